@@ -1,0 +1,786 @@
+//! Landmark EKF-SLAM with a fixed, compile-time maximum number of landmarks.
+//!
+//! The state is `[x, y, θ, x₁, y₁, …, x_L, y_L]` (robot pose, then point landmarks) with
+//! dimension `N = 3 + 2·L` ([`state_dim`]). Storage for the whole `N × N` covariance is
+//! reserved up front, but only the *active* block `(3 + 2n) × (3 + 2n)` of the `n`
+//! landmarks added so far is ever read or written:
+//!
+//! | step | what it touches | cost |
+//! | --- | --- | --- |
+//! | [`EkfSlam::predict_increment`], [`EkfSlam::predict_velocity`] | robot mean, `P_RR`, `P_RM` | O(n) |
+//! | [`EkfSlam::update`] | the active block | O(n²) |
+//! | [`EkfSlam::add_landmark`] | one new row/column pair | O(n) |
+//!
+//! Nothing decomposes the covariance: the only inverse is of the 2 × 2 innovation
+//! covariance. Corrections to seed 1: the covariance update is `P − K S Kᵀ` (its eq. 19 has
+//! the wrong sign), the measurement model is polar on both sides (eq. 12 mixes a Cartesian
+//! prediction with a polar measurement), and all noise is configuration (eq. 9's constant
+//! `Q` is gone).
+//!
+//! # Memory
+//!
+//! `size_of::<EkfSlam<T, N>>() = (N² + N) · size_of::<T>() + EKF_OVERHEAD_BYTES(T)`; for
+//! `f32` the overhead is [`EKF_OVERHEAD_BYTES_F32`]. With `f32`:
+//!
+//! | landmarks | N | bytes |
+//! | --- | --- | --- |
+//! | 16 | 35 | 5 044 |
+//! | 32 | 67 | 18 228 |
+//! | 64 | 131 | 69 292 |
+//!
+//! Such a filter belongs in a `static` on a microcontroller: [`EkfSlam::new`] is a
+//! `const fn`, so `static`s are laid out by the linker (`.bss`/`.data`) and never pass
+//! through the stack; [`EkfSlam::init`] re-initialises in place. A step itself uses
+//! about `4 · N · size_of::<T>()` bytes of stack for its `N × 2` temporaries.
+//!
+//! A state dimension that is not `3 + 2k` is rejected at compile time:
+//!
+//! ```compile_fail
+//! use microslam::ekf::{EkfConfig, EkfSlam};
+//! // 4 = 3 + 2·0.5: no whole number of landmarks fits.
+//! let ekf = EkfSlam::<f32, 4>::new(EkfConfig::DEFAULT_F32);
+//! ```
+
+use crate::error::EkfError;
+use crate::gate::ChiSquareGate;
+use crate::geometry::{Pose2, wrap_angle};
+use crate::motion::{
+    IncrementNoise, MotionStep, OdometryIncrement, VelocityNoise, compose_increment,
+    integrate_velocity,
+};
+use crate::scalar::Real;
+use crate::sensors::range_bearing::{RangeBearing, RangeBearingSensor};
+use nalgebra::{ArrayStorage, Matrix2, Matrix2x3, Matrix3, SMatrix, SVector, Vector2};
+
+/// State dimension for a maximum of `max_landmarks` point landmarks: `3 + 2 · max_landmarks`.
+///
+/// ```
+/// use microslam::ekf::{state_dim, EkfSlam};
+/// type Slam32 = EkfSlam<f32, { state_dim(32) }>;
+/// assert_eq!(Slam32::MAX_LANDMARKS, 32);
+/// ```
+pub const fn state_dim(max_landmarks: usize) -> usize {
+    3 + 2 * max_landmarks
+}
+
+/// Bytes an `f32` filter uses beyond its mean and covariance (configuration, counters).
+pub const EKF_OVERHEAD_BYTES_F32: usize = 108;
+
+/// How the covariance is updated after a measurement (as in adskalman-rs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CovarianceUpdate {
+    /// Joseph form `(I − KH) P (I − KH)ᵀ + K R Kᵀ`, evaluated in place in O(n²) and then
+    /// symmetrised: keeps `P` positive semi-definite in `f32` even when `K` carries rounding
+    /// errors. About three passes over the active block.
+    #[default]
+    Joseph,
+    /// The optimal-gain form `P − K S Kᵀ` on the upper triangle, mirrored (exactly
+    /// symmetric): one pass over half the block, the cheapest choice.
+    Symmetric,
+}
+
+/// Settings of the landmark EKF: noise, sensor mount, gate and update form.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EkfConfig<T> {
+    /// Noise of odometry increments (used by [`EkfSlam::predict_increment`]).
+    pub increment_noise: IncrementNoise<T>,
+    /// Noise of velocity odometry (used by [`EkfSlam::predict_velocity`]).
+    pub velocity_noise: VelocityNoise<T>,
+    /// Standard deviation of measured ranges, metres (when a sighting brings no covariance).
+    pub range_std: T,
+    /// Standard deviation of measured bearings, radians.
+    pub bearing_std: T,
+    /// The range-bearing sensor and its mount on the robot.
+    pub sensor: RangeBearingSensor<T>,
+    /// Innovation gate on the squared Mahalanobis distance (2 degrees of freedom).
+    pub gate: ChiSquareGate<T>,
+    /// Form of the covariance update.
+    pub covariance_update: CovarianceUpdate,
+}
+
+macro_rules! default_config {
+    ($t:ty) => {
+        EkfConfig {
+            increment_noise: IncrementNoise {
+                translation_std: 0.0,
+                translation_std_per_metre: 0.05,
+                rotation_std: 0.0,
+                rotation_std_per_radian: 0.05,
+                rotation_std_per_metre: 0.02,
+            },
+            velocity_noise: VelocityNoise {
+                linear_std: 0.01,
+                linear_std_per_mps: 0.1,
+                angular_std: 0.01,
+                angular_std_per_radps: 0.1,
+                angular_std_per_mps: 0.0,
+            },
+            range_std: 0.1,
+            bearing_std: 0.035,
+            sensor: RangeBearingSensor::at_robot_origin(),
+            // χ²₂ quantile at 0.999.
+            gate: ChiSquareGate::from_threshold(13.815_511),
+            covariance_update: CovarianceUpdate::Joseph,
+        }
+    };
+}
+
+impl EkfConfig<f32> {
+    /// Generic defaults for `f32`: 5 % odometry noise, 0.1 m / 2° sightings, a 99.9 % gate.
+    /// Tune them per robot and dataset.
+    pub const DEFAULT_F32: Self = default_config!(f32);
+}
+
+impl EkfConfig<f64> {
+    /// The same defaults as [`EkfConfig::DEFAULT_F32`], in `f64`.
+    pub const DEFAULT_F64: Self = default_config!(f64);
+}
+
+impl<T: Real> EkfConfig<T> {
+    /// `true` when every noise figure is finite and non-negative and the gate positive.
+    pub fn is_valid(&self) -> bool {
+        self.increment_noise.is_valid()
+            && self.velocity_noise.is_valid()
+            && self.range_std.finite()
+            && self.bearing_std.finite()
+            && self.range_std >= T::ZERO
+            && self.bearing_std >= T::ZERO
+            && self.sensor.mount.is_finite()
+            && self.gate.threshold > T::ZERO
+    }
+
+    /// The measurement covariance `diag(σ_r², σ_b²)` from the configured noise.
+    pub fn measurement_covariance(&self) -> Matrix2<T> {
+        Matrix2::new(
+            self.range_std * self.range_std,
+            T::ZERO,
+            T::ZERO,
+            self.bearing_std * self.bearing_std,
+        )
+    }
+}
+
+/// What [`EkfSlam::update`] did with a sighting.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum UpdateOutcome<T> {
+    /// The sighting passed the gate and corrected the state; the normalised innovation
+    /// squared (NIS, `νᵀ S⁻¹ ν`) is reported.
+    Accepted {
+        /// Normalised innovation squared.
+        nis: T,
+    },
+    /// The sighting failed the gate and was not used; the state is unchanged.
+    Gated {
+        /// Normalised innovation squared.
+        nis: T,
+    },
+}
+
+impl<T: Copy> UpdateOutcome<T> {
+    /// The normalised innovation squared, accepted or not.
+    pub fn nis(&self) -> T {
+        match *self {
+            Self::Accepted { nis } | Self::Gated { nis } => nis,
+        }
+    }
+}
+
+/// Counters of what the filter did, for status reports.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EkfCounters {
+    /// Prediction steps applied.
+    pub predictions: u32,
+    /// Sightings that corrected the state.
+    pub updates: u32,
+    /// Sightings refused by the innovation gate.
+    pub gated: u32,
+    /// Steps refused for bad input (any [`EkfError`]).
+    pub rejected: u32,
+}
+
+/// Innovation of one sighting against one landmark: everything the association and the
+/// update need.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Innovation<T: Real> {
+    /// `z − h(x)`, bearing wrapped.
+    pub nu: Vector2<T>,
+    /// Innovation covariance `H P Hᵀ + R`.
+    pub s: Matrix2<T>,
+    /// Its inverse.
+    pub s_inv: Matrix2<T>,
+    /// Squared Mahalanobis distance `νᵀ S⁻¹ ν`.
+    pub mahalanobis_squared: T,
+    /// ∂h/∂robot at the current estimate.
+    pub jacobian_robot: Matrix2x3<T>,
+    /// ∂h/∂landmark at the current estimate.
+    pub jacobian_landmark: Matrix2<T>,
+}
+
+/// Landmark EKF-SLAM over `f32` or `f64` with state dimension `N = 3 + 2·L`.
+///
+/// ```
+/// use microslam::ekf::{state_dim, EkfConfig, EkfSlam, UpdateOutcome};
+/// use microslam::geometry::Pose2;
+/// use microslam::sensors::range_bearing::RangeBearing;
+///
+/// static mut _ILLUSTRATION: () = (); // on a target: `static SLAM: … = EkfSlam::new(…)`
+/// let mut slam = EkfSlam::<f64, { state_dim(8) }>::new(EkfConfig::DEFAULT_F64);
+/// let sign = slam.add_landmark(&RangeBearing::new(2.0, 0.5))?;
+/// slam.predict_velocity(0.5, 0.1, 0.1)?;
+/// let outcome = slam.update(sign, &RangeBearing::new(1.96, 0.51))?;
+/// assert!(matches!(outcome, UpdateOutcome::Accepted { .. }));
+/// assert_eq!(slam.landmark_count(), 1);
+/// # Ok::<(), microslam::EkfError>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct EkfSlam<T: Real, const N: usize> {
+    mean: SVector<T, N>,
+    covariance: SMatrix<T, N, N>,
+    landmarks: usize,
+    config: EkfConfig<T>,
+    counters: EkfCounters,
+}
+
+impl<T: Real, const N: usize> EkfSlam<T, N> {
+    /// Checked at compile time wherever the type is constructed.
+    const DIMENSION_IS_VALID: () = assert!(
+        N >= 3 && (N - 3) % 2 == 0,
+        "EkfSlam state dimension must be 3 + 2 * max_landmarks: use state_dim()"
+    );
+
+    /// Maximum number of landmarks, `(N − 3) / 2`.
+    pub const MAX_LANDMARKS: usize = (N - 3) / 2;
+
+    /// A filter with the robot at the origin, known exactly, and no landmarks.
+    ///
+    /// A `const fn`: use it to initialise a `static`, so the covariance is placed by the
+    /// linker and never copied through the stack.
+    pub const fn new(config: EkfConfig<T>) -> Self {
+        let () = Self::DIMENSION_IS_VALID;
+        Self {
+            mean: SVector::from_array_storage(ArrayStorage([[T::ZERO; N]; 1])),
+            covariance: SMatrix::from_array_storage(ArrayStorage([[T::ZERO; N]; N])),
+            landmarks: 0,
+            config,
+            counters: EkfCounters {
+                predictions: 0,
+                updates: 0,
+                gated: 0,
+                rejected: 0,
+            },
+        }
+    }
+
+    /// Re-initialises in place: robot at `pose` with zero covariance, no landmarks, new
+    /// configuration, counters cleared. Only the previously active block is cleared.
+    pub fn init(&mut self, config: EkfConfig<T>, pose: Pose2<T>) -> Result<(), EkfError> {
+        if !config.is_valid() {
+            return Err(EkfError::InvalidNoise);
+        }
+        if !pose.is_finite() {
+            return Err(EkfError::NonFiniteInput);
+        }
+        let k = self.active_dim();
+        self.covariance.view_mut((0, 0), (k, k)).fill(T::ZERO);
+        self.mean.rows_mut(0, k).fill(T::ZERO);
+        self.mean[0] = pose.x;
+        self.mean[1] = pose.y;
+        self.mean[2] = wrap_angle(pose.theta);
+        self.landmarks = 0;
+        self.config = config;
+        self.counters = EkfCounters::default();
+        Ok(())
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &EkfConfig<T> {
+        &self.config
+    }
+
+    /// Replaces the configuration (noise, gate, sensor). Refused when not valid.
+    pub fn set_config(&mut self, config: EkfConfig<T>) -> Result<(), EkfError> {
+        if !config.is_valid() {
+            return Err(EkfError::InvalidNoise);
+        }
+        self.config = config;
+        Ok(())
+    }
+
+    /// Counters of applied, gated and refused steps.
+    pub fn counters(&self) -> EkfCounters {
+        self.counters
+    }
+
+    /// Number of landmarks in the state.
+    pub fn landmark_count(&self) -> usize {
+        self.landmarks
+    }
+
+    /// Dimension of the active part of the state, `3 + 2n`.
+    pub fn active_dim(&self) -> usize {
+        3 + 2 * self.landmarks
+    }
+
+    /// Current robot pose estimate.
+    pub fn pose(&self) -> Pose2<T> {
+        Pose2::new(self.mean[0], self.mean[1], self.mean[2])
+    }
+
+    /// Covariance of the robot pose, `P_RR`.
+    pub fn pose_covariance(&self) -> Matrix3<T> {
+        self.covariance.fixed_view::<3, 3>(0, 0).into_owned()
+    }
+
+    /// Position of landmark `index`, or `None` when there is no such landmark.
+    pub fn landmark(&self, index: usize) -> Option<Vector2<T>> {
+        (index < self.landmarks).then(|| self.mean.fixed_rows::<2>(3 + 2 * index).into_owned())
+    }
+
+    /// 2 × 2 covariance of landmark `index`, or `None` when there is no such landmark.
+    pub fn landmark_covariance(&self, index: usize) -> Option<Matrix2<T>> {
+        let i = 3 + 2 * index;
+        (index < self.landmarks).then(|| self.covariance.fixed_view::<2, 2>(i, i).into_owned())
+    }
+
+    /// The active part of the mean, `[x, y, θ, x₁, y₁, …]`.
+    pub fn active_mean(&self) -> &[T] {
+        let k = self.active_dim();
+        self.mean.as_slice().get(..k).unwrap_or(&[])
+    }
+
+    /// The active block of the covariance, as a view (no copy).
+    pub fn active_covariance(
+        &self,
+    ) -> nalgebra::MatrixView<'_, T, nalgebra::Dyn, nalgebra::Dyn, nalgebra::U1, nalgebra::Const<N>>
+    {
+        let k = self.active_dim();
+        self.covariance.view((0, 0), (k, k))
+    }
+
+    /// The whole mean, active or not (for tests and diagnostics).
+    pub fn full_mean(&self) -> &SVector<T, N> {
+        &self.mean
+    }
+
+    /// The whole covariance storage, active or not (for tests and diagnostics).
+    pub fn full_covariance(&self) -> &SMatrix<T, N, N> {
+        &self.covariance
+    }
+
+    fn reject<R>(&mut self, e: EkfError) -> Result<R, EkfError> {
+        crate::log::debug!("ekf: step refused: {}", e);
+        self.counters.rejected = self.counters.rejected.saturating_add(1);
+        Err(e)
+    }
+
+    /// Prediction with an odometry increment `(dx, dy, dθ)` in the previous robot frame
+    /// (seed 1, eqs. 4–8), with the configured [`IncrementNoise`].
+    ///
+    /// Touches only the robot mean, `P_RR` and `P_RM`. Non-finite input →
+    /// [`EkfError::NonFiniteInput`], state unchanged.
+    pub fn predict_increment(&mut self, increment: &OdometryIncrement<T>) -> Result<(), EkfError> {
+        if !increment.is_finite() {
+            return self.reject(EkfError::NonFiniteInput);
+        }
+        let step = compose_increment(&self.pose(), increment);
+        let q = self.config.increment_noise.covariance(increment);
+        let q = step.wrt_input * q * step.wrt_input.transpose();
+        self.apply_motion(&step, &q)
+    }
+
+    /// Prediction with velocities `(v, ω)` held for `dt` seconds (seed 2, eq. 6), with the
+    /// configured [`VelocityNoise`].
+    ///
+    /// `dt = 0` is a no-op; `dt < 0` (out-of-order stamps) → [`EkfError::NegativeTimeStep`];
+    /// non-finite input → [`EkfError::NonFiniteInput`]; the state is unchanged on error.
+    pub fn predict_velocity(&mut self, v: T, omega: T, dt: T) -> Result<(), EkfError> {
+        if !(v.finite() && omega.finite() && dt.finite()) {
+            return self.reject(EkfError::NonFiniteInput);
+        }
+        if dt < T::ZERO {
+            return self.reject(EkfError::NegativeTimeStep);
+        }
+        if dt == T::ZERO {
+            return Ok(());
+        }
+        let step = integrate_velocity(&self.pose(), v, omega, dt);
+        let q = self.config.velocity_noise.covariance(v, omega, dt);
+        let q = step.wrt_input * q * step.wrt_input.transpose();
+        self.apply_motion(&step, &q)
+    }
+
+    /// `P_RR ← A P_RR Aᵀ + W Q Wᵀ`, `P_RM ← A P_RM`, mean ← new pose.
+    fn apply_motion<const U: usize>(
+        &mut self,
+        step: &MotionStep<T, U>,
+        q: &Matrix3<T>,
+    ) -> Result<(), EkfError> {
+        let a = &step.wrt_pose;
+        let p_rr = self.covariance.fixed_view::<3, 3>(0, 0).into_owned();
+        let mut new_rr = a * p_rr * a.transpose() + q;
+        if !step.pose.is_finite() || !new_rr.iter().all(|v| v.finite()) {
+            return self.reject(EkfError::NumericalFailure);
+        }
+        symmetrise3(&mut new_rr);
+        self.covariance
+            .fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&new_rr);
+        let k = self.active_dim();
+        for j in 3..k {
+            let col = self.covariance.fixed_view::<3, 1>(0, j).into_owned();
+            let new = a * col;
+            self.covariance.fixed_view_mut::<3, 1>(0, j).copy_from(&new);
+            self.covariance
+                .fixed_view_mut::<1, 3>(j, 0)
+                .copy_from(&new.transpose());
+        }
+        self.mean[0] = step.pose.x;
+        self.mean[1] = step.pose.y;
+        self.mean[2] = step.pose.theta;
+        self.counters.predictions = self.counters.predictions.saturating_add(1);
+        Ok(())
+    }
+
+    /// The innovation of sighting `z` (covariance `r`) against landmark `index`, without
+    /// changing anything; also fills `m = P Hᵀ` (active rows) when given.
+    fn innovation_with(
+        &self,
+        index: usize,
+        z: &RangeBearing<T>,
+        r: &Matrix2<T>,
+        m: Option<&mut SMatrix<T, N, 2>>,
+    ) -> Result<Innovation<T>, EkfError> {
+        if index >= self.landmarks {
+            return Err(EkfError::UnknownLandmark);
+        }
+        let li = 3 + 2 * index;
+        let landmark = self.mean.fixed_rows::<2>(li).into_owned();
+        let pred = self
+            .config
+            .sensor
+            .predict(&self.pose(), &landmark)
+            .ok_or(EkfError::LandmarkOnSensor)?;
+        let (hr, hl) = (pred.wrt_robot, pred.wrt_landmark);
+        let k = self.active_dim();
+        // S = H P Hᵀ + R, from the robot and landmark blocks only.
+        let p_rr = self.covariance.fixed_view::<3, 3>(0, 0);
+        let p_rl = self.covariance.fixed_view::<3, 2>(0, li);
+        let p_ll = self.covariance.fixed_view::<2, 2>(li, li);
+        let hphr = hr * p_rl * hl.transpose();
+        let mut s =
+            hr * p_rr * hr.transpose() + hphr + hphr.transpose() + hl * p_ll * hl.transpose() + r;
+        let off = (s[(0, 1)] + s[(1, 0)]) * T::lit(0.5);
+        s[(0, 1)] = off;
+        s[(1, 0)] = off;
+        let det = s[(0, 0)] * s[(1, 1)] - off * off;
+        if !(det > T::ZERO) || !(s[(0, 0)] > T::ZERO) || !det.finite() {
+            return Err(EkfError::SingularInnovation);
+        }
+        let s_inv = Matrix2::new(s[(1, 1)] / det, -off / det, -off / det, s[(0, 0)] / det);
+        let nu = Vector2::new(
+            z.range - pred.z.range,
+            wrap_angle(z.bearing - pred.z.bearing),
+        );
+        let d2 = (nu.transpose() * s_inv * nu)[(0, 0)];
+        if !d2.finite() {
+            return Err(EkfError::NumericalFailure);
+        }
+        if let Some(m) = m {
+            // M = P Hᵀ over the active rows: columns 0..3 with Hr, li..li+2 with Hl.
+            for i in 0..k {
+                let mut acc0 = T::ZERO;
+                let mut acc1 = T::ZERO;
+                for c in 0..3 {
+                    let p = self.covariance[(i, c)];
+                    acc0 += p * hr[(0, c)];
+                    acc1 += p * hr[(1, c)];
+                }
+                for c in 0..2 {
+                    let p = self.covariance[(i, li + c)];
+                    acc0 += p * hl[(0, c)];
+                    acc1 += p * hl[(1, c)];
+                }
+                m[(i, 0)] = acc0;
+                m[(i, 1)] = acc1;
+            }
+        }
+        Ok(Innovation {
+            nu,
+            s,
+            s_inv,
+            mahalanobis_squared: d2,
+            jacobian_robot: hr,
+            jacobian_landmark: hl,
+        })
+    }
+
+    /// Checks a sighting and its covariance; returns the covariance to use.
+    fn checked_measurement(
+        &self,
+        z: &RangeBearing<T>,
+        r: Option<&Matrix2<T>>,
+    ) -> Result<Matrix2<T>, EkfError> {
+        if !(z.range.finite() && z.bearing.finite()) {
+            return Err(EkfError::NonFiniteInput);
+        }
+        if !(z.range > T::ZERO) {
+            return Err(EkfError::InvalidRange);
+        }
+        let r = r
+            .copied()
+            .unwrap_or_else(|| self.config.measurement_covariance());
+        let det = r[(0, 0)] * r[(1, 1)] - r[(0, 1)] * r[(1, 0)];
+        if !r.iter().all(|v| v.finite())
+            || r[(0, 0)] < T::ZERO
+            || r[(1, 1)] < T::ZERO
+            || det < T::ZERO
+        {
+            return Err(EkfError::InvalidNoise);
+        }
+        Ok(r)
+    }
+
+    /// The innovation of sighting `z` against landmark `index` (for data association),
+    /// with the configured measurement noise, without changing the state.
+    pub fn innovation(&self, index: usize, z: &RangeBearing<T>) -> Result<Innovation<T>, EkfError> {
+        let r = self.checked_measurement(z, None)?;
+        self.innovation_with(index, z, &r, None)
+    }
+
+    /// Corrects the state with a sighting `z` of landmark `index`, using the configured
+    /// measurement noise. See [`EkfSlam::update_with_covariance`].
+    pub fn update(
+        &mut self,
+        index: usize,
+        z: &RangeBearing<T>,
+    ) -> Result<UpdateOutcome<T>, EkfError> {
+        self.update_inner(index, z, None)
+    }
+
+    /// Corrects the state with a sighting `z` of landmark `index` whose measurement
+    /// covariance is `r` (range, bearing).
+    ///
+    /// Gating: when `νᵀ S⁻¹ ν` exceeds the configured gate the state is left unchanged and
+    /// [`UpdateOutcome::Gated`] is returned. Errors (state unchanged): non-finite input,
+    /// non-positive range, invalid covariance, unknown landmark, landmark on the sensor, a
+    /// non-positive-definite innovation covariance.
+    pub fn update_with_covariance(
+        &mut self,
+        index: usize,
+        z: &RangeBearing<T>,
+        r: &Matrix2<T>,
+    ) -> Result<UpdateOutcome<T>, EkfError> {
+        self.update_inner(index, z, Some(r))
+    }
+
+    fn update_inner(
+        &mut self,
+        index: usize,
+        z: &RangeBearing<T>,
+        r: Option<&Matrix2<T>>,
+    ) -> Result<UpdateOutcome<T>, EkfError> {
+        let r = match self.checked_measurement(z, r) {
+            Ok(r) => r,
+            Err(e) => return self.reject(e),
+        };
+        let mut m = SMatrix::<T, N, 2>::zeros();
+        let inn = match self.innovation_with(index, z, &r, Some(&mut m)) {
+            Ok(inn) => inn,
+            Err(e) => return self.reject(e),
+        };
+        let nis = inn.mahalanobis_squared;
+        if !self.config.gate.accepts(nis) {
+            self.counters.gated = self.counters.gated.saturating_add(1);
+            return Ok(UpdateOutcome::Gated { nis });
+        }
+        let k = self.active_dim();
+        // K = M S⁻¹ (k × 2).
+        let mut gain = SMatrix::<T, N, 2>::zeros();
+        for i in 0..k {
+            let row = Vector2::new(m[(i, 0)], m[(i, 1)]).transpose() * inn.s_inv;
+            gain[(i, 0)] = row[0];
+            gain[(i, 1)] = row[1];
+        }
+        // The mean correction is checked before anything is written.
+        let mut correction_ok = true;
+        for i in 0..k {
+            let dx = gain[(i, 0)] * inn.nu[0] + gain[(i, 1)] * inn.nu[1];
+            correction_ok &= (self.mean[i] + dx).finite();
+        }
+        if !correction_ok {
+            return self.reject(EkfError::NumericalFailure);
+        }
+        for i in 0..k {
+            self.mean[i] += gain[(i, 0)] * inn.nu[0] + gain[(i, 1)] * inn.nu[1];
+        }
+        self.mean[2] = wrap_angle(self.mean[2]);
+        let li = 3 + 2 * index;
+        match self.config.covariance_update {
+            CovarianceUpdate::Joseph => self.joseph_update(k, li, &inn, &gain, &m, &r),
+            CovarianceUpdate::Symmetric => self.symmetric_update(k, &gain, &inn.s),
+        }
+        self.counters.updates = self.counters.updates.saturating_add(1);
+        Ok(UpdateOutcome::Accepted { nis })
+    }
+
+    /// `P ← P − K S Kᵀ` on the upper triangle, mirrored.
+    fn symmetric_update(&mut self, k: usize, gain: &SMatrix<T, N, 2>, s: &Matrix2<T>) {
+        let (g0, g1) = split_columns(gain, k);
+        // KS = K S, then P_ij −= (KS)_i · K_j.
+        let mut ks = SMatrix::<T, N, 2>::zeros();
+        for i in 0..k {
+            ks[(i, 0)] = g0[i] * s[(0, 0)] + g1[i] * s[(1, 0)];
+            ks[(i, 1)] = g0[i] * s[(0, 1)] + g1[i] * s[(1, 1)];
+        }
+        let (ks0, ks1) = split_columns(&ks, k);
+        for j in 0..k {
+            let (gj0, gj1) = (g0[j], g1[j]);
+            for i in 0..=j {
+                let v = self.covariance[(i, j)] - (ks0[i] * gj0 + ks1[i] * gj1);
+                self.covariance[(i, j)] = v;
+                self.covariance[(j, i)] = v;
+            }
+        }
+    }
+
+    /// Joseph form in place: `A = P − K Mᵀ` (= (I − KH) P), `B = A Hᵀ`,
+    /// `P = A − B Kᵀ + K R Kᵀ` (= A (I − KH)ᵀ + K R Kᵀ), then symmetrised.
+    fn joseph_update(
+        &mut self,
+        k: usize,
+        li: usize,
+        inn: &Innovation<T>,
+        gain: &SMatrix<T, N, 2>,
+        m: &SMatrix<T, N, 2>,
+        r: &Matrix2<T>,
+    ) {
+        let (g0, g1) = split_columns(gain, k);
+        let (m0, m1) = split_columns(m, k);
+        // Pass 1: A = P − K Mᵀ, column by column.
+        for j in 0..k {
+            let (mj0, mj1) = (m0[j], m1[j]);
+            let mut col = self.covariance.column_mut(j);
+            for ((p, &ga), &gb) in col.iter_mut().zip(g0).zip(g1) {
+                *p -= ga * mj0 + gb * mj1;
+            }
+        }
+        // D = K R − A Hᵀ, with H nonzero only on the robot and landmark columns.
+        let (hr, hl) = (&inn.jacobian_robot, &inn.jacobian_landmark);
+        let mut d = SMatrix::<T, N, 2>::zeros();
+        for i in 0..k {
+            let a = |c: usize| self.covariance[(i, c)];
+            let (a0, a1, a2, a3, a4) = (a(0), a(1), a(2), a(li), a(li + 1));
+            let b0 = a0 * hr[(0, 0)]
+                + a1 * hr[(0, 1)]
+                + a2 * hr[(0, 2)]
+                + a3 * hl[(0, 0)]
+                + a4 * hl[(0, 1)];
+            let b1 = a0 * hr[(1, 0)]
+                + a1 * hr[(1, 1)]
+                + a2 * hr[(1, 2)]
+                + a3 * hl[(1, 0)]
+                + a4 * hl[(1, 1)];
+            d[(i, 0)] = g0[i] * r[(0, 0)] + g1[i] * r[(1, 0)] - b0;
+            d[(i, 1)] = g0[i] * r[(0, 1)] + g1[i] * r[(1, 1)] - b1;
+        }
+        // Pass 2: P = A + D Kᵀ.
+        let (d0, d1) = split_columns(&d, k);
+        for j in 0..k {
+            let (gj0, gj1) = (g0[j], g1[j]);
+            let mut col = self.covariance.column_mut(j);
+            for ((p, &da), &db) in col.iter_mut().zip(d0).zip(d1) {
+                *p += da * gj0 + db * gj1;
+            }
+        }
+        // Pass 3: symmetrise (rounding makes A (I − KH)ᵀ slightly asymmetric).
+        for j in 0..k {
+            for i in 0..j {
+                let v = (self.covariance[(i, j)] + self.covariance[(j, i)]) * T::lit(0.5);
+                self.covariance[(i, j)] = v;
+                self.covariance[(j, i)] = v;
+            }
+        }
+    }
+
+    /// Adds a landmark seen at `z`, with the configured measurement noise. See
+    /// [`EkfSlam::add_landmark_with_covariance`].
+    pub fn add_landmark(&mut self, z: &RangeBearing<T>) -> Result<usize, EkfError> {
+        self.add_inner(z, None)
+    }
+
+    /// Adds a landmark seen at `z` with measurement covariance `r`, by the inverse
+    /// observation model `g` (seed 1, eqs. 20–24): mean `g(x_R, z)`,
+    /// `P_pp = G_R P_RR G_Rᵀ + G_z R G_zᵀ`, `P_pX = G_R [P_RR P_RM]`. Returns its index.
+    ///
+    /// Errors (state unchanged): [`EkfError::MapFull`] when all `L` slots are used (the
+    /// filter goes on with the landmarks it has), non-finite input, non-positive range,
+    /// invalid covariance.
+    pub fn add_landmark_with_covariance(
+        &mut self,
+        z: &RangeBearing<T>,
+        r: &Matrix2<T>,
+    ) -> Result<usize, EkfError> {
+        self.add_inner(z, Some(r))
+    }
+
+    fn add_inner(
+        &mut self,
+        z: &RangeBearing<T>,
+        r: Option<&Matrix2<T>>,
+    ) -> Result<usize, EkfError> {
+        let r = match self.checked_measurement(z, r) {
+            Ok(r) => r,
+            Err(e) => return self.reject(e),
+        };
+        if self.landmarks >= Self::MAX_LANDMARKS {
+            return self.reject(EkfError::MapFull);
+        }
+        let g = self.config.sensor.landmark_from(&self.pose(), z);
+        let k = self.active_dim();
+        let p_rr = self.covariance.fixed_view::<3, 3>(0, 0).into_owned();
+        let mut p_pp = g.wrt_robot * p_rr * g.wrt_robot.transpose()
+            + g.wrt_measurement * r * g.wrt_measurement.transpose();
+        let off = (p_pp[(0, 1)] + p_pp[(1, 0)]) * T::lit(0.5);
+        p_pp[(0, 1)] = off;
+        p_pp[(1, 0)] = off;
+        if !g.landmark.iter().chain(p_pp.iter()).all(|v| v.finite()) {
+            return self.reject(EkfError::NumericalFailure);
+        }
+        // P_pX = G_R P[0..3, 0..k], one column at a time.
+        for j in 0..k {
+            let col = self.covariance.fixed_view::<3, 1>(0, j).into_owned();
+            let v = g.wrt_robot * col;
+            self.covariance.fixed_view_mut::<2, 1>(k, j).copy_from(&v);
+            self.covariance
+                .fixed_view_mut::<1, 2>(j, k)
+                .copy_from(&v.transpose());
+        }
+        self.covariance
+            .fixed_view_mut::<2, 2>(k, k)
+            .copy_from(&p_pp);
+        self.mean.fixed_rows_mut::<2>(k).copy_from(&g.landmark);
+        let index = self.landmarks;
+        self.landmarks += 1;
+        Ok(index)
+    }
+}
+
+/// The first `k` entries of the two columns of an `N × 2` matrix.
+fn split_columns<T: Real, const N: usize>(m: &SMatrix<T, N, 2>, k: usize) -> (&[T], &[T]) {
+    let (a, b) = m.as_slice().split_at(N);
+    (a.get(..k).unwrap_or(&[]), b.get(..k).unwrap_or(&[]))
+}
+
+fn symmetrise3<T: Real>(m: &mut Matrix3<T>) {
+    for i in 0..3 {
+        for j in 0..i {
+            let v = (m[(i, j)] + m[(j, i)]) * T::lit(0.5);
+            m[(i, j)] = v;
+            m[(j, i)] = v;
+        }
+    }
+}

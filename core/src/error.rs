@@ -1,0 +1,62 @@
+//! Errors of the estimators: small `Copy` values, never panics.
+//!
+//! Every step function checks its input before it touches the filter: when it returns an
+//! error, the state is exactly what it was before the call.
+
+use core::fmt;
+
+/// Why an EKF step was refused. The filter state is unchanged whenever one is returned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EkfError {
+    /// An input (odometry, measurement, noise) held NaN or ±∞.
+    NonFiniteInput,
+    /// A velocity step with a negative duration (time stamps out of order).
+    NegativeTimeStep,
+    /// A measurement with a range that is not positive.
+    InvalidRange,
+    /// A noise setting or covariance that is negative or not finite.
+    InvalidNoise,
+    /// The landmark index does not name an active landmark.
+    UnknownLandmark,
+    /// The landmark sits on the sensor: its bearing is undefined.
+    LandmarkOnSensor,
+    /// The landmark table is full: the sighting was not added (it is still the caller's).
+    MapFull,
+    /// The innovation covariance is not positive definite (a corrupted filter or noise).
+    SingularInnovation,
+    /// The step would leave a non-finite value in the state; it was not applied.
+    NumericalFailure,
+}
+
+impl fmt::Display for EkfError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::NonFiniteInput => "input contains NaN or infinity",
+            Self::NegativeTimeStep => "negative time step (time stamps out of order)",
+            Self::InvalidRange => "measured range is not positive",
+            Self::InvalidNoise => "noise parameter is negative or not finite",
+            Self::UnknownLandmark => "no active landmark has this index",
+            Self::LandmarkOnSensor => "landmark coincides with the sensor",
+            Self::MapFull => "landmark table is full",
+            Self::SingularInnovation => "innovation covariance is not positive definite",
+            Self::NumericalFailure => "step would make the state non-finite",
+        })
+    }
+}
+
+impl core::error::Error for EkfError {}
+
+/// A fixed-capacity table is full; carries back the item that did not fit, like
+/// `heapless::Vec::push`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MapFull<I>(pub I);
+
+impl<I> fmt::Display for MapFull<I> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("table is full")
+    }
+}
+
+impl<I: fmt::Debug> core::error::Error for MapFull<I> {}

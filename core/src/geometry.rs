@@ -1,0 +1,158 @@
+//! Planar rigid-body geometry: poses in SE(2), composition, inversion, angle wrapping.
+//!
+//! Conventions used throughout the crate: x forward, y left, angles counter-clockwise
+//! positive, in radians, wrapped to (−π, π].
+
+use crate::scalar::Real;
+use nalgebra::{Vector2, Vector3};
+
+/// Wraps an angle to (−π, π].
+///
+/// Uses `atan2(sin a, cos a)`, which is exact at the branch cut's neighbourhood and needs no
+/// loop for large inputs. A non-finite input gives NaN.
+#[inline]
+pub fn wrap_angle<T: Real>(angle: T) -> T {
+    let (s, c) = angle.sin_cos();
+    s.atan2(c)
+}
+
+/// A pose in the plane: position `(x, y)` and heading `theta` (radians, CCW positive).
+///
+/// Read `a.compose(&b)` as "`b` expressed in frame `a`, taken to the frame `a` lives in":
+/// the ⊕ operator of Smith, Self and Cheeseman.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Pose2<T> {
+    /// Position along the x axis, metres.
+    pub x: T,
+    /// Position along the y axis, metres.
+    pub y: T,
+    /// Heading, radians, counter-clockwise from the x axis.
+    pub theta: T,
+}
+
+impl<T: Real> Pose2<T> {
+    /// The identity pose (origin, heading 0), usable in `const` contexts.
+    pub const IDENTITY: Self = Self {
+        x: T::ZERO,
+        y: T::ZERO,
+        theta: T::ZERO,
+    };
+
+    /// A pose from its components; the heading is stored as given (see [`Pose2::wrapped`]).
+    #[inline]
+    pub const fn new(x: T, y: T, theta: T) -> Self {
+        Self { x, y, theta }
+    }
+
+    /// The pose as a column vector `[x, y, θ]`.
+    #[inline]
+    pub fn to_vector(&self) -> Vector3<T> {
+        Vector3::new(self.x, self.y, self.theta)
+    }
+
+    /// A pose from a column vector `[x, y, θ]`.
+    #[inline]
+    pub fn from_vector(v: &Vector3<T>) -> Self {
+        Self::new(v[0], v[1], v[2])
+    }
+
+    /// The same pose with its heading wrapped to (−π, π].
+    #[inline]
+    pub fn wrapped(&self) -> Self {
+        Self::new(self.x, self.y, wrap_angle(self.theta))
+    }
+
+    /// `true` when all three components are finite.
+    #[inline]
+    pub fn is_finite(&self) -> bool {
+        self.x.finite() && self.y.finite() && self.theta.finite()
+    }
+
+    /// Composition `self ⊕ other`: `other`, given in the frame of `self`, in the frame that
+    /// `self` is expressed in. The heading of the result is wrapped.
+    #[inline]
+    pub fn compose(&self, other: &Self) -> Self {
+        let (s, c) = self.theta.sin_cos();
+        Self::new(
+            self.x + c * other.x - s * other.y,
+            self.y + s * other.x + c * other.y,
+            wrap_angle(self.theta + other.theta),
+        )
+    }
+
+    /// Inverse `⊖self`: the pose of the outer frame seen from `self`.
+    #[inline]
+    pub fn inverse(&self) -> Self {
+        let (s, c) = self.theta.sin_cos();
+        Self::new(
+            -c * self.x - s * self.y,
+            s * self.x - c * self.y,
+            wrap_angle(-self.theta),
+        )
+    }
+
+    /// The relative pose `⊖self ⊕ other`: `other` seen from `self`.
+    #[inline]
+    pub fn between(&self, other: &Self) -> Self {
+        self.inverse().compose(other)
+    }
+
+    /// Transforms a point given in this pose's frame into the outer frame.
+    #[inline]
+    pub fn transform_point(&self, p: &Vector2<T>) -> Vector2<T> {
+        let (s, c) = self.theta.sin_cos();
+        Vector2::new(self.x + c * p[0] - s * p[1], self.y + s * p[0] + c * p[1])
+    }
+
+    /// Transforms a point given in the outer frame into this pose's frame.
+    #[inline]
+    pub fn inverse_transform_point(&self, p: &Vector2<T>) -> Vector2<T> {
+        let (s, c) = self.theta.sin_cos();
+        let dx = p[0] - self.x;
+        let dy = p[1] - self.y;
+        Vector2::new(c * dx + s * dy, -s * dx + c * dy)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::f64::consts::PI;
+
+    fn close(a: &Pose2<f64>, b: &Pose2<f64>) -> bool {
+        (a.x - b.x).abs() < 1e-12
+            && (a.y - b.y).abs() < 1e-12
+            && wrap_angle(a.theta - b.theta).abs() < 1e-12
+    }
+
+    #[test]
+    fn wrap_angle_range() {
+        for k in -20..=20 {
+            let a = 0.3 + f64::from(k) * 2.0 * PI;
+            assert!((wrap_angle(a) - 0.3).abs() < 1e-9, "{k}");
+        }
+        assert!((wrap_angle(PI) - PI).abs() < 1e-15);
+        assert!(wrap_angle(-PI + 1e-9) > -PI);
+        assert!(wrap_angle(f64::NAN).is_nan());
+    }
+
+    #[test]
+    fn compose_known_values() {
+        let a = Pose2::new(1.0, 2.0, PI / 2.0);
+        let b = Pose2::new(1.0, 0.0, 0.0);
+        // One metre forward while facing +y moves along +y.
+        assert!(close(&a.compose(&b), &Pose2::new(1.0, 3.0, PI / 2.0)));
+    }
+
+    #[test]
+    fn inverse_and_between() {
+        let a = Pose2::new(1.0, -2.0, 0.7);
+        let b = Pose2::new(-3.0, 0.5, -2.9);
+        assert!(close(&a.compose(&a.inverse()), &Pose2::IDENTITY));
+        assert!(close(&a.compose(&a.between(&b)), &b));
+        let p = Vector2::new(0.3, -1.1);
+        let q = a.inverse_transform_point(&a.transform_point(&p));
+        assert!((p - q).norm() < 1e-12);
+    }
+}

@@ -1,0 +1,58 @@
+//! # microslam
+//!
+//! SLAM estimators that run on a robot's microcontroller — `no_std`, no allocation, all
+//! memory sized at compile time — and, unchanged, on a laptop replaying recorded datasets.
+//!
+//! - [`ekf::EkfSlam`]: landmark EKF-SLAM with range-bearing sightings of signs or markers
+//!   and a compile-time maximum number of landmarks; known-id association in
+//!   [`association`].
+//!
+//! Every estimator is generic over the scalar ([`Real`]: `f32` on a Cortex-M4F, `f64` on
+//! the host), returns errors as small `Copy` values and never panics on bad input: a step
+//! that returns an error leaves the state as it was.
+//!
+//! ```
+//! use microslam::association::{observe_known, KnownIds};
+//! use microslam::ekf::{state_dim, EkfConfig, EkfSlam};
+//! use microslam::sensors::range_bearing::RangeBearing;
+//!
+//! // Up to 32 landmarks: 18 KB in f32, usually a `static` on the target.
+//! let mut slam = EkfSlam::<f32, { state_dim(32) }>::new(EkfConfig::DEFAULT_F32);
+//! let mut ids = KnownIds::<32>::new();
+//!
+//! slam.predict_velocity(0.2, 0.05, 0.1)?; // v [m/s], ω [rad/s], dt [s]
+//! observe_known(&mut slam, &mut ids, 42, &RangeBearing::new(3.0, 0.25))?; // marker 42
+//! let pose = slam.pose();
+//! assert!(pose.x > 0.0);
+//! # Ok::<(), microslam::EkfError>(())
+//! ```
+//!
+//! ## Features
+//! - `std`: build against the standard library (host tools). Off by default.
+//! - `defmt`: `defmt::Format` for public types and log lines through defmt.
+//! - `libm-force`: use libm for float math even with `std`, so host and target agree
+//!   bit for bit.
+#![cfg_attr(not(any(test, feature = "std")), no_std)]
+#![deny(unsafe_code)]
+#![deny(missing_docs)]
+#![cfg_attr(
+    not(test),
+    deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
+)]
+
+pub mod association;
+pub mod ekf;
+pub mod error;
+pub mod gate;
+pub mod geometry;
+mod log;
+pub mod motion;
+pub mod scalar;
+pub mod sensors;
+
+#[cfg(test)]
+mod testing;
+
+pub use error::{EkfError, MapFull};
+pub use geometry::Pose2;
+pub use scalar::Real;

@@ -1,0 +1,71 @@
+//! The scalar types the estimators run on.
+//!
+//! Every estimator is generic over [`Real`]: `f32` on a microcontroller with an FPU,
+//! `f64` allowed on the host. The trait adds to nalgebra's [`RealField`] the few things a
+//! `no_std`, allocation-free filter needs: constants usable in `const fn` (so that large
+//! filters can be built directly in a `static`) and lossless conversion of literals.
+
+use nalgebra::RealField;
+
+/// A real scalar usable by the estimators: `f32` or `f64`.
+pub trait Real: RealField + Copy + Default {
+    /// Zero, usable in `const` contexts.
+    const ZERO: Self;
+    /// One, usable in `const` contexts.
+    const ONE: Self;
+
+    /// Converts an `f64` literal or setting to this type (rounding for `f32`).
+    fn lit(value: f64) -> Self;
+
+    /// Converts to `f64` (exact for both implementations).
+    fn to_f64(self) -> f64;
+
+    /// `true` when the value is neither NaN nor infinite.
+    fn finite(self) -> bool;
+}
+
+impl Real for f32 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+
+    #[inline]
+    fn lit(value: f64) -> Self {
+        value as f32
+    }
+
+    #[inline]
+    fn to_f64(self) -> f64 {
+        f64::from(self)
+    }
+
+    #[inline]
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+}
+
+impl Real for f64 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+
+    #[inline]
+    fn lit(value: f64) -> Self {
+        value
+    }
+
+    #[inline]
+    fn to_f64(self) -> f64 {
+        self
+    }
+
+    #[inline]
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+}
+
+/// `true` when every value is finite.
+#[inline]
+pub fn all_finite<T: Real>(values: &[T]) -> bool {
+    values.iter().all(|v| v.finite())
+}

@@ -1,0 +1,3 @@
+//! Sensor models: what a sensor measures, given the robot pose and the world.
+
+pub mod range_bearing;
