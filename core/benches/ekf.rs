@@ -13,8 +13,10 @@ fn filled<T: Real, const N: usize>(config: EkfConfig<T>) -> Box<EkfSlam<T, N>> {
     let l = EkfSlam::<T, N>::MAX_LANDMARKS;
     for i in 0..l {
         let b = T::lit(-3.0 + 6.0 * i as f64 / l as f64);
-        slam.add_landmark(&RangeBearing::new(T::lit(3.0), b)).expect("room for every landmark");
-        slam.predict_velocity(T::lit(0.1), T::lit(0.05), T::lit(0.1)).expect("finite input");
+        slam.add_landmark(&RangeBearing::new(T::lit(3.0), b))
+            .expect("room for every landmark");
+        slam.predict_velocity(T::lit(0.1), T::lit(0.05), T::lit(0.1))
+            .expect("finite input");
     }
     slam
 }
@@ -24,16 +26,32 @@ fn bench_size<T: Real, const N: usize>(c: &mut Criterion, scalar: &str) {
     let mut group = c.benchmark_group(format!("ekf_{scalar}"));
     let mut slam = filled::<T, N>(EkfConfig::DEFAULT_F64.cast());
     group.bench_function(BenchmarkId::new("predict", l), |b| {
-        b.iter(|| slam.predict_velocity(black_box(T::lit(0.2)), black_box(T::lit(0.01)), black_box(T::lit(0.01))))
+        b.iter(|| {
+            slam.predict_velocity(
+                black_box(T::lit(0.2)),
+                black_box(T::lit(0.01)),
+                black_box(T::lit(0.01)),
+            )
+        })
     });
-    for (name, form) in [("update_joseph", CovarianceUpdate::Joseph), ("update_symmetric", CovarianceUpdate::Symmetric)] {
-        let mut slam = filled::<T, N>(EkfConfig { covariance_update: form, ..EkfConfig::DEFAULT_F64.cast() });
+    for (name, form) in [
+        ("update_joseph", CovarianceUpdate::Joseph),
+        ("update_symmetric", CovarianceUpdate::Symmetric),
+    ] {
+        let mut slam = filled::<T, N>(EkfConfig {
+            covariance_update: form,
+            ..EkfConfig::DEFAULT_F64.cast()
+        });
         // The predicted sightings: updating with them leaves the mean where it is, so every
         // timed update is accepted and costs the same.
         let sightings: Vec<RangeBearing<T>> = (0..l)
             .map(|i| {
                 let landmark = slam.landmark(i).expect("filled");
-                slam.config().sensor.predict(&slam.pose(), &landmark).expect("not on the sensor").z
+                slam.config()
+                    .sensor
+                    .predict(&slam.pose(), &landmark)
+                    .expect("not on the sensor")
+                    .z
             })
             .collect();
         let mut i = 0;

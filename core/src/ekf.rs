@@ -671,7 +671,9 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let (ks0, ks1) = split_columns(&ks, k);
         let data = self.covariance.as_mut_slice();
         for (j, (&gj0, &gj1)) in g0.iter().zip(g1).enumerate() {
-            let Some(col) = data.get_mut(j * N..j * N + j + 1) else { break };
+            let Some(col) = data.get_mut(j * N..j * N + j + 1) else {
+                break;
+            };
             for ((p, &a0), &a1) in col.iter_mut().zip(ks0).zip(ks1) {
                 *p -= a0 * gj0 + a1 * gj1;
             }
@@ -717,7 +719,9 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let data = self.covariance.as_mut_slice();
         for j in 0..k {
             let (kj0, kj1, mj0, mj1) = (g0[j], g1[j], m0[j], m1[j]);
-            let Some(col) = data.get_mut(j * N..j * N + j + 1) else { break };
+            let Some(col) = data.get_mut(j * N..j * N + j + 1) else {
+                break;
+            };
             let rows = g0.iter().zip(g1).zip(d0.iter().zip(d1));
             for (p, ((&ki0, &ki1), (&di0, &di1))) in col.iter_mut().zip(rows) {
                 *p += (di0 * kj0 + di1 * kj1) - (ki0 * mj0 + ki1 * mj1);

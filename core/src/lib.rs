@@ -53,6 +53,11 @@ pub mod sensors;
 #[cfg(test)]
 mod testing;
 
+/// The README's code examples, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../../README.md")]
+pub struct ReadmeDoctests;
+
 pub use error::{EkfError, MapFull};
 pub use geometry::Pose2;
 pub use scalar::Real;
