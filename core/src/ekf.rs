@@ -24,9 +24,9 @@
 //!
 //! | landmarks | N | bytes |
 //! | --- | --- | --- |
-//! | 16 | 35 | 5 044 |
-//! | 32 | 67 | 18 228 |
-//! | 64 | 131 | 69 292 |
+//! | 16 | 35 | 5 128 |
+//! | 32 | 67 | 18 312 |
+//! | 64 | 131 | 69 256 |
 //!
 //! Such a filter belongs in a `static` on a microcontroller: [`EkfSlam::new`] is a
 //! `const fn`, so `static`s are laid out by the linker (`.bss`/`.data`) and never pass
@@ -64,7 +64,7 @@ pub const fn state_dim(max_landmarks: usize) -> usize {
 }
 
 /// Bytes an `f32` filter uses beyond its mean and covariance (configuration, counters).
-pub const EKF_OVERHEAD_BYTES_F32: usize = 108;
+pub const EKF_OVERHEAD_BYTES_F32: usize = 88;
 
 /// How the covariance is updated after a measurement (as in adskalman-rs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -227,7 +227,6 @@ pub struct Innovation<T: Real> {
 /// use microslam::geometry::Pose2;
 /// use microslam::sensors::range_bearing::RangeBearing;
 ///
-/// static mut _ILLUSTRATION: () = (); // on a target: `static SLAM: … = EkfSlam::new(…)`
 /// let mut slam = EkfSlam::<f64, { state_dim(8) }>::new(EkfConfig::DEFAULT_F64);
 /// let sign = slam.add_landmark(&RangeBearing::new(2.0, 0.5))?;
 /// slam.predict_velocity(0.5, 0.1, 0.1)?;
@@ -240,7 +239,8 @@ pub struct Innovation<T: Real> {
 pub struct EkfSlam<T: Real, const N: usize> {
     mean: SVector<T, N>,
     covariance: SMatrix<T, N, N>,
-    landmarks: usize,
+    /// Number of active landmarks (`u32` keeps the layout the same on 32- and 64-bit).
+    landmarks: u32,
     config: EkfConfig<T>,
     counters: EkfCounters,
 }
@@ -248,7 +248,7 @@ pub struct EkfSlam<T: Real, const N: usize> {
 impl<T: Real, const N: usize> EkfSlam<T, N> {
     /// Checked at compile time wherever the type is constructed.
     const DIMENSION_IS_VALID: () = assert!(
-        N >= 3 && (N - 3) % 2 == 0,
+        N >= 3 && (N - 3).is_multiple_of(2),
         "EkfSlam state dimension must be 3 + 2 * max_landmarks: use state_dim()"
     );
 
@@ -317,12 +317,12 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
 
     /// Number of landmarks in the state.
     pub fn landmark_count(&self) -> usize {
-        self.landmarks
+        self.landmarks as usize
     }
 
     /// Dimension of the active part of the state, `3 + 2n`.
     pub fn active_dim(&self) -> usize {
-        3 + 2 * self.landmarks
+        3 + 2 * self.landmark_count()
     }
 
     /// Current robot pose estimate.
@@ -337,13 +337,15 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
 
     /// Position of landmark `index`, or `None` when there is no such landmark.
     pub fn landmark(&self, index: usize) -> Option<Vector2<T>> {
-        (index < self.landmarks).then(|| self.mean.fixed_rows::<2>(3 + 2 * index).into_owned())
+        (index < self.landmark_count())
+            .then(|| self.mean.fixed_rows::<2>(3 + 2 * index).into_owned())
     }
 
     /// 2 × 2 covariance of landmark `index`, or `None` when there is no such landmark.
     pub fn landmark_covariance(&self, index: usize) -> Option<Matrix2<T>> {
         let i = 3 + 2 * index;
-        (index < self.landmarks).then(|| self.covariance.fixed_view::<2, 2>(i, i).into_owned())
+        (index < self.landmark_count())
+            .then(|| self.covariance.fixed_view::<2, 2>(i, i).into_owned())
     }
 
     /// The active part of the mean, `[x, y, θ, x₁, y₁, …]`.
@@ -454,7 +456,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         r: &Matrix2<T>,
         m: Option<&mut SMatrix<T, N, 2>>,
     ) -> Result<Innovation<T>, EkfError> {
-        if index >= self.landmarks {
+        if index >= self.landmark_count() {
             return Err(EkfError::UnknownLandmark);
         }
         let li = 3 + 2 * index;
@@ -477,7 +479,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         s[(0, 1)] = off;
         s[(1, 0)] = off;
         let det = s[(0, 0)] * s[(1, 1)] - off * off;
-        if !(det > T::ZERO) || !(s[(0, 0)] > T::ZERO) || !det.finite() {
+        if !is_positive(det) || !is_positive(s[(0, 0)]) || !det.finite() {
             return Err(EkfError::SingularInnovation);
         }
         let s_inv = Matrix2::new(s[(1, 1)] / det, -off / det, -off / det, s[(0, 0)] / det);
@@ -527,7 +529,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         if !(z.range.finite() && z.bearing.finite()) {
             return Err(EkfError::NonFiniteInput);
         }
-        if !(z.range > T::ZERO) {
+        if !is_positive(z.range) {
             return Err(EkfError::InvalidRange);
         }
         let r = r
@@ -736,7 +738,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             Ok(r) => r,
             Err(e) => return self.reject(e),
         };
-        if self.landmarks >= Self::MAX_LANDMARKS {
+        if self.landmark_count() >= Self::MAX_LANDMARKS {
             return self.reject(EkfError::MapFull);
         }
         let g = self.config.sensor.landmark_from(&self.pose(), z);
@@ -763,7 +765,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             .fixed_view_mut::<2, 2>(k, k)
             .copy_from(&p_pp);
         self.mean.fixed_rows_mut::<2>(k).copy_from(&g.landmark);
-        let index = self.landmarks;
+        let index = self.landmark_count();
         self.landmarks += 1;
         Ok(index)
     }
@@ -773,6 +775,11 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
 fn split_columns<T: Real, const N: usize>(m: &SMatrix<T, N, 2>, k: usize) -> (&[T], &[T]) {
     let (a, b) = m.as_slice().split_at(N);
     (a.get(..k).unwrap_or(&[]), b.get(..k).unwrap_or(&[]))
+}
+
+/// `x > 0`, false for NaN.
+fn is_positive<T: Real>(x: T) -> bool {
+    x > T::ZERO
 }
 
 fn symmetrise3<T: Real>(m: &mut Matrix3<T>) {
