@@ -308,13 +308,13 @@ impl<T: Real, const N: usize, const B: usize, const K: usize> Search<'_, T, N, B
 /// Lower Cholesky factor of a symmetric 2 × 2 matrix; `None` when not positive definite.
 fn cholesky2<T: Real>(s: &Matrix2<T>) -> Option<Matrix2<T>> {
     let s00 = s[(0, 0)];
-    if !(s00 > T::ZERO) {
+    if s00 <= T::ZERO || !s00.finite() {
         return None;
     }
     let l00 = s00.sqrt();
     let l10 = (s[(1, 0)] + s[(0, 1)]) * T::lit(0.5) / l00;
     let d = s[(1, 1)] - l10 * l10;
-    if !(d > T::ZERO) || !d.finite() {
+    if d <= T::ZERO || !d.finite() {
         return None;
     }
     Some(Matrix2::new(l00, T::ZERO, l10, d.sqrt()))
