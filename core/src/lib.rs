@@ -8,6 +8,8 @@
 //! - [`ekf::EkfSlam`]: landmark EKF-SLAM with range-bearing sightings of signs or markers
 //!   and a compile-time maximum number of landmarks; known-id association in
 //!   [`association`].
+//! - [`event::Event`]: one time-stamped sensor sample; readers produce them, estimators
+//!   consume them.
 //!
 //! Every estimator is generic over the scalar ([`Real`]: `f32` on a Cortex-M4F, `f64` on
 //! the host), returns errors as small `Copy` values and never panics on bad input: a step
@@ -45,6 +47,7 @@
 pub mod association;
 pub mod ekf;
 pub mod error;
+pub mod event;
 pub mod gate;
 pub mod geometry;
 mod log;
