@@ -11,6 +11,9 @@
 //!   panics and never allocates.
 //! - [`scan`]: a lidar scan is longer than one frame; [`ScanAssembler`] puts the chunks of
 //!   one scan back together and drops a scan with a missing chunk.
+//! - [`session`]: the device side: [`Session`] turns received bytes into estimator steps
+//!   and replies. The firmware runs it behind its UART; a host runs the same code to get
+//!   the reference the firmware must match.
 //!
 //! ```
 //! use microslam::wire::{encode_frame, FrameDecoder, Odometry, ToDevice, MAX_FRAME_LEN};
@@ -35,6 +38,7 @@
 pub mod frame;
 pub mod messages;
 pub mod scan;
+pub mod session;
 
 pub use frame::{
     EncodeError, FrameDecoder, FrameError, MAX_FRAME_LEN, MAX_PAYLOAD_LEN, WireCounters,
@@ -45,6 +49,7 @@ pub use messages::{
     ToDevice, ToHost,
 };
 pub use scan::{Scan, ScanAssembler, ScanError};
+pub use session::Session;
 
 #[cfg(test)]
 mod tests;
