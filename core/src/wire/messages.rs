@@ -232,5 +232,8 @@ pub enum ToHost {
         estimator: EstimatorKind,
         /// The counters.
         status: Status,
+        /// Deepest use of the stack so far, bytes, where the device can measure it
+        /// (a firmware that paints its stack at reset); 0 where it cannot.
+        stack_peak_bytes: u32,
     },
 }

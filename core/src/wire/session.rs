@@ -167,6 +167,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
             seq,
             estimator: self.active,
             status: self.status,
+            stack_peak_bytes: 0,
         }
     }
 
