@@ -58,6 +58,11 @@ pub mod wire;
 #[cfg(test)]
 mod testing;
 
+/// The README's code examples, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../../README.md")]
+pub struct ReadmeDoctests;
+
 pub use error::{EkfError, MapFull};
 pub use geometry::Pose2;
 pub use scalar::Real;
