@@ -9,7 +9,9 @@
 #![no_std]
 
 #[cfg(all(feature = "qemu", feature = "stm32f411"))]
-compile_error!("choose one board: feature `qemu` (default) or `stm32f411` with --no-default-features");
+compile_error!(
+    "choose one board: feature `qemu` (default) or `stm32f411` with --no-default-features"
+);
 #[cfg(not(any(feature = "qemu", feature = "stm32f411")))]
 compile_error!("choose a board: feature `qemu` or `stm32f411`");
 
@@ -66,7 +68,11 @@ where
             replies = replies.wrapping_add(1);
             if replies % HEARTBEAT_EVENTS == 0 {
                 led_on = !led_on;
-                let _ = if led_on { led.set_high() } else { led.set_low() };
+                let _ = if led_on {
+                    led.set_high()
+                } else {
+                    led.set_low()
+                };
             }
         }
     }

@@ -19,7 +19,10 @@ fn main() -> ! {
     let ekf = EKF.take();
     let mut session = Session::<_, EKF_LANDMARKS>::new(ekf, EKF_CONFIG);
     let (mut serial, mut led) = board::init();
-    defmt::info!("microslam firmware: EKF with {} landmarks, waiting for frames", EKF_LANDMARKS);
+    defmt::info!(
+        "microslam firmware: EKF with {} landmarks, waiting for frames",
+        EKF_LANDMARKS
+    );
     serve(&mut session, &mut serial, &mut led, stack::peak_bytes)
 }
 

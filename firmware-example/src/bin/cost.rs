@@ -3,4 +3,6 @@
 use cortex_m_rt::entry;
 use panic_probe as _;
 #[entry]
-fn main() -> ! { firmware_example::board::halt(0) }
+fn main() -> ! {
+    firmware_example::board::halt(0)
+}
