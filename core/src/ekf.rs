@@ -671,14 +671,19 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let (ks0, ks1) = split_columns(&ks, k);
         let data = self.covariance.as_mut_slice();
         for (j, (&gj0, &gj1)) in g0.iter().zip(g1).enumerate() {
-            let Some(col) = data.get_mut(j * N..j * N + j + 1) else {
+            let Some((upper, diagonal, mirror)) = column_and_mirror(data, N, j) else {
                 break;
             };
-            for ((p, &a0), &a1) in col.iter_mut().zip(ks0).zip(ks1) {
-                *p -= a0 * gj0 + a1 * gj1;
+            let rows = ks0.iter().zip(ks1);
+            for ((p, m), (&a0, &a1)) in upper.iter_mut().zip(mirror).zip(rows) {
+                let v = *p - (a0 * gj0 + a1 * gj1);
+                *p = v;
+                *m = v;
+            }
+            if let (Some(&a0), Some(&a1)) = (ks0.get(j), ks1.get(j)) {
+                *diagonal -= a0 * gj0 + a1 * gj1;
             }
         }
-        mirror_upper_triangle(data, N, k);
     }
 
     /// Joseph form `(I − KH) P (I − KH)ᵀ + K R Kᵀ` in one pass over the upper triangle.
@@ -719,15 +724,17 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let data = self.covariance.as_mut_slice();
         for j in 0..k {
             let (kj0, kj1, mj0, mj1) = (g0[j], g1[j], m0[j], m1[j]);
-            let Some(col) = data.get_mut(j * N..j * N + j + 1) else {
+            let Some((upper, diagonal, mirror)) = column_and_mirror(data, N, j) else {
                 break;
             };
             let rows = g0.iter().zip(g1).zip(d0.iter().zip(d1));
-            for (p, ((&ki0, &ki1), (&di0, &di1))) in col.iter_mut().zip(rows) {
-                *p += (di0 * kj0 + di1 * kj1) - (ki0 * mj0 + ki1 * mj1);
+            for ((p, m), ((&ki0, &ki1), (&di0, &di1))) in upper.iter_mut().zip(mirror).zip(rows) {
+                let v = *p + ((di0 * kj0 + di1 * kj1) - (ki0 * mj0 + ki1 * mj1));
+                *p = v;
+                *m = v;
             }
+            *diagonal += (d0[j] * kj0 + d1[j] * kj1) - (kj0 * mj0 + kj1 * mj1);
         }
-        mirror_upper_triangle(data, N, k);
     }
 
     /// Adds a landmark seen at `z`, with the configured measurement noise. See
@@ -799,17 +806,23 @@ fn split_columns<T: Real, const N: usize>(m: &SMatrix<T, N, 2>, k: usize) -> (&[
     (a.get(..k).unwrap_or(&[]), b.get(..k).unwrap_or(&[]))
 }
 
-/// Copies the upper triangle of the leading `k × k` block of a column-major `n × n`
-/// matrix onto its lower triangle.
-fn mirror_upper_triangle<T: Copy>(data: &mut [T], n: usize, k: usize) {
-    for j in 1..k {
-        for i in 0..j {
-            let upper = data.get(j * n + i).copied();
-            if let (Some(v), Some(lower)) = (upper, data.get_mut(i * n + j)) {
-                *lower = v;
-            }
-        }
+/// Column `j` of a column-major `n × n` matrix split for an in-place symmetric update:
+/// its rows `0..j` (upper triangle), its diagonal element, and an iterator over the mirror
+/// positions `(j, i)`, `i < j` (row `j` of the columns before). Writing each upper value
+/// to its mirror in the same pass replaces a separate, strided mirroring pass.
+fn column_and_mirror<T>(
+    data: &mut [T],
+    n: usize,
+    j: usize,
+) -> Option<(&mut [T], &mut T, impl Iterator<Item = &mut T>)> {
+    if j >= n {
+        return None;
     }
+    let (left, rest) = data.split_at_mut_checked(j * n)?;
+    let (diagonal, upper) = rest.get_mut(..=j)?.split_last_mut()?;
+    // Each chunk is one column of length n > j, so `get_mut(j)` never fails.
+    let mirror = left.chunks_exact_mut(n).filter_map(move |c| c.get_mut(j));
+    Some((upper, diagonal, mirror))
 }
 
 /// `x > 0`, false for NaN.

@@ -10,6 +10,8 @@
 //!   [`association`].
 //! - [`event::Event`]: one time-stamped sensor sample; readers produce them, estimators
 //!   consume them.
+//! - `wire` (feature `wire`): the messages between a host and the device on a serial line,
+//!   with a streaming, allocation-free frame decoder.
 //!
 //! Every estimator is generic over the scalar ([`Real`]: `f32` on a Cortex-M4F, `f64` on
 //! the host), returns errors as small `Copy` values and never panics on bad input: a step
@@ -34,6 +36,7 @@
 //! ## Features
 //! - `std`: build against the standard library (host tools). Off by default.
 //! - `defmt`: `defmt::Format` for public types and log lines through defmt.
+//! - `wire`: `microslam::wire`, the serial-line messages (serde + postcard, COBS, CRC-16).
 //! - `libm-force`: use libm for float math even with `std`, so host and target agree
 //!   bit for bit.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
@@ -54,6 +57,8 @@ mod log;
 pub mod motion;
 pub mod scalar;
 pub mod sensors;
+#[cfg(feature = "wire")]
+pub mod wire;
 
 #[cfg(test)]
 mod testing;
