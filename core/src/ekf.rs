@@ -478,13 +478,12 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
     ) -> Result<(), EkfError> {
         let a = &step.wrt_pose;
         let p_rr = self.covariance.fixed_view::<3, 3>(0, 0).into_owned();
-        let mut new_rr = a * p_rr * a.transpose() + q;
+        let new_rr = a * p_rr * a.transpose() + q;
         // |P_RM| ≤ max variance (P is PSD), so A P_RM is bounded by 3 · max|A| · max variance.
         let cross_bound = T::lit(3.0) * max_abs(a.iter().copied()) * self.max_variance();
         if !step.pose.is_finite() || !new_rr.iter().all(|v| v.finite()) || !cross_bound.finite() {
             return self.reject(EkfError::NumericalFailure);
         }
-        symmetrise3(&mut new_rr);
         // Last-resort variance caps (see the module docs): scale the robot's rows and
         // columns by D = diag(s) — a congruence, so P stays positive semi-definite.
         let caps = [
@@ -499,7 +498,8 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             }
         }
         let d = Matrix3::from_diagonal(&nalgebra::Vector3::new(scale[0], scale[1], scale[2]));
-        let new_rr = d * new_rr * d;
+        let mut new_rr = d * new_rr * d;
+        symmetrise3(&mut new_rr);
         let a = d * a;
         self.covariance
             .fixed_view_mut::<3, 3>(0, 0)
@@ -602,7 +602,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         if !(z.range.finite() && z.bearing.finite()) {
             return Err(EkfError::NonFiniteInput);
         }
-        if !is_positive(z.range) {
+        if z.range < T::lit(crate::sensors::range_bearing::MIN_RANGE) {
             return Err(EkfError::InvalidRange);
         }
         let r = r

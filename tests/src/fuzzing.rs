@@ -95,24 +95,24 @@ pub fn ekf_steps(data: &[u8]) {
             ),
             2 => (
                 ekf.update(index, &RangeBearing::new(a, b)).is_err(),
-                !(a.is_finite() && b.is_finite()) || a <= 0.0,
+                !(a.is_finite() && b.is_finite()) || a < 1e-3,
             ),
             3 => (
                 ekf.add_landmark(&RangeBearing::new(a, b)).is_err(),
-                !(a.is_finite() && b.is_finite()) || a <= 0.0,
+                !(a.is_finite() && b.is_finite()) || a < 1e-3,
             ),
             4 => {
                 let r = Matrix2::new(c.abs(), 0.0, 0.0, c.abs());
                 let z = RangeBearing::new(a, b);
                 (
                     ekf.update_with_covariance(index, &z, &r).is_err(),
-                    !finite || a <= 0.0,
+                    !finite || a < 1e-3,
                 )
             }
             _ => {
                 let z = RangeBearing::new(a, b);
                 let out = observe_known(&mut ekf, &mut ids, u32::from(op >> 3), &z);
-                (out.is_err(), !(a.is_finite() && b.is_finite()) || a <= 0.0)
+                (out.is_err(), !(a.is_finite() && b.is_finite()) || a < 1e-3)
             }
         };
         if must_refuse {
