@@ -35,9 +35,26 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
     }
 
     let odo_path = file(format!("Robot{robot}_Odometry.dat"));
-    let odometry = read_table::<3>(&odo_path)?;
     let meas_path = file(format!("Robot{robot}_Measurement.dat"));
-    let measurements = read_table::<4>(&meas_path)?;
+    let gt_path = file(format!("Robot{robot}_Groundtruth.dat"));
+    // The three large files are parsed in parallel.
+    let (odometry, measurements, truth) = std::thread::scope(|s| {
+        let odo = s.spawn(|| read_table::<3>(&odo_path));
+        let gt = s.spawn(|| {
+            gt_path
+                .exists()
+                .then(|| read_table::<4>(&gt_path))
+                .transpose()
+        });
+        let meas = read_table::<4>(&meas_path);
+        let panicked = |_| anyhow::anyhow!("reader thread panicked");
+        anyhow::Ok((
+            odo.join().map_err(panicked)?,
+            meas,
+            gt.join().map_err(panicked)?,
+        ))
+    })?;
+    let (odometry, measurements, truth) = (odometry?, measurements?, truth?);
 
     let mut events = Vec::with_capacity(odometry.len() + measurements.len());
     for row in &odometry {
@@ -70,10 +87,9 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
     }
     sort_events(&mut events)?;
 
-    let gt_path = file(format!("Robot{robot}_Groundtruth.dat"));
     let mut ground_truth = Vec::new();
-    if gt_path.exists() {
-        for row in read_table::<4>(&gt_path)? {
+    if let Some(truth) = truth {
+        for row in truth {
             let [stamp, x, y, theta] = row.values;
             ground_truth.push(TruePose {
                 stamp,

@@ -1,0 +1,97 @@
+//! TUM trajectory files: `t x y z qx qy qz qw`, one pose a line.
+
+use anyhow::{Context, Result};
+use microslam::geometry::Pose2;
+use std::io::Write;
+use std::path::Path;
+
+/// One TUM line for a planar pose (z = 0, rotation about z).
+pub fn tum_line(stamp: f64, pose: &Pose2<f64>) -> String {
+    let mut s = Vec::new();
+    push_line(&mut s, stamp, pose);
+    s.pop();
+    String::from_utf8_lossy(&s).into_owned()
+}
+
+/// Writes poses as a TUM file.
+pub fn write_tum(path: &Path, poses: impl Iterator<Item = (f64, Pose2<f64>)>) -> Result<()> {
+    let mut bytes = Vec::with_capacity(1 << 20);
+    bytes.extend_from_slice(b"# timestamp x y z qx qy qz qw\n");
+    for (t, p) in poses {
+        push_line(&mut bytes, t, &p);
+    }
+    std::fs::write(path, &bytes).with_context(|| format!("cannot write {}", path.display()))
+}
+
+fn push_line(out: &mut Vec<u8>, stamp: f64, p: &Pose2<f64>) {
+    let (s, c) = (p.theta / 2.0).sin_cos();
+    push_fixed(out, stamp, 6);
+    out.push(b' ');
+    push_fixed(out, p.x, 6);
+    out.push(b' ');
+    push_fixed(out, p.y, 6);
+    out.extend_from_slice(b" 0 0 0 ");
+    push_fixed(out, s, 9);
+    out.push(b' ');
+    push_fixed(out, c, 9);
+    out.push(b'\n');
+}
+
+/// Appends `v` with 6 or 9 digits after the point, by integer arithmetic: float
+/// formatting dominated the writing of long trajectories. Values too large for it fall
+/// back to the standard formatter.
+fn push_fixed(out: &mut Vec<u8>, v: f64, decimals: usize) {
+    let unit: u64 = if decimals == 9 {
+        1_000_000_000
+    } else {
+        1_000_000
+    };
+    let scaled = (v.abs() * unit as f64).round();
+    if scaled.is_nan() || scaled >= 9.0e18 {
+        let _ = write!(out, "{v:.decimals$}");
+        return;
+    }
+    let n = scaled as u64;
+    if v < 0.0 && n != 0 {
+        out.push(b'-');
+    }
+    push_digits(out, n / unit, 1);
+    out.push(b'.');
+    push_digits(out, n % unit, decimals);
+}
+
+/// Appends the decimal digits of `n`, zero-padded to at least `min_digits`.
+fn push_digits(out: &mut Vec<u8>, mut n: u64, min_digits: usize) {
+    let mut buf = [b'0'; 20];
+    let mut i = buf.len();
+    while n > 0 || buf.len() - i < min_digits {
+        i -= 1;
+        if let Some(b) = buf.get_mut(i) {
+            *b = b'0' + (n % 10) as u8;
+        }
+        n /= 10;
+    }
+    out.extend_from_slice(buf.get(i..).unwrap_or(&[]));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quaternion_of_a_yaw() {
+        let l = tum_line(1.5, &Pose2::new(1.0, -2.0, std::f64::consts::FRAC_PI_2));
+        assert_eq!(
+            l,
+            "1.500000 1.000000 -2.000000 0 0 0 0.707106781 0.707106781"
+        );
+        let l = tum_line(
+            1248444187.156,
+            &Pose2::new(-0.0000004, -0.25, -std::f64::consts::PI),
+        );
+        assert_eq!(
+            l,
+            "1248444187.156000 0.000000 -0.250000 0 0 0 -1.000000000 0.000000000"
+        );
+    }
+}
