@@ -74,6 +74,7 @@ pub struct AssociationSettings {
     pub joint_probability: f64,
     pub max_search_nodes: u32,
     pub batch_window_s: f64,
+    pub ambiguity_margin: f64,
 }
 
 /// See `configs/mrclam.toml` for the meaning of each field.
@@ -136,6 +137,7 @@ impl Settings {
             s.bearing_std,
             s.min_range,
             a.batch_window_s,
+            a.ambiguity_margin,
         ];
         if non_negative.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
             bail!("noise figures, ranges and windows must be finite and non-negative");
@@ -212,6 +214,7 @@ impl Settings {
             new_landmark_threshold: T::lit(chi_square_quantile(a.new_landmark_probability, 2)),
             joint_probability: a.joint_probability,
             max_search_nodes: a.max_search_nodes,
+            ambiguity_margin: T::lit(a.ambiguity_margin),
         }
     }
 }

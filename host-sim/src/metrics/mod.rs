@@ -7,11 +7,12 @@
 //!   onto the true ones).
 //! - **Landmark RMSE** (m): estimated landmarks carried by the same transform; known ids
 //!   matched by id, unknown ones by a one-to-one assignment minimising total distance.
-//! - **Association purity**: the estimated landmarks and the true landmarks are paired
-//!   one-to-one so as to maximise the sightings they share; purity is the share of all
-//!   sightings the filter used (updates and creations) that went to the partner of their
-//!   true landmark. A duplicate landmark and a mixed one both lower it.
-//!   `association_cluster_purity` is the plain cluster purity (each landmark's majority).
+//! - **Association purity** (the textbook cluster purity): each estimated landmark is
+//!   credited with the sightings of its majority true landmark; purity is their share of
+//!   all sightings the filter used (updates and creations). Mixed landmarks lower it,
+//!   duplicates do not: `association_one_to_one_purity` also penalises duplicates by
+//!   pairing estimated and true landmarks one-to-one (maximising shared sightings) and
+//!   counting only the sightings that went to the partner of their true landmark.
 //! - **NEES** of the pose against ground truth (filter frame = world frame: the filter
 //!   starts at the true initial pose), mean over the evaluated estimates with an
 //!   invertible covariance; **NIS** mean of the accepted updates.
@@ -83,7 +84,7 @@ pub struct Metrics {
     pub landmark_rmse_m: Aligned,
     /// Landmarks in the final map.
     pub landmarks_created: usize,
-    /// See the module docs.
+    /// Cluster purity of the association (see the module docs).
     pub association_purity: Option<f64>,
     /// Mean NEES of the pose (3 dof).
     pub nees_pose_mean: Option<f64>,
@@ -98,8 +99,8 @@ pub struct Metrics {
     pub association: String,
     /// Filter scalar.
     pub precision: String,
-    /// Plain cluster purity (each landmark's majority true id).
-    pub association_cluster_purity: Option<f64>,
+    /// One-to-one purity: duplicates count as errors too (see the module docs).
+    pub association_one_to_one_purity: Option<f64>,
     /// True landmarks in the dataset.
     pub landmarks_true: usize,
     /// Estimates scored against ground truth.
@@ -176,7 +177,7 @@ pub fn evaluate(recording: &Recording, run: &ReplayRun) -> Metrics {
     m.nees_pose_within_95 = (!nees.is_empty())
         .then(|| nees.iter().filter(|v| **v <= bound).count() as f64 / nees.len() as f64);
     m.nis_mean = mean(&run.nis);
-    (m.association_purity, m.association_cluster_purity) = purity(recording, run);
+    (m.association_one_to_one_purity, m.association_purity) = purity(recording, run);
     m
 }
 
