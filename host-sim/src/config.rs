@@ -102,14 +102,36 @@ impl Settings {
         toml::from_str(text).with_context(|| format!("built-in config {family}.toml"))
     }
 
-    /// The defaults of `family` with the file `path` (if any) laid over them.
-    pub fn load(family: &str, path: Option<&Path>) -> Result<Self> {
+    /// The defaults of `family` with the file `path` (if any) laid over them, for the
+    /// association `mode` (`None`: the file's own `association.mode`).
+    ///
+    /// With an unknown-id mode (ICNN, JCBB), the `[unknown_ids]` table of the files, when
+    /// present, is laid over the rest: association needs noise figures that keep the
+    /// filter consistent, which are not always those that score best with known ids.
+    pub fn load_for(family: &str, path: Option<&Path>, mode: Option<AssociationMode>) -> Result<Self> {
         let mut base: toml::Table = toml::from_str(builtin_text(family)?)?;
         if let Some(path) = path {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("cannot read config {}", path.display()))?;
             let over: toml::Table =
                 toml::from_str(&text).with_context(|| format!("config {}", path.display()))?;
+            merge(&mut base, over);
+        }
+        let unknown = base.remove("unknown_ids");
+        if let Some(mode) = mode {
+            let mut table = toml::Table::new();
+            table.insert("mode".into(), toml::Value::try_from(mode)?);
+            merge(&mut base, toml::Table::from_iter([("association".to_owned(), toml::Value::Table(table))]));
+        }
+        let file_mode = base
+            .get("association")
+            .and_then(|a| a.get("mode"))
+            .and_then(|m| m.as_str())
+            .unwrap_or("known")
+            .to_owned();
+        if file_mode != "known"
+            && let Some(toml::Value::Table(over)) = unknown
+        {
             merge(&mut base, over);
         }
         let settings: Self = toml::Value::Table(base)
@@ -120,6 +142,11 @@ impl Settings {
             })?;
         settings.validate()?;
         Ok(settings)
+    }
+
+    /// [`Settings::load_for`] with the association mode of the files.
+    pub fn load(family: &str, path: Option<&Path>) -> Result<Self> {
+        Self::load_for(family, path, None)
     }
 
     /// Checks ranges of values that TOML types cannot.
@@ -261,5 +288,12 @@ mod tests {
         );
         std::fs::write(&p, "[sighting]\nrange_std = -1.0\n").unwrap();
         assert!(Settings::load("mrclam", Some(&p)).is_err());
+        // The unknown-id overlay applies to ICNN/JCBB only.
+        std::fs::write(&p, "[unknown_ids.sighting]\nrange_std = 0.3\n").unwrap();
+        let known = Settings::load_for("mrclam", Some(&p), Some(AssociationMode::Known)).unwrap();
+        let jcbb = Settings::load_for("mrclam", Some(&p), Some(AssociationMode::Jcbb)).unwrap();
+        assert_eq!(known.sighting.range_std, base.sighting.range_std);
+        assert_eq!(jcbb.sighting.range_std, 0.3);
+        assert_eq!(jcbb.association.mode, AssociationMode::Jcbb);
     }
 }

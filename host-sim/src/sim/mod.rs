@@ -145,7 +145,7 @@ pub fn simulate(settings: &Settings, seed: u64) -> Result<Recording> {
 /// `host-sim sim`: simulate, replay, score, write the results.
 pub fn run_cli(args: &SimArgs, quiet: bool) -> Result<()> {
     let started = std::time::Instant::now();
-    let settings = Settings::load("sim", args.config.as_deref())?;
+    let settings = Settings::load_for("sim", args.config.as_deref(), Some(args.association))?;
     let recording = simulate(&settings, args.seed)?;
     crate::replay::run_and_report(
         &recording,
