@@ -108,7 +108,11 @@ impl Settings {
     /// With an unknown-id mode (ICNN, JCBB), the `[unknown_ids]` table of the files, when
     /// present, is laid over the rest: association needs noise figures that keep the
     /// filter consistent, which are not always those that score best with known ids.
-    pub fn load_for(family: &str, path: Option<&Path>, mode: Option<AssociationMode>) -> Result<Self> {
+    pub fn load_for(
+        family: &str,
+        path: Option<&Path>,
+        mode: Option<AssociationMode>,
+    ) -> Result<Self> {
         let mut base: toml::Table = toml::from_str(builtin_text(family)?)?;
         if let Some(path) = path {
             let text = std::fs::read_to_string(path)
@@ -121,7 +125,10 @@ impl Settings {
         if let Some(mode) = mode {
             let mut table = toml::Table::new();
             table.insert("mode".into(), toml::Value::try_from(mode)?);
-            merge(&mut base, toml::Table::from_iter([("association".to_owned(), toml::Value::Table(table))]));
+            merge(
+                &mut base,
+                toml::Table::from_iter([("association".to_owned(), toml::Value::Table(table))]),
+            );
         }
         let file_mode = base
             .get("association")

@@ -20,7 +20,11 @@ use std::time::Instant;
 /// `host-sim replay`.
 pub fn run_cli(args: &ReplayArgs, quiet: bool) -> Result<()> {
     let started = Instant::now();
-    let settings = Settings::load_for(args.dataset.family(), args.config.as_deref(), args.association)?;
+    let settings = Settings::load_for(
+        args.dataset.family(),
+        args.config.as_deref(),
+        args.association,
+    )?;
     let recording = crate::readers::read(&args.dataset, args.robot)?;
     let mode = settings.association.mode;
     run_and_report(
