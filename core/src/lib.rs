@@ -3,11 +3,15 @@
 //! SLAM estimators that run on a robot's microcontroller — `no_std`, no allocation, all
 //! memory sized at compile time — and, unchanged, on a laptop replaying recorded datasets.
 //!
+//! - [`sensors::camera`]: pinhole / RGB-D camera geometry: a detection's pixel and depth
+//!   to a range-bearing sighting with its covariance, pixels back to the robot and world.
 //! - [`ekf::EkfSlam`]: landmark EKF-SLAM with range-bearing sightings of signs or markers
 //!   and a compile-time maximum number of landmarks; known-id association in
 //!   [`association`].
 //! - [`event::Event`]: one time-stamped sensor sample; readers produce them, estimators
 //!   consume them.
+//! - `wire` (feature `wire`): the messages between a host and the device on a serial line,
+//!   with a streaming, allocation-free frame decoder.
 //!
 //! Every estimator is generic over the scalar ([`Real`]: `f32` on a Cortex-M4F, `f64` on
 //! the host), returns errors as small `Copy` values and never panics on bad input: a step
@@ -32,6 +36,7 @@
 //! ## Features
 //! - `std`: build against the standard library (host tools). Off by default.
 //! - `defmt`: `defmt::Format` for public types and log lines through defmt.
+//! - `wire`: `microslam::wire`, the serial-line messages (serde + postcard, COBS, CRC-16).
 //! - `libm-force`: use libm for float math even with `std`, so host and target agree
 //!   bit for bit.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
@@ -52,9 +57,16 @@ mod log;
 pub mod motion;
 pub mod scalar;
 pub mod sensors;
+#[cfg(feature = "wire")]
+pub mod wire;
 
 #[cfg(test)]
 mod testing;
+
+/// The README's code examples, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../../README.md")]
+pub struct ReadmeDoctests;
 
 pub use error::{EkfError, MapFull};
 pub use geometry::Pose2;
