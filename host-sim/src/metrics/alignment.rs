@@ -136,7 +136,7 @@ mod tests {
                 "{a} -> {w}"
             );
             assert!(
-                (w - reference).abs() < 1e-12 || (w - reference).abs() > 6.28,
+                (w - reference).abs() < 1e-12 || (w - reference).abs() > 6.0,
                 "{a}: {w} vs {reference}"
             );
         }

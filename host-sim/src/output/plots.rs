@@ -12,6 +12,9 @@ use nalgebra::{Matrix2, Vector2};
 use plotters::prelude::*;
 use std::path::Path;
 
+/// A point of the plot, metres.
+type Point = (f64, f64);
+
 const MAP_PX: u32 = 900;
 const ERR_W: u32 = 1200;
 const ERR_H: u32 = 450;
@@ -64,7 +67,7 @@ pub fn draw_map(
         .collect();
     let (s, c) = t.theta.sin_cos();
     let rot = Matrix2::new(c, -s, s, c);
-    let landmarks: Vec<((f64, f64), Vec<(f64, f64)>)> = run
+    let landmarks: Vec<(Point, Vec<Point>)> = run
         .landmarks
         .iter()
         .map(|l| {

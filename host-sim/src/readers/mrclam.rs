@@ -2,8 +2,8 @@
 //! truth.
 //!
 //! Files in the dataset folder (tab-separated, 4 `#` header lines):
-//! - `Robot<k>_Odometry.dat`: time [s], v [m/s], ω [rad/s] → [`EventKind::Velocity`];
-//! - `Robot<k>_Measurement.dat`: time, **barcode**, range [m], bearing [rad] →
+//! - `Robot<k>_Odometry.dat`: time (s), v (m/s), ω (rad/s) → [`EventKind::Velocity`];
+//! - `Robot<k>_Measurement.dat`: time, **barcode**, range (m), bearing (rad) →
 //!   [`EventKind::Sighting`] with [`Identity::Unique`]`(subject)`; the barcode is mapped
 //!   to a subject through `Barcodes.dat`. Subjects 1–5 are the robots: their sightings are
 //!   dropped, as are barcodes that `Barcodes.dat` does not list (counted in
@@ -65,7 +65,7 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
     for row in &measurements {
         let [t, code, range, bearing] = row.values;
         let code = whole(&meas_path, row.line, code, "barcode")?;
-        if !(range > 0.0) {
+        if range <= 0.0 {
             return Err(invalid(
                 &meas_path,
                 row.line,
