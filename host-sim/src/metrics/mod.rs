@@ -63,6 +63,52 @@ pub fn interpolate_pose(truth: &[TruePose], stamp: f64) -> Option<Pose2<f64>> {
     ))
 }
 
+/// Interpolates ground truth at non-decreasing stamps by walking forward (no search):
+/// the same results as [`interpolate_pose`].
+pub struct TruthCursor<'a> {
+    truth: &'a [TruePose],
+    next: usize,
+}
+
+impl<'a> TruthCursor<'a> {
+    /// A cursor at the start of `truth`.
+    pub fn new(truth: &'a [TruePose]) -> Self {
+        Self { truth, next: 0 }
+    }
+
+    /// Ground truth at `stamp`; stamps must not decrease between calls (a smaller one
+    /// falls back to a search).
+    pub fn at(&mut self, stamp: f64) -> Option<Pose2<f64>> {
+        let t = self.truth;
+        if self.next > 0 && t.get(self.next - 1).is_some_and(|p| p.stamp > stamp) {
+            return interpolate_pose(t, stamp);
+        }
+        while t.get(self.next).is_some_and(|p| p.stamp <= stamp) {
+            self.next += 1;
+        }
+        let first = t.first()?;
+        let last = t.last()?;
+        if !(stamp >= first.stamp && stamp <= last.stamp) {
+            return None;
+        }
+        let a = t.get(self.next.checked_sub(1)?)?;
+        let Some(b) = t.get(self.next) else {
+            return Some(a.pose);
+        };
+        let span = b.stamp - a.stamp;
+        let s = if span > 0.0 {
+            (stamp - a.stamp) / span
+        } else {
+            0.0
+        };
+        Some(Pose2::new(
+            a.pose.x + s * (b.pose.x - a.pose.x),
+            a.pose.y + s * (b.pose.y - a.pose.y),
+            wrap(a.pose.theta + s * wrap(b.pose.theta - a.pose.theta)),
+        ))
+    }
+}
+
 /// A figure under both alignments (`null` in JSON when it cannot be computed).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct Aligned {
@@ -128,8 +174,9 @@ pub fn evaluate(recording: &Recording, run: &ReplayRun) -> Metrics {
     let mut est = Vec::new();
     let mut gt = Vec::new();
     let mut nees = Vec::new();
+    let mut cursor = TruthCursor::new(truth);
     for s in &run.trajectory {
-        let Some(g) = interpolate_pose(truth, s.stamp) else {
+        let Some(g) = cursor.at(s.stamp) else {
             continue;
         };
         est.push(s.pose);
@@ -147,8 +194,9 @@ pub fn evaluate(recording: &Recording, run: &ReplayRun) -> Metrics {
     }
     let mut dr_est = Vec::new();
     let mut dr_gt = Vec::new();
+    let mut cursor = TruthCursor::new(truth);
     for (t, p) in &run.dead_reckoning {
-        if let Some(g) = interpolate_pose(truth, *t) {
+        if let Some(g) = cursor.at(*t) {
             dr_est.push(*p);
             dr_gt.push(g);
         }
@@ -322,4 +370,30 @@ fn purity(recording: &Recording, run: &ReplayRun) -> (Option<f64>, Option<f64>) 
         Some(matched / total as f64),
         Some(cluster as f64 / total as f64),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cursor_matches_search_and_stays_inside_the_span() {
+        let truth: Vec<TruePose> = (0..50)
+            .map(|i| TruePose {
+                stamp: f64::from(i) * 0.1,
+                pose: Pose2::new(f64::from(i), -f64::from(i), wrap(f64::from(i) * 0.4)),
+            })
+            .collect();
+        let mut c = TruthCursor::new(&truth);
+        for k in -5..560 {
+            let t = f64::from(k) * 0.00913;
+            assert_eq!(c.at(t), interpolate_pose(&truth, t), "t = {t}");
+        }
+        assert_eq!(c.at(0.05), interpolate_pose(&truth, 0.05), "backwards");
+        // Half-way between samples 3 and 4, heading across the ±π cut handled.
+        let p = interpolate_pose(&truth, 0.35).unwrap();
+        assert!((p.x - 3.5).abs() < 1e-12 && (p.y + 3.5).abs() < 1e-12);
+        assert_eq!(interpolate_pose(&truth, 4.95), None);
+        assert_eq!(interpolate_pose(&truth, -0.01), None);
+    }
 }

@@ -25,39 +25,35 @@ pub fn write_tum(path: &Path, poses: impl Iterator<Item = (f64, Pose2<f64>)>) ->
 
 fn push_line(out: &mut Vec<u8>, stamp: f64, p: &Pose2<f64>) {
     let (s, c) = (p.theta / 2.0).sin_cos();
-    push_fixed(out, stamp, 6);
+    push_fixed::<6>(out, stamp);
     out.push(b' ');
-    push_fixed(out, p.x, 6);
+    push_fixed::<6>(out, p.x);
     out.push(b' ');
-    push_fixed(out, p.y, 6);
+    push_fixed::<6>(out, p.y);
     out.extend_from_slice(b" 0 0 0 ");
-    push_fixed(out, s, 9);
+    push_fixed::<9>(out, s);
     out.push(b' ');
-    push_fixed(out, c, 9);
+    push_fixed::<9>(out, c);
     out.push(b'\n');
 }
 
 /// Appends `v` with 6 or 9 digits after the point, by integer arithmetic: float
 /// formatting dominated the writing of long trajectories. Values too large for it fall
 /// back to the standard formatter.
-fn push_fixed(out: &mut Vec<u8>, v: f64, decimals: usize) {
-    let unit: u64 = if decimals == 9 {
-        1_000_000_000
-    } else {
-        1_000_000
-    };
-    let scaled = (v.abs() * unit as f64).round();
+fn push_fixed<const D: u32>(out: &mut Vec<u8>, v: f64) {
+    let unit = 10u64.pow(D);
+    let scaled = v.abs() * unit as f64 + 0.5;
     if scaled.is_nan() || scaled >= 9.0e18 {
-        let _ = write!(out, "{v:.decimals$}");
+        let _ = write!(out, "{v:.*}", D as usize);
         return;
     }
-    let n = scaled as u64;
+    let n = scaled as u64; // truncating x + 0.5 rounds x ≥ 0
     if v < 0.0 && n != 0 {
         out.push(b'-');
     }
     push_digits(out, n / unit, 1);
     out.push(b'.');
-    push_digits(out, n % unit, decimals);
+    push_digits(out, n % unit, D as usize);
 }
 
 /// Appends the decimal digits of `n`, zero-padded to at least `min_digits`.
