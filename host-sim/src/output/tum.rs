@@ -15,12 +15,21 @@ pub fn tum_line(stamp: f64, pose: &Pose2<f64>) -> String {
 
 /// Writes poses as a TUM file.
 pub fn write_tum(path: &Path, poses: impl Iterator<Item = (f64, Pose2<f64>)>) -> Result<()> {
-    let mut bytes = Vec::with_capacity(1 << 20);
-    bytes.extend_from_slice(b"# timestamp x y z qx qy qz qw\n");
+    let file =
+        std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+    let mut w = std::io::BufWriter::with_capacity(1 << 16, file);
+    let mut line = Vec::with_capacity(128);
+    line.extend_from_slice(b"# timestamp x y z qx qy qz qw\n");
     for (t, p) in poses {
-        push_line(&mut bytes, t, &p);
+        push_line(&mut line, t, &p);
+        if line.len() > 4096 {
+            w.write_all(&line)?;
+            line.clear();
+        }
     }
-    std::fs::write(path, &bytes).with_context(|| format!("cannot write {}", path.display()))
+    w.write_all(&line)?;
+    w.flush()
+        .with_context(|| format!("cannot write {}", path.display()))
 }
 
 fn push_line(out: &mut Vec<u8>, stamp: f64, p: &Pose2<f64>) {

@@ -11,7 +11,7 @@
 //! - `Robot<k>_Groundtruth.dat` (optional: dataset 1 has none): time, x, y, θ;
 //! - `Landmark_Groundtruth.dat`: subject, x, y, σx, σy.
 
-use super::text::{ReadError, invalid, read_table};
+use super::text::{ReadError, invalid, read_table, read_table_with};
 use super::{Recording, TrueLandmark, TruePose, sort_events};
 use microslam::event::{Event, EventKind, Identity, Sighting};
 use microslam::geometry::Pose2;
@@ -37,30 +37,39 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
     let odo_path = file(format!("Robot{robot}_Odometry.dat"));
     let meas_path = file(format!("Robot{robot}_Measurement.dat"));
     let gt_path = file(format!("Robot{robot}_Groundtruth.dat"));
-    // The three large files are parsed in parallel.
-    let (odometry, measurements, truth) = std::thread::scope(|s| {
-        let odo = s.spawn(|| read_table::<3>(&odo_path));
-        let gt = s.spawn(|| {
-            gt_path
-                .exists()
-                .then(|| read_table::<4>(&gt_path))
-                .transpose()
+    // The three large files are parsed in parallel, straight into events and poses.
+    let (odometry, measurements, ground_truth) = std::thread::scope(|s| {
+        let odometry = s.spawn(|| {
+            let mut events = Vec::with_capacity(65_536);
+            read_table_with::<3>(&odo_path, |row| {
+                let [t, v, omega] = row.values;
+                events.push(Event::new(t, EventKind::Velocity { v, omega }));
+            })
+            .map(|()| events)
         });
-        let meas = read_table::<4>(&meas_path);
+        let truth = s.spawn(|| {
+            let mut poses = Vec::with_capacity(65_536);
+            if gt_path.exists() {
+                read_table_with::<4>(&gt_path, |row| {
+                    let [stamp, x, y, theta] = row.values;
+                    poses.push(TruePose {
+                        stamp,
+                        pose: Pose2::new(x, y, theta),
+                    });
+                })?;
+            }
+            Ok::<_, ReadError>(poses)
+        });
+        let measurements = read_table::<4>(&meas_path);
         let panicked = |_| anyhow::anyhow!("reader thread panicked");
         anyhow::Ok((
-            odo.join().map_err(panicked)?,
-            meas,
-            gt.join().map_err(panicked)?,
+            odometry.join().map_err(panicked)?,
+            measurements,
+            truth.join().map_err(panicked)?,
         ))
     })?;
-    let (odometry, measurements, truth) = (odometry?, measurements?, truth?);
-
-    let mut events = Vec::with_capacity(odometry.len() + measurements.len());
-    for row in &odometry {
-        let [t, v, omega] = row.values;
-        events.push(Event::new(t, EventKind::Velocity { v, omega }));
-    }
+    let (mut events, measurements, mut ground_truth) = (odometry?, measurements?, ground_truth?);
+    events.reserve(measurements.len());
     let mut dropped = 0;
     for row in &measurements {
         let [t, code, range, bearing] = row.values;
@@ -86,18 +95,7 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
         }
     }
     sort_events(&mut events)?;
-
-    let mut ground_truth = Vec::new();
-    if let Some(truth) = truth {
-        for row in truth {
-            let [stamp, x, y, theta] = row.values;
-            ground_truth.push(TruePose {
-                stamp,
-                pose: Pose2::new(x, y, theta),
-            });
-        }
-        ground_truth.sort_by(|a, b| a.stamp.total_cmp(&b.stamp));
-    }
+    ground_truth.sort_by(|a, b| a.stamp.total_cmp(&b.stamp));
 
     let lm_path = file("Landmark_Groundtruth.dat".into());
     let mut landmarks = Vec::new();
