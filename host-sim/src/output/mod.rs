@@ -46,7 +46,9 @@ pub fn write_all(
             write_tum(
                 &out.join("trajectory.tum"),
                 run.trajectory.iter().map(|p| (p.stamp, p.pose)),
-            )?;
+            )
+        });
+        let truth = s.spawn(|| -> Result<()> {
             write_tum(
                 &out.join("groundtruth.tum"),
                 recording.ground_truth.iter().map(|p| (p.stamp, p.pose)),
@@ -64,7 +66,11 @@ pub fn write_all(
             h.join()
                 .unwrap_or_else(|_| Err(anyhow::anyhow!("writer thread panicked")))
         };
-        (join(tum), join(map), errors.unwrap_or(Ok(())))
+        (
+            join(tum).and(join(truth)),
+            join(map),
+            errors.unwrap_or(Ok(())),
+        )
     });
     a?;
     b?;

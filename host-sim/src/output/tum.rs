@@ -65,18 +65,33 @@ fn push_fixed<const D: u32>(out: &mut Vec<u8>, v: f64) {
     push_digits(out, n % unit, D as usize);
 }
 
-/// Appends the decimal digits of `n`, zero-padded to at least `min_digits`.
+/// "00" … "99": two digits per division.
+const PAIRS: &[u8; 200] = b"0001020304050607080910111213141516171819\
+2021222324252627282930313233343536373839\
+4041424344454647484950515253545556575859\
+6061626364656667686970717273747576777879\
+8081828384858687888990919293949596979899";
+
+/// Appends the decimal digits of `n`, zero-padded to at least `min_digits` (≤ 20).
 fn push_digits(out: &mut Vec<u8>, mut n: u64, min_digits: usize) {
     let mut buf = [b'0'; 20];
     let mut i = buf.len();
-    while n > 0 || buf.len() - i < min_digits {
-        i -= 1;
-        if let Some(b) = buf.get_mut(i) {
-            *b = b'0' + (n % 10) as u8;
-        }
-        n /= 10;
+    while n >= 100 {
+        let d = (n % 100) as usize * 2;
+        n /= 100;
+        i -= 2;
+        buf[i..i + 2].copy_from_slice(&PAIRS[d..d + 2]);
     }
-    out.extend_from_slice(buf.get(i..).unwrap_or(&[]));
+    if n >= 10 {
+        let d = n as usize * 2;
+        i -= 2;
+        buf[i..i + 2].copy_from_slice(&PAIRS[d..d + 2]);
+    } else {
+        i -= 1;
+        buf[i] = b'0' + n as u8;
+    }
+    let start = i.min(buf.len().saturating_sub(min_digits));
+    out.extend_from_slice(&buf[start..]);
 }
 
 #[cfg(test)]
