@@ -102,14 +102,45 @@ pub fn replay(
     precision: Precision,
     progress: Option<&ProgressBar>,
 ) -> Result<ReplayRun> {
-    match precision {
-        Precision::F32 => {
-            Replayer::<f32>::new(settings, mode, recording)?.run(recording, progress, precision)
+    // Dead reckoning runs beside the filter (it only needs the events).
+    let max_gap = settings.odometry.max_gap_s;
+    std::thread::scope(|s| {
+        let dr = s.spawn(|| dead_reckoning(recording, max_gap));
+        let mut run =
+            match precision {
+                Precision::F32 => Replayer::<f32>::new(settings, mode, recording)?
+                    .run(recording, progress, precision),
+                Precision::F64 => Replayer::<f64>::new(settings, mode, recording)?
+                    .run(recording, progress, precision),
+            }?;
+        run.dead_reckoning = dr
+            .join()
+            .map_err(|_| anyhow::anyhow!("dead-reckoning thread panicked"))?;
+        Ok(run)
+    })
+}
+
+/// Odometry integrated alone from the recording's initial pose, at each odometry stamp
+/// (after integrating up to it), with the same motion model and gap rule as the filter.
+pub fn dead_reckoning(recording: &Recording, max_gap: f64) -> Vec<(f64, Pose2<f64>)> {
+    let mut out = Vec::with_capacity(recording.events.len());
+    let mut pose = recording.initial_pose.unwrap_or(Pose2::IDENTITY);
+    let mut velocity = (0.0, 0.0);
+    let mut last: Option<f64> = None;
+    for e in &recording.events {
+        if let Some(prev) = last {
+            let dt = (e.stamp - prev).min(max_gap);
+            if dt > 0.0 {
+                pose = integrate_velocity(&pose, velocity.0, velocity.1, dt).pose;
+            }
         }
-        Precision::F64 => {
-            Replayer::<f64>::new(settings, mode, recording)?.run(recording, progress, precision)
+        last = Some(last.map_or(e.stamp, |p: f64| p.max(e.stamp)));
+        if let EventKind::Velocity { v, omega } = e.kind {
+            velocity = (v, omega);
+            out.push((e.stamp, pose));
         }
     }
+    out
 }
 
 struct Replayer<T: Real> {
@@ -160,8 +191,6 @@ impl<T: Real> Replayer<T> {
         let max_gap = self.settings.odometry.max_gap_s;
         let window = self.settings.association.batch_window_s;
         let mut trajectory = Vec::with_capacity(events.len());
-        let mut dead_reckoning = Vec::with_capacity(events.len());
-        let mut dr_pose = recording.initial_pose.unwrap_or(Pose2::IDENTITY);
         let mut velocity = (0.0f64, 0.0f64);
         let mut last: Option<f64> = None;
         let mut sightings = 0;
@@ -188,7 +217,6 @@ impl<T: Real> Replayer<T> {
                     if let Err(e) = r {
                         bail!("prediction at t = {t} refused: {e}");
                     }
-                    dr_pose = integrate_velocity(&dr_pose, velocity.0, velocity.1, dt).pose;
                 }
             }
             last = Some(last.map_or(t, |p: f64| p.max(t)));
@@ -197,7 +225,6 @@ impl<T: Real> Replayer<T> {
                     velocity = (v, omega);
                     steps += 1;
                     trajectory.push(self.sample(t));
-                    dead_reckoning.push((t, dr_pose));
                     i += 1;
                 }
                 EventKind::Sighting(_) => {
@@ -252,7 +279,7 @@ impl<T: Real> Replayer<T> {
             mode: self.mode,
             precision,
             trajectory,
-            dead_reckoning,
+            dead_reckoning: Vec::new(),
             landmarks,
             nis: self.nis,
             steps,

@@ -8,7 +8,9 @@
 
 mod estimator;
 
-pub use estimator::{AssociationCounts, MapLandmark, PoseSample, ReplayRun, replay};
+pub use estimator::{
+    AssociationCounts, MapLandmark, PoseSample, ReplayRun, dead_reckoning, replay,
+};
 
 use crate::cli::{AssociationMode, Precision, ReplayArgs};
 use crate::config::Settings;
