@@ -3,9 +3,13 @@
 //! SLAM estimators that run on a robot's microcontroller — `no_std`, no allocation, all
 //! memory sized at compile time — and, unchanged, on a laptop replaying recorded datasets.
 //!
+//! - [`sensors::camera`]: pinhole / RGB-D camera geometry: a detection's pixel and depth
+//!   to a range-bearing sighting with its covariance, pixels back to the robot and world.
 //! - [`ekf::EkfSlam`]: landmark EKF-SLAM with range-bearing sightings of signs or markers
 //!   and a compile-time maximum number of landmarks; known-id association in
 //!   [`association`].
+//! - [`event::Event`]: one time-stamped sensor sample; readers produce them, estimators
+//!   consume them.
 //! - `wire` (feature `wire`): the messages between a host and the device on a serial line,
 //!   with a streaming, allocation-free frame decoder.
 //!
@@ -46,6 +50,7 @@
 pub mod association;
 pub mod ekf;
 pub mod error;
+pub mod event;
 pub mod gate;
 pub mod geometry;
 mod log;

@@ -1,4 +1,4 @@
-//! Helpers of the cross-crate tests.
+//! Helpers of the cross-crate tests (the tests themselves are in `tests/tests/*.rs`).
 //!
 //! - [`firmware`]: runs the firmware of `firmware-example` under QEMU, streams wire frames
 //!   to its UART and collects its replies; the same bytes through a host
