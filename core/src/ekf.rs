@@ -602,7 +602,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         if !(z.range.finite() && z.bearing.finite()) {
             return Err(EkfError::NonFiniteInput);
         }
-        if z.range < T::lit(crate::sensors::range_bearing::MIN_RANGE) {
+        if !z.is_valid() {
             return Err(EkfError::InvalidRange);
         }
         let r = r

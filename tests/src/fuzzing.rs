@@ -87,6 +87,8 @@ pub fn ekf_steps(data: &[u8]) {
             ekf.active_covariance().clone_owned(),
         );
         let index = usize::from(op >> 3);
+        // What the EKF accepts as a sighting: finite, range within 1 mm ..= 1 km.
+        let valid_z = a.is_finite() && b.is_finite() && (1e-3..=1e3).contains(&a);
         let (refused, must_refuse) = match op % 6 {
             0 => (ekf.predict_velocity(a, b, c).is_err(), !finite || c < 0.0),
             1 => (
@@ -95,24 +97,24 @@ pub fn ekf_steps(data: &[u8]) {
             ),
             2 => (
                 ekf.update(index, &RangeBearing::new(a, b)).is_err(),
-                !(a.is_finite() && b.is_finite()) || a < 1e-3,
+                !valid_z,
             ),
             3 => (
                 ekf.add_landmark(&RangeBearing::new(a, b)).is_err(),
-                !(a.is_finite() && b.is_finite()) || a < 1e-3,
+                !valid_z,
             ),
             4 => {
                 let r = Matrix2::new(c.abs(), 0.0, 0.0, c.abs());
                 let z = RangeBearing::new(a, b);
                 (
                     ekf.update_with_covariance(index, &z, &r).is_err(),
-                    !finite || a < 1e-3,
+                    !valid_z || !c.is_finite(),
                 )
             }
             _ => {
                 let z = RangeBearing::new(a, b);
                 let out = observe_known(&mut ekf, &mut ids, u32::from(op >> 3), &z);
-                (out.is_err(), !(a.is_finite() && b.is_finite()) || a < 1e-3)
+                (out.is_err(), !valid_z)
             }
         };
         if must_refuse {

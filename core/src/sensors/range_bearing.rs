@@ -23,6 +23,11 @@ use nalgebra::{Matrix2, Matrix2x3, Vector2};
 /// refused.
 pub const MIN_RANGE: f64 = 1.0e-3;
 
+/// Longest range the model accepts, metres. Far beyond any landmark sensor; it keeps the
+/// new landmark's covariance, whose across-ray variance grows as range², representable
+/// next to its along-ray variance in `f32` (a 50 km sighting is not).
+pub const MAX_RANGE: f64 = 1.0e3;
+
 /// A range-bearing measurement: range in metres, bearing in radians (CCW positive).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -44,9 +49,13 @@ impl<T: Real> RangeBearing<T> {
         Vector2::new(self.range, self.bearing)
     }
 
-    /// `true` when both components are finite and the range at least [`MIN_RANGE`].
+    /// `true` when both components are finite and the range within
+    /// [`MIN_RANGE`]`..=`[`MAX_RANGE`].
     pub fn is_valid(&self) -> bool {
-        self.range.finite() && self.bearing.finite() && self.range >= T::lit(MIN_RANGE)
+        self.range.finite()
+            && self.bearing.finite()
+            && self.range >= T::lit(MIN_RANGE)
+            && self.range <= T::lit(MAX_RANGE)
     }
 }
 
