@@ -1,7 +1,8 @@
 //! Numerical soak: long random runs of the f32 EKF through a field of landmarks, with
 //! realistic magnitudes, both covariance forms. Every 500 steps the covariance must be
 //! finite, exactly symmetric and positive semi-definite (smallest eigenvalue ≥ −1e-6 ·
-//! trace); the robot must stay consistent with the landmarks it sees.
+//! trace), and valid input is never refused; over the short run the position error must
+//! also stay inside the filter's own uncertainty.
 //!
 //! `cargo test -p microslam --test soak` runs 20 000 steps per form; the full soak of
 //! 10⁶ steps per form is `cargo test --release -p microslam --test soak -- --ignored`.
@@ -130,7 +131,10 @@ fn soak(steps: usize, form: CovarianceUpdate, seed: u64) -> SoakReport {
     report
 }
 
-fn run(steps: usize) {
+/// `nees_bound`: the largest position NEES allowed at any checkpoint, or `None` to only
+/// report it (over 10⁶ steps EKF-SLAM's known overconfidence in heading shows: measured
+/// maximum 33.7 at one of 2 000 checkpoints, against 8.1 over the first 20 000 steps).
+fn run(steps: usize, nees_bound: Option<f64>) {
     for (form, seed) in [
         (CovarianceUpdate::Joseph, 2),
         (CovarianceUpdate::Symmetric, 1),
@@ -155,11 +159,13 @@ fn run(steps: usize) {
 
 #[test]
 fn soak_short() {
-    run(20_000);
+    // The error stays inside the filter's own uncertainty: below the 2-DOF χ² quantile of
+    // 1 − 1e-5 at each of the 40 checkpoints (measured maxima 8.1 and 3.0).
+    run(20_000, Some(23.0));
 }
 
 #[test]
 #[ignore = "10⁶ steps per form: run with --release -- --ignored"]
 fn soak_million_steps() {
-    run(1_000_000);
+    run(1_000_000, None);
 }
