@@ -12,11 +12,14 @@
 //! - [`metrics`]: ATE, landmark error, NEES/NIS, association purity → `metrics.json`.
 //! - [`output`]: TUM trajectories and PNG pictures.
 //! - [`config`]: estimator settings from TOML files.
+//! - [`faults`]: fault injection into event streams (drops, duplicates, reordering,
+//!   corrupted readings, clock jumps).
 #![deny(missing_docs)]
 
 pub mod cli;
 pub mod config;
 pub mod datasets;
+pub mod faults;
 pub mod metrics;
 pub mod output;
 pub mod readers;
