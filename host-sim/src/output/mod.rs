@@ -27,7 +27,7 @@ pub fn progress_bar(len: u64) -> ProgressBar {
     bar
 }
 
-/// Writes `trajectory.tum`, `groundtruth.tum`, `map.png` and
+/// Writes `trajectory.tum`, `groundtruth.tum`, `landmarks.csv`, `map.png` and
 /// `errors.png` (when `plots`), then `metrics.json` with the wall time since `started`.
 pub fn write_all(
     out: &Path,
@@ -75,10 +75,31 @@ pub fn write_all(
     a?;
     b?;
     c?;
+    write_landmarks(&out.join("landmarks.csv"), run)?;
     metrics.wall_time_s = started.elapsed().as_secs_f64();
     let json = serde_json::to_string_pretty(metrics)?;
     let path = out.join("metrics.json");
     std::fs::write(&path, json + "\n").with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// `landmarks.csv`: the final map, one landmark a line: index, bound id (known-id mode,
+/// else empty), x, y (m) and the covariance entries σxx, σxy, σyy (m²).
+pub fn write_landmarks(path: &Path, run: &ReplayRun) -> Result<()> {
+    use std::fmt::Write;
+    let mut text = String::from("index,id,x,y,cov_xx,cov_xy,cov_yy\n");
+    for (i, l) in run.landmarks.iter().enumerate() {
+        let id = l.id.map(|id| id.to_string()).unwrap_or_default();
+        let _ = writeln!(
+            text,
+            "{i},{id},{:.6},{:.6},{:.3e},{:.3e},{:.3e}",
+            l.position[0],
+            l.position[1],
+            l.covariance[0][0],
+            l.covariance[0][1],
+            l.covariance[1][1]
+        );
+    }
+    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
 }
 
 /// A short human-readable summary of the metrics.
