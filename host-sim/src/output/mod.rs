@@ -27,7 +27,7 @@ pub fn progress_bar(len: u64) -> ProgressBar {
     bar
 }
 
-/// Writes `trajectory.tum`, `groundtruth.tum`, `landmarks.csv`, `map.png` and
+/// Writes `trajectory.tum`, `landmarks.csv`, `map.png` and
 /// `errors.png` (when `plots`), then `metrics.json` with the wall time since `started`.
 pub fn write_all(
     out: &Path,
@@ -48,12 +48,6 @@ pub fn write_all(
                 run.trajectory.iter().map(|p| (p.stamp, p.pose)),
             )
         });
-        let truth = s.spawn(|| -> Result<()> {
-            write_tum(
-                &out.join("groundtruth.tum"),
-                recording.ground_truth.iter().map(|p| (p.stamp, p.pose)),
-            )
-        });
         let map = s.spawn(|| -> Result<()> {
             if plots {
                 draw_map(&out.join("map.png"), recording, run, &alignment)?;
@@ -66,11 +60,7 @@ pub fn write_all(
             h.join()
                 .unwrap_or_else(|_| Err(anyhow::anyhow!("writer thread panicked")))
         };
-        (
-            join(tum).and(join(truth)),
-            join(map),
-            errors.unwrap_or(Ok(())),
-        )
+        (join(tum), join(map), errors.unwrap_or(Ok(())))
     });
     a?;
     b?;
@@ -100,6 +90,15 @@ pub fn write_landmarks(path: &Path, run: &ReplayRun) -> Result<()> {
         );
     }
     std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Writes `groundtruth.tum` (the recording's ground truth) into `out`, creating it.
+pub fn write_truth(out: &Path, recording: &Recording) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    write_tum(
+        &out.join("groundtruth.tum"),
+        recording.ground_truth.iter().map(|p| (p.stamp, p.pose)),
+    )
 }
 
 /// A short human-readable summary of the metrics.
