@@ -17,6 +17,7 @@
 pub mod cli;
 pub mod config;
 pub mod datasets;
+pub mod hil;
 pub mod metrics;
 pub mod output;
 pub mod readers;
