@@ -25,10 +25,10 @@
 //!   ([`EkfError::NumericalFailure`]) — the state is then exactly what it was;
 //! - the covariance is kept exactly symmetric (only the upper triangle is computed);
 //! - as a last resort, a prediction caps the robot's variances at
-//!   [`MAX_POSITION_VARIANCE`] and [`MAX_HEADING_VARIANCE`] by scaling the robot's rows
-//!   and columns (a congruence, which keeps `P` positive semi-definite). A robot that far
-//!   from certainty is lost; without the cap, `f32` cancellation in the next update would
-//!   break the covariance.
+//!   [`MAX_POSITION_VARIANCE`] and [`MAX_HEADING_VARIANCE`], and a new landmark's at
+//!   [`MAX_POSITION_VARIANCE`], by scaling their rows and columns (a congruence, which
+//!   keeps `P` positive semi-definite). A robot or landmark that uncertain is lost;
+//!   without the cap, `f32` cancellation in the next update would break the covariance.
 //!
 //! # Memory
 //!
@@ -852,19 +852,36 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let g = self.config.sensor.landmark_from(&self.pose(), z);
         let k = self.active_dim();
         let p_rr = self.covariance.fixed_view::<3, 3>(0, 0).into_owned();
-        let mut p_pp = g.wrt_robot * p_rr * g.wrt_robot.transpose()
+        let p_pp = g.wrt_robot * p_rr * g.wrt_robot.transpose()
             + g.wrt_measurement * r * g.wrt_measurement.transpose();
+        // Last-resort cap, as for the robot: scale the new rows and columns (a congruence).
+        let cap = T::lit(MAX_POSITION_VARIANCE);
+        let scale = Vector2::new(
+            if p_pp[(0, 0)] > cap {
+                (cap / p_pp[(0, 0)]).sqrt()
+            } else {
+                T::ONE
+            },
+            if p_pp[(1, 1)] > cap {
+                (cap / p_pp[(1, 1)]).sqrt()
+            } else {
+                T::ONE
+            },
+        );
+        let d = Matrix2::from_diagonal(&scale);
+        let mut p_pp = d * p_pp * d;
         let off = (p_pp[(0, 1)] + p_pp[(1, 0)]) * T::lit(0.5);
         p_pp[(0, 1)] = off;
         p_pp[(1, 0)] = off;
-        let cross_bound = T::lit(3.0) * max_abs(g.wrt_robot.iter().copied()) * self.max_variance();
+        let g_robot = d * g.wrt_robot;
+        let cross_bound = T::lit(3.0) * max_abs(g_robot.iter().copied()) * self.max_variance();
         if !g.landmark.iter().chain(p_pp.iter()).all(|v| v.finite()) || !cross_bound.finite() {
             return self.reject(EkfError::NumericalFailure);
         }
         // P_pX = G_R P[0..3, 0..k], one column at a time.
         for j in 0..k {
             let col = self.covariance.fixed_view::<3, 1>(0, j).into_owned();
-            let v = g.wrt_robot * col;
+            let v = g_robot * col;
             self.covariance.fixed_view_mut::<2, 1>(k, j).copy_from(&v);
             self.covariance
                 .fixed_view_mut::<1, 2>(j, k)
