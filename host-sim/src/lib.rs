@@ -20,6 +20,7 @@ pub mod cli;
 pub mod config;
 pub mod datasets;
 pub mod faults;
+pub mod hil;
 pub mod metrics;
 pub mod output;
 pub mod readers;
