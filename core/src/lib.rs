@@ -6,6 +6,11 @@
 //! - [`ekf::EkfSlam`]: landmark EKF-SLAM with range-bearing sightings of signs or markers
 //!   and a compile-time maximum number of landmarks; known-id association in
 //!   [`association`].
+//! - [`pf::GridSlam`] / [`pf::GridLocalizer`]: the grid particle filter — lidar scans
+//!   scored by map correlation with a local shift search against a saturating `i8`
+//!   log-odds [`grid::OccupancyGrid`] (SLAM) or a fixed, borrowed map (localization, e.g.
+//!   from flash); wheel odometry, IMU yaw-rate filtering and stream alignment in
+//!   [`sensors`].
 //!
 //! Every estimator is generic over the scalar ([`Real`]: `f32` on a Cortex-M4F, `f64` on
 //! the host), returns errors as small `Copy` values and never panics on bad input: a step
@@ -45,8 +50,10 @@ pub mod ekf;
 pub mod error;
 pub mod gate;
 pub mod geometry;
+pub mod grid;
 mod log;
 pub mod motion;
+pub mod pf;
 pub mod scalar;
 pub mod sensors;
 
