@@ -101,12 +101,7 @@ impl<'a> GridView<'a> {
             let start = row + x0 as usize;
             if let Some(chunk) = self.cells.get(start..start + 16) {
                 if let Ok(bytes) = <&[i8; 16]>::try_from(chunk) {
-                    let t = self.occupied_above;
-                    let mut mask = 0u32;
-                    for (k, b) in bytes.iter().enumerate() {
-                        mask |= u32::from(*b > t) << k;
-                    }
-                    return mask & ((1u32 << n) - 1);
+                    return bool_bytes_to_mask(bytes, self.occupied_above) & ((1u32 << n) - 1);
                 }
             }
         }
@@ -118,6 +113,25 @@ impl<'a> GridView<'a> {
         }
         mask
     }
+}
+
+/// Bit `k` set when `bytes[k] > t`: one vector compare into 0/1 bytes, then each group of
+/// eight 0/1 bytes gathered into 8 bits by one multiplication (every partial product
+/// lands on its own bit, so nothing carries).
+#[inline]
+fn bool_bytes_to_mask(bytes: &[i8; 16], t: i8) -> u32 {
+    const GATHER: u64 = 0x0102_0408_1020_4080;
+    let mut flags = [0u8; 16];
+    for (f, b) in flags.iter_mut().zip(bytes) {
+        *f = u8::from(*b > t);
+    }
+    let (groups, _) = flags.as_chunks::<8>();
+    let mut mask = 0u32;
+    for (g, group) in groups.iter().enumerate() {
+        let bits = u64::from_le_bytes(*group).wrapping_mul(GATHER) >> 56;
+        mask |= (bits as u32) << (8 * g);
+    }
+    mask
 }
 
 #[cfg(test)]

@@ -198,24 +198,13 @@ impl<const P: usize> ParticleFilter<P> {
         let res = map.geometry().resolution;
         let scale = self.config.log_likelihood_per_unit / WEIGHT_ONE as f32;
         let k = self.config.shift_window_cells;
-        let mut scores = [0u32; MAX_SHIFTS];
-        let mut previous: Option<(Pose2<f32>, ShiftScore)> = None;
         let mut shifts = [ShiftScore {
             dx: 0,
             dy: 0,
             score: 0,
         }; P];
-        let mut scored = 0;
-        for (p, shift) in self.poses.iter_mut().zip(shifts.iter_mut()) {
-            let s = match previous {
-                Some((q, s)) if q == *p => s,
-                _ => {
-                    scored += 1;
-                    search_window(map, p, points, k, &mut scores)
-                }
-            };
-            previous = Some((*p, s));
-            *shift = s;
+        let scored = score_particles(map, &self.poses, points, k, &mut shifts);
+        for (p, s) in self.poses.iter_mut().zip(shifts.iter()) {
             p.x += s.dx as f32 * res;
             p.y += s.dy as f32 * res;
         }
@@ -288,4 +277,69 @@ impl<const P: usize> ParticleFilter<P> {
         self.log_weights.fill(-libm::logf(P as f32));
         self.resamples = self.resamples.wrapping_add(1);
     }
+}
+
+/// Best shift of every particle; a particle equal to its predecessor (copies after
+/// resampling that did not move) reuses its result. Returns how many were scored.
+#[cfg(not(feature = "parallel"))]
+fn score_particles<const P: usize>(
+    map: &GridView<'_>,
+    poses: &[Pose2<f32>; P],
+    points: &[ScanPoint],
+    half_width: u8,
+    shifts: &mut [ShiftScore; P],
+) -> usize {
+    let mut scores = [0u32; MAX_SHIFTS];
+    let mut scored = 0;
+    let mut previous: Option<(&Pose2<f32>, ShiftScore)> = None;
+    for (p, shift) in poses.iter().zip(shifts.iter_mut()) {
+        *shift = match previous {
+            Some((q, s)) if q == p => s,
+            _ => {
+                scored += 1;
+                search_window(map, p, points, half_width, &mut scores)
+            }
+        };
+        previous = Some((p, *shift));
+    }
+    scored
+}
+
+/// [`score_particles`] on all cores (feature `parallel`): every particle is scored
+/// independently, so the result is the same as on one core.
+#[cfg(feature = "parallel")]
+fn score_particles<const P: usize>(
+    map: &GridView<'_>,
+    poses: &[Pose2<f32>; P],
+    points: &[ScanPoint],
+    half_width: u8,
+    shifts: &mut [ShiftScore; P],
+) -> usize {
+    use rayon::prelude::*;
+    let repeats = |i: usize| i > 0 && poses.get(i) == poses.get(i - 1);
+    shifts
+        .par_iter_mut()
+        .enumerate()
+        .with_min_len(8)
+        .for_each(|(i, shift)| {
+            if !repeats(i) {
+                let mut scores = [0u32; MAX_SHIFTS];
+                if let Some(p) = poses.get(i) {
+                    *shift = search_window(map, p, points, half_width, &mut scores);
+                }
+            }
+        });
+    let mut scored = 0;
+    for i in 0..P {
+        if repeats(i) {
+            if let Some(prev) = shifts.get(i - 1).copied() {
+                if let Some(s) = shifts.get_mut(i) {
+                    *s = prev;
+                }
+            }
+        } else {
+            scored += 1;
+        }
+    }
+    scored
 }
