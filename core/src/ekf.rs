@@ -24,9 +24,9 @@
 //!
 //! | landmarks | N | bytes |
 //! | --- | --- | --- |
-//! | 16 | 35 | 5 044 |
-//! | 32 | 67 | 18 228 |
-//! | 64 | 131 | 69 292 |
+//! | 16 | 35 | 5 128 |
+//! | 32 | 67 | 18 312 |
+//! | 64 | 131 | 69 256 |
 //!
 //! Such a filter belongs in a `static` on a microcontroller: [`EkfSlam::new`] is a
 //! `const fn`, so `static`s are laid out by the linker (`.bss`/`.data`) and never pass
@@ -64,7 +64,7 @@ pub const fn state_dim(max_landmarks: usize) -> usize {
 }
 
 /// Bytes an `f32` filter uses beyond its mean and covariance (configuration, counters).
-pub const EKF_OVERHEAD_BYTES_F32: usize = 108;
+pub const EKF_OVERHEAD_BYTES_F32: usize = 88;
 
 /// How the covariance is updated after a measurement (as in adskalman-rs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -151,6 +151,36 @@ impl<T: Real> EkfConfig<T> {
             && self.gate.threshold > T::ZERO
     }
 
+    /// The same settings in another scalar type (e.g. a host `f64` configuration for an
+    /// `f32` target).
+    pub fn cast<U: Real>(&self) -> EkfConfig<U> {
+        let c = |v: T| U::lit(v.to_f64());
+        let i = &self.increment_noise;
+        let v = &self.velocity_noise;
+        let m = &self.sensor.mount;
+        EkfConfig {
+            increment_noise: IncrementNoise {
+                translation_std: c(i.translation_std),
+                translation_std_per_metre: c(i.translation_std_per_metre),
+                rotation_std: c(i.rotation_std),
+                rotation_std_per_radian: c(i.rotation_std_per_radian),
+                rotation_std_per_metre: c(i.rotation_std_per_metre),
+            },
+            velocity_noise: VelocityNoise {
+                linear_std: c(v.linear_std),
+                linear_std_per_mps: c(v.linear_std_per_mps),
+                angular_std: c(v.angular_std),
+                angular_std_per_radps: c(v.angular_std_per_radps),
+                angular_std_per_mps: c(v.angular_std_per_mps),
+            },
+            range_std: c(self.range_std),
+            bearing_std: c(self.bearing_std),
+            sensor: RangeBearingSensor::new(Pose2::new(c(m.x), c(m.y), c(m.theta))),
+            gate: ChiSquareGate::from_threshold(c(self.gate.threshold)),
+            covariance_update: self.covariance_update,
+        }
+    }
+
     /// The measurement covariance `diag(σ_r², σ_b²)` from the configured noise.
     pub fn measurement_covariance(&self) -> Matrix2<T> {
         Matrix2::new(
@@ -227,7 +257,6 @@ pub struct Innovation<T: Real> {
 /// use microslam::geometry::Pose2;
 /// use microslam::sensors::range_bearing::RangeBearing;
 ///
-/// static mut _ILLUSTRATION: () = (); // on a target: `static SLAM: … = EkfSlam::new(…)`
 /// let mut slam = EkfSlam::<f64, { state_dim(8) }>::new(EkfConfig::DEFAULT_F64);
 /// let sign = slam.add_landmark(&RangeBearing::new(2.0, 0.5))?;
 /// slam.predict_velocity(0.5, 0.1, 0.1)?;
@@ -240,7 +269,8 @@ pub struct Innovation<T: Real> {
 pub struct EkfSlam<T: Real, const N: usize> {
     mean: SVector<T, N>,
     covariance: SMatrix<T, N, N>,
-    landmarks: usize,
+    /// Number of active landmarks (`u32` keeps the layout the same on 32- and 64-bit).
+    landmarks: u32,
     config: EkfConfig<T>,
     counters: EkfCounters,
 }
@@ -248,7 +278,7 @@ pub struct EkfSlam<T: Real, const N: usize> {
 impl<T: Real, const N: usize> EkfSlam<T, N> {
     /// Checked at compile time wherever the type is constructed.
     const DIMENSION_IS_VALID: () = assert!(
-        N >= 3 && (N - 3) % 2 == 0,
+        N >= 3 && (N - 3).is_multiple_of(2),
         "EkfSlam state dimension must be 3 + 2 * max_landmarks: use state_dim()"
     );
 
@@ -317,12 +347,12 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
 
     /// Number of landmarks in the state.
     pub fn landmark_count(&self) -> usize {
-        self.landmarks
+        self.landmarks as usize
     }
 
     /// Dimension of the active part of the state, `3 + 2n`.
     pub fn active_dim(&self) -> usize {
-        3 + 2 * self.landmarks
+        3 + 2 * self.landmark_count()
     }
 
     /// Current robot pose estimate.
@@ -337,13 +367,15 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
 
     /// Position of landmark `index`, or `None` when there is no such landmark.
     pub fn landmark(&self, index: usize) -> Option<Vector2<T>> {
-        (index < self.landmarks).then(|| self.mean.fixed_rows::<2>(3 + 2 * index).into_owned())
+        (index < self.landmark_count())
+            .then(|| self.mean.fixed_rows::<2>(3 + 2 * index).into_owned())
     }
 
     /// 2 × 2 covariance of landmark `index`, or `None` when there is no such landmark.
     pub fn landmark_covariance(&self, index: usize) -> Option<Matrix2<T>> {
         let i = 3 + 2 * index;
-        (index < self.landmarks).then(|| self.covariance.fixed_view::<2, 2>(i, i).into_owned())
+        (index < self.landmark_count())
+            .then(|| self.covariance.fixed_view::<2, 2>(i, i).into_owned())
     }
 
     /// The active part of the mean, `[x, y, θ, x₁, y₁, …]`.
@@ -454,7 +486,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         r: &Matrix2<T>,
         m: Option<&mut SMatrix<T, N, 2>>,
     ) -> Result<Innovation<T>, EkfError> {
-        if index >= self.landmarks {
+        if index >= self.landmark_count() {
             return Err(EkfError::UnknownLandmark);
         }
         let li = 3 + 2 * index;
@@ -477,7 +509,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         s[(0, 1)] = off;
         s[(1, 0)] = off;
         let det = s[(0, 0)] * s[(1, 1)] - off * off;
-        if !(det > T::ZERO) || !(s[(0, 0)] > T::ZERO) || !det.finite() {
+        if !is_positive(det) || !is_positive(s[(0, 0)]) || !det.finite() {
             return Err(EkfError::SingularInnovation);
         }
         let s_inv = Matrix2::new(s[(1, 1)] / det, -off / det, -off / det, s[(0, 0)] / det);
@@ -527,7 +559,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         if !(z.range.finite() && z.bearing.finite()) {
             return Err(EkfError::NonFiniteInput);
         }
-        if !(z.range > T::ZERO) {
+        if !is_positive(z.range) {
             return Err(EkfError::InvalidRange);
         }
         let r = r
@@ -630,25 +662,35 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
     /// `P ← P − K S Kᵀ` on the upper triangle, mirrored.
     fn symmetric_update(&mut self, k: usize, gain: &SMatrix<T, N, 2>, s: &Matrix2<T>) {
         let (g0, g1) = split_columns(gain, k);
-        // KS = K S, then P_ij −= (KS)_i · K_j.
+        // KS = K S; P_ij −= (KS)_i · K_j.
         let mut ks = SMatrix::<T, N, 2>::zeros();
         for i in 0..k {
             ks[(i, 0)] = g0[i] * s[(0, 0)] + g1[i] * s[(1, 0)];
             ks[(i, 1)] = g0[i] * s[(0, 1)] + g1[i] * s[(1, 1)];
         }
         let (ks0, ks1) = split_columns(&ks, k);
-        for j in 0..k {
-            let (gj0, gj1) = (g0[j], g1[j]);
-            for i in 0..=j {
-                let v = self.covariance[(i, j)] - (ks0[i] * gj0 + ks1[i] * gj1);
-                self.covariance[(i, j)] = v;
-                self.covariance[(j, i)] = v;
+        let data = self.covariance.as_mut_slice();
+        for (j, (&gj0, &gj1)) in g0.iter().zip(g1).enumerate() {
+            let Some((upper, diagonal, mirror)) = column_and_mirror(data, N, j) else {
+                break;
+            };
+            let rows = ks0.iter().zip(ks1);
+            for ((p, m), (&a0, &a1)) in upper.iter_mut().zip(mirror).zip(rows) {
+                let v = *p - (a0 * gj0 + a1 * gj1);
+                *p = v;
+                *m = v;
+            }
+            if let (Some(&a0), Some(&a1)) = (ks0.get(j), ks1.get(j)) {
+                *diagonal -= a0 * gj0 + a1 * gj1;
             }
         }
     }
 
-    /// Joseph form in place: `A = P − K Mᵀ` (= (I − KH) P), `B = A Hᵀ`,
-    /// `P = A − B Kᵀ + K R Kᵀ` (= A (I − KH)ᵀ + K R Kᵀ), then symmetrised.
+    /// Joseph form `(I − KH) P (I − KH)ᵀ + K R Kᵀ` in one pass over the upper triangle.
+    ///
+    /// With `M = P Hᵀ` and `A = P − K Mᵀ` (= (I − KH) P), the result is
+    /// `A − (A Hᵀ) Kᵀ + K R Kᵀ = P − K Mᵀ + D Kᵀ` with `D = K R − A Hᵀ`. `A Hᵀ` needs only
+    /// the five columns of `A` where `H` is nonzero, so `A` is never stored.
     fn joseph_update(
         &mut self,
         k: usize,
@@ -660,49 +702,38 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
     ) {
         let (g0, g1) = split_columns(gain, k);
         let (m0, m1) = split_columns(m, k);
-        // Pass 1: A = P − K Mᵀ, column by column.
-        for j in 0..k {
-            let (mj0, mj1) = (m0[j], m1[j]);
-            let mut col = self.covariance.column_mut(j);
-            for ((p, &ga), &gb) in col.iter_mut().zip(g0).zip(g1) {
-                *p -= ga * mj0 + gb * mj1;
-            }
-        }
-        // D = K R − A Hᵀ, with H nonzero only on the robot and landmark columns.
         let (hr, hl) = (&inn.jacobian_robot, &inn.jacobian_landmark);
+        let cols = [0usize, 1, 2, li, li + 1];
+        let h = [
+            [hr[(0, 0)], hr[(0, 1)], hr[(0, 2)], hl[(0, 0)], hl[(0, 1)]],
+            [hr[(1, 0)], hr[(1, 1)], hr[(1, 2)], hl[(1, 0)], hl[(1, 1)]],
+        ];
         let mut d = SMatrix::<T, N, 2>::zeros();
         for i in 0..k {
-            let a = |c: usize| self.covariance[(i, c)];
-            let (a0, a1, a2, a3, a4) = (a(0), a(1), a(2), a(li), a(li + 1));
-            let b0 = a0 * hr[(0, 0)]
-                + a1 * hr[(0, 1)]
-                + a2 * hr[(0, 2)]
-                + a3 * hl[(0, 0)]
-                + a4 * hl[(0, 1)];
-            let b1 = a0 * hr[(1, 0)]
-                + a1 * hr[(1, 1)]
-                + a2 * hr[(1, 2)]
-                + a3 * hl[(1, 0)]
-                + a4 * hl[(1, 1)];
-            d[(i, 0)] = g0[i] * r[(0, 0)] + g1[i] * r[(1, 0)] - b0;
-            d[(i, 1)] = g0[i] * r[(0, 1)] + g1[i] * r[(1, 1)] - b1;
+            let (ki0, ki1) = (g0[i], g1[i]);
+            let (mut b0, mut b1) = (T::ZERO, T::ZERO);
+            for (c, &col) in cols.iter().enumerate() {
+                let a = self.covariance[(i, col)] - (ki0 * m0[col] + ki1 * m1[col]);
+                b0 += a * h[0][c];
+                b1 += a * h[1][c];
+            }
+            d[(i, 0)] = ki0 * r[(0, 0)] + ki1 * r[(1, 0)] - b0;
+            d[(i, 1)] = ki0 * r[(0, 1)] + ki1 * r[(1, 1)] - b1;
         }
-        // Pass 2: P = A + D Kᵀ.
         let (d0, d1) = split_columns(&d, k);
+        let data = self.covariance.as_mut_slice();
         for j in 0..k {
-            let (gj0, gj1) = (g0[j], g1[j]);
-            let mut col = self.covariance.column_mut(j);
-            for ((p, &da), &db) in col.iter_mut().zip(d0).zip(d1) {
-                *p += da * gj0 + db * gj1;
+            let (kj0, kj1, mj0, mj1) = (g0[j], g1[j], m0[j], m1[j]);
+            let Some((upper, diagonal, mirror)) = column_and_mirror(data, N, j) else {
+                break;
+            };
+            let rows = g0.iter().zip(g1).zip(d0.iter().zip(d1));
+            for ((p, m), ((&ki0, &ki1), (&di0, &di1))) in upper.iter_mut().zip(mirror).zip(rows) {
+                let v = *p + ((di0 * kj0 + di1 * kj1) - (ki0 * mj0 + ki1 * mj1));
+                *p = v;
+                *m = v;
             }
-        }
-        // Pass 3: symmetrise (rounding makes A (I − KH)ᵀ slightly asymmetric).
-        for j in 0..k {
-            for i in 0..j {
-                let v = (self.covariance[(i, j)] + self.covariance[(j, i)]) * T::lit(0.5);
-                self.covariance[(i, j)] = v;
-                self.covariance[(j, i)] = v;
-            }
+            *diagonal += (d0[j] * kj0 + d1[j] * kj1) - (kj0 * mj0 + kj1 * mj1);
         }
     }
 
@@ -736,7 +767,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             Ok(r) => r,
             Err(e) => return self.reject(e),
         };
-        if self.landmarks >= Self::MAX_LANDMARKS {
+        if self.landmark_count() >= Self::MAX_LANDMARKS {
             return self.reject(EkfError::MapFull);
         }
         let g = self.config.sensor.landmark_from(&self.pose(), z);
@@ -763,7 +794,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             .fixed_view_mut::<2, 2>(k, k)
             .copy_from(&p_pp);
         self.mean.fixed_rows_mut::<2>(k).copy_from(&g.landmark);
-        let index = self.landmarks;
+        let index = self.landmark_count();
         self.landmarks += 1;
         Ok(index)
     }
@@ -773,6 +804,30 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
 fn split_columns<T: Real, const N: usize>(m: &SMatrix<T, N, 2>, k: usize) -> (&[T], &[T]) {
     let (a, b) = m.as_slice().split_at(N);
     (a.get(..k).unwrap_or(&[]), b.get(..k).unwrap_or(&[]))
+}
+
+/// Column `j` of a column-major `n × n` matrix split for an in-place symmetric update:
+/// its rows `0..j` (upper triangle), its diagonal element, and an iterator over the mirror
+/// positions `(j, i)`, `i < j` (row `j` of the columns before). Writing each upper value
+/// to its mirror in the same pass replaces a separate, strided mirroring pass.
+fn column_and_mirror<T>(
+    data: &mut [T],
+    n: usize,
+    j: usize,
+) -> Option<(&mut [T], &mut T, impl Iterator<Item = &mut T>)> {
+    if j >= n {
+        return None;
+    }
+    let (left, rest) = data.split_at_mut_checked(j * n)?;
+    let (diagonal, upper) = rest.get_mut(..=j)?.split_last_mut()?;
+    // Each chunk is one column of length n > j, so `get_mut(j)` never fails.
+    let mirror = left.chunks_exact_mut(n).filter_map(move |c| c.get_mut(j));
+    Some((upper, diagonal, mirror))
+}
+
+/// `x > 0`, false for NaN.
+fn is_positive<T: Real>(x: T) -> bool {
+    x > T::ZERO
 }
 
 fn symmetrise3<T: Real>(m: &mut Matrix3<T>) {

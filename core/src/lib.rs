@@ -3,6 +3,8 @@
 //! SLAM estimators that run on a robot's microcontroller — `no_std`, no allocation, all
 //! memory sized at compile time — and, unchanged, on a laptop replaying recorded datasets.
 //!
+//! - [`sensors::camera`]: pinhole / RGB-D camera geometry: a detection's pixel and depth
+//!   to a range-bearing sighting with its covariance, pixels back to the robot and world.
 //! - [`ekf::EkfSlam`]: landmark EKF-SLAM with range-bearing sightings of signs or markers
 //!   and a compile-time maximum number of landmarks; known-id association in
 //!   [`association`].
@@ -11,6 +13,10 @@
 //!   log-odds [`grid::OccupancyGrid`] (SLAM) or a fixed, borrowed map (localization, e.g.
 //!   from flash); wheel odometry, IMU yaw-rate filtering and stream alignment in
 //!   [`sensors`].
+//! - [`event::Event`]: one time-stamped sensor sample; readers produce them, estimators
+//!   consume them.
+//! - `wire` (feature `wire`): the messages between a host and the device on a serial line,
+//!   with a streaming, allocation-free frame decoder.
 //!
 //! Every estimator is generic over the scalar ([`Real`]: `f32` on a Cortex-M4F, `f64` on
 //! the host), returns errors as small `Copy` values and never panics on bad input: a step
@@ -35,6 +41,7 @@
 //! ## Features
 //! - `std`: build against the standard library (host tools). Off by default.
 //! - `defmt`: `defmt::Format` for public types and log lines through defmt.
+//! - `wire`: `microslam::wire`, the serial-line messages (serde + postcard, COBS, CRC-16).
 //! - `libm-force`: use libm for float math even with `std`, so host and target agree
 //!   bit for bit.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
@@ -48,6 +55,7 @@
 pub mod association;
 pub mod ekf;
 pub mod error;
+pub mod event;
 pub mod gate;
 pub mod geometry;
 pub mod grid;
@@ -56,9 +64,16 @@ pub mod motion;
 pub mod pf;
 pub mod scalar;
 pub mod sensors;
+#[cfg(feature = "wire")]
+pub mod wire;
 
 #[cfg(test)]
 mod testing;
+
+/// The README's code examples, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../../README.md")]
+pub struct ReadmeDoctests;
 
 pub use error::{EkfError, MapFull};
 pub use geometry::Pose2;

@@ -108,7 +108,7 @@ impl<T: Real> RangeBearingSensor<T> {
         let dy = landmark[1] - sy;
         let q = dx * dx + dy * dy;
         let r = q.sqrt();
-        if !(r > T::ZERO) || !r.finite() {
+        if !r.finite() || r <= T::ZERO {
             return None;
         }
         // ∂r/∂d = d/r, ∂b/∂d = (−d_y, d_x)/q; ∂d/∂(x, y) = −I, ∂d/∂θ = −∂s/∂θ; ∂b/∂θ has −1.
@@ -176,7 +176,7 @@ mod tests {
         // A robot facing +y sees a landmark on +x to its right: negative bearing.
         let p = s
             .predict(
-                &Pose2::new(0.0, 0.0, 1.5707963267948966),
+                &Pose2::new(0.0, 0.0, core::f64::consts::FRAC_PI_2),
                 &Vector2::new(2.0, 0.0),
             )
             .unwrap();

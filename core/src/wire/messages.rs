@@ -1,0 +1,239 @@
+//! The messages: sensor events and commands to the device, estimates and status to the host.
+//!
+//! All numbers on the wire are `f32` (the target's scalar) and integers; postcard encodes
+//! integers as varints, so small sequence numbers and stamps cost few bytes. Every message
+//! to the device carries a sequence number `seq` chosen by the host (usually counting up);
+//! each estimate names the `seq` of the event it answers, so the host can stream without
+//! waiting for replies.
+
+use heapless::Vec;
+use serde::{Deserialize, Serialize};
+
+/// Beams per [`ScanChunk`]: a 90-beam scan takes three frames.
+pub const SCAN_CHUNK_BEAMS: usize = 32;
+
+/// Odometry in one of the forms robots report.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Odometry {
+    /// A pose increment in the previous robot frame: metres, metres, radians.
+    Increment {
+        /// Forward motion, m.
+        dx: f32,
+        /// Leftward motion, m.
+        dy: f32,
+        /// Turn, rad (counter-clockwise positive).
+        dtheta: f32,
+    },
+    /// Velocities held over `dt`.
+    Velocity {
+        /// Forward speed, m/s.
+        v: f32,
+        /// Yaw rate, rad/s.
+        omega: f32,
+        /// Duration, s.
+        dt: f32,
+    },
+    /// Wheel encoder ticks counted over `dt` (four-wheel differential drive).
+    EncoderTicks {
+        /// Front-left ticks.
+        front_left: i32,
+        /// Front-right ticks.
+        front_right: i32,
+        /// Rear-left ticks.
+        rear_left: i32,
+        /// Rear-right ticks.
+        rear_right: i32,
+        /// Duration, s.
+        dt: f32,
+    },
+}
+
+/// Which estimator the device runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EstimatorKind {
+    /// Landmark EKF-SLAM (odometry + landmark sightings).
+    #[default]
+    Ekf,
+    /// Grid particle filter (odometry + yaw rate + lidar).
+    Grid,
+}
+
+/// Commands from the host.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Command {
+    /// Restart the active estimator with the robot at this pose, counters cleared.
+    Reset {
+        /// x, m.
+        x: f32,
+        /// y, m.
+        y: f32,
+        /// Heading, rad.
+        theta: f32,
+    },
+    /// Switch to another estimator (which is reset at the origin).
+    SelectEstimator(EstimatorKind),
+    /// Answer with a [`ToHost::Status`].
+    ReportStatus,
+}
+
+/// A part of one lidar scan: `ranges_mm[i]` is beam `beam_offset + i` of `beam_total`,
+/// at angle `angle_min + (beam_offset + i) · angle_increment` in the lidar frame.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ScanChunk {
+    /// Sequence number of this frame.
+    pub seq: u32,
+    /// Time stamp of the scan, µs.
+    pub stamp_us: u64,
+    /// Which scan the chunk belongs to (counts up per scan, wraps).
+    pub scan_id: u16,
+    /// Index of the first beam in this chunk.
+    pub beam_offset: u16,
+    /// Number of beams in the whole scan.
+    pub beam_total: u16,
+    /// Angle of beam 0, rad.
+    pub angle_min: f32,
+    /// Angle between beams, rad.
+    pub angle_increment: f32,
+    /// Ranges in millimetres; 0 means no return.
+    pub ranges_mm: Vec<u16, SCAN_CHUNK_BEAMS>,
+}
+
+/// Messages from the host to the device: sensor events and commands.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum ToDevice {
+    /// Wheel odometry.
+    Odometry {
+        /// Sequence number.
+        seq: u32,
+        /// Time stamp, µs.
+        stamp_us: u64,
+        /// The odometry.
+        odometry: Odometry,
+    },
+    /// A gyro sample.
+    YawRate {
+        /// Sequence number.
+        seq: u32,
+        /// Time stamp, µs.
+        stamp_us: u64,
+        /// Yaw rate, rad/s (counter-clockwise positive).
+        yaw_rate: f32,
+    },
+    /// A sighting of a landmark with a known id.
+    Landmark {
+        /// Sequence number.
+        seq: u32,
+        /// Time stamp, µs.
+        stamp_us: u64,
+        /// The landmark's id (marker, sign class, barcode).
+        id: u32,
+        /// Range, m.
+        range: f32,
+        /// Bearing, rad, counter-clockwise positive.
+        bearing: f32,
+    },
+    /// A part of a lidar scan.
+    Scan(ScanChunk),
+    /// A command.
+    Command {
+        /// Sequence number.
+        seq: u32,
+        /// The command.
+        command: Command,
+    },
+}
+
+impl ToDevice {
+    /// The message's sequence number.
+    pub fn seq(&self) -> u32 {
+        match self {
+            Self::Odometry { seq, .. }
+            | Self::YawRate { seq, .. }
+            | Self::Landmark { seq, .. }
+            | Self::Command { seq, .. } => *seq,
+            Self::Scan(chunk) => chunk.seq,
+        }
+    }
+}
+
+/// What the estimator did with an event.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StepResult {
+    /// The event was applied.
+    Applied,
+    /// A sighting added a new landmark.
+    Added,
+    /// A sighting failed the innovation gate; the state is unchanged.
+    Gated,
+    /// The event was refused; the state is unchanged. `reason` is the estimator's error
+    /// code (for the EKF, the position of the variant in [`crate::EkfError`]).
+    Rejected {
+        /// Error code.
+        reason: u8,
+    },
+    /// The event does not apply to the active estimator and was skipped.
+    Ignored,
+}
+
+/// Counters of the device, sent with every estimate.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Status {
+    /// Frames decoded.
+    pub frames_ok: u32,
+    /// Frames skipped: truncated, corrupt, oversize or unknown.
+    pub frames_bad: u32,
+    /// Events handed to an estimator.
+    pub events: u32,
+    /// Events refused by the estimator.
+    pub rejected: u32,
+    /// Landmarks in the map.
+    pub landmarks: u16,
+    /// Resampling steps of the particle filter.
+    pub resamples: u32,
+}
+
+/// An estimate of the robot pose after one event.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Estimate {
+    /// Sequence number of the event this answers.
+    pub seq: u32,
+    /// Time stamp of that event, µs.
+    pub stamp_us: u64,
+    /// The estimator that produced it.
+    pub estimator: EstimatorKind,
+    /// What the event did.
+    pub result: StepResult,
+    /// Pose `[x, y, θ]`: m, m, rad.
+    pub pose: [f32; 3],
+    /// Upper triangle of the 3 × 3 pose covariance, row by row:
+    /// `[xx, xy, xθ, yy, yθ, θθ]`.
+    pub covariance: [f32; 6],
+    /// The device's counters after the event.
+    pub status: Status,
+}
+
+/// Messages from the device to the host.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ToHost {
+    /// An estimate after an event.
+    Estimate(Estimate),
+    /// The answer to a command that produces no estimate.
+    Status {
+        /// Sequence number of the command.
+        seq: u32,
+        /// The estimator now active.
+        estimator: EstimatorKind,
+        /// The counters.
+        status: Status,
+        /// Deepest use of the stack so far, bytes, where the device can measure it
+        /// (a firmware that paints its stack at reset); 0 where it cannot.
+        stack_peak_bytes: u32,
+    },
+}

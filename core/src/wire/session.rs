@@ -1,0 +1,361 @@
+//! The device side of the serial protocol: bytes in, estimator steps, replies out.
+//!
+//! A [`Session`] owns the frame decoder and borrows the estimators (which live in
+//! `static`s on a microcontroller). It is the whole firmware main loop minus the UART:
+//! the firmware feeds it received bytes and writes the replies it returns; a host feeds
+//! it the same bytes and gets the same replies, bit for bit when both use libm. Every
+//! event frame is answered with exactly one [`ToHost::Estimate`] carrying the event's
+//! sequence number, so a host can stream without waiting; every command with one
+//! [`ToHost::Status`].
+
+use crate::association::KnownIds;
+use crate::association::{Observed, observe_known};
+use crate::ekf::{EkfConfig, EkfSlam, UpdateOutcome};
+use crate::geometry::Pose2;
+use crate::sensors::range_bearing::RangeBearing;
+
+use super::frame::{FrameDecoder, FrameError, MAX_FRAME_LEN};
+use super::messages::{
+    Command, Estimate, EstimatorKind, Odometry, Status, StepResult, ToDevice, ToHost,
+};
+
+/// The device side of the protocol for an `f32` EKF of state dimension `N` with a
+/// known-id table of `L` ids.
+///
+/// ```
+/// use microslam::ekf::{state_dim, EkfConfig, EkfSlam};
+/// use microslam::wire::{encode_frame, Odometry, Session, ToDevice, ToHost, MAX_FRAME_LEN};
+///
+/// let mut ekf = EkfSlam::<f32, { state_dim(8) }>::new(EkfConfig::DEFAULT_F32);
+/// let mut session = Session::<_, 8>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+/// let msg = ToDevice::Odometry { seq: 1, stamp_us: 0, odometry: Odometry::Velocity { v: 1.0, omega: 0.0, dt: 0.5 } };
+/// let mut buf = [0u8; MAX_FRAME_LEN];
+/// let mut replies = 0;
+/// for &b in encode_frame(&msg, &mut buf)? {
+///     if let Some(ToHost::Estimate(e)) = session.receive(b) {
+///         assert_eq!((e.seq, e.pose[0]), (1, 0.5));
+///         replies += 1;
+///     }
+/// }
+/// assert_eq!(replies, 1);
+/// # Ok::<(), microslam::wire::EncodeError>(())
+/// ```
+pub struct Session<'a, const N: usize, const L: usize> {
+    decoder: FrameDecoder<MAX_FRAME_LEN>,
+    ekf: &'a mut EkfSlam<f32, N>,
+    ekf_config: EkfConfig<f32>,
+    ids: KnownIds<L>,
+    active: EstimatorKind,
+    status: Status,
+}
+
+impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
+    /// A session over `ekf`, which is re-initialised in place with `ekf_config` (robot at
+    /// the origin). An invalid configuration leaves the filter's own configuration.
+    pub fn new(ekf: &'a mut EkfSlam<f32, N>, ekf_config: EkfConfig<f32>) -> Self {
+        let mut session = Self {
+            decoder: FrameDecoder::new(),
+            ekf,
+            ekf_config,
+            ids: KnownIds::new(),
+            active: EstimatorKind::Ekf,
+            status: Status::default(),
+        };
+        session.reset(Pose2::new(0.0, 0.0, 0.0));
+        session
+    }
+
+    /// The counters.
+    pub fn status(&self) -> Status {
+        self.status
+    }
+
+    /// The estimator in use.
+    pub fn active(&self) -> EstimatorKind {
+        self.active
+    }
+
+    /// The EKF.
+    pub fn ekf(&self) -> &EkfSlam<f32, N> {
+        self.ekf
+    }
+
+    /// Takes one received byte; returns the reply when the byte ends a frame holding a
+    /// message. Bad frames are counted in [`Status::frames_bad`] and produce no reply.
+    pub fn receive(&mut self, byte: u8) -> Option<ToHost> {
+        let result: Option<Result<ToDevice, FrameError>> = self.decoder.push(byte);
+        let c = self.decoder.counters();
+        self.status.frames_ok = c.ok;
+        self.status.frames_bad = c.bad();
+        match result? {
+            Ok(msg) => Some(self.handle(&msg)),
+            Err(_) => None,
+        }
+    }
+
+    /// Handles one decoded message and returns its reply.
+    pub fn handle(&mut self, msg: &ToDevice) -> ToHost {
+        let (seq, stamp_us, result) = match msg {
+            ToDevice::Command { seq, command } => return self.command(*seq, command),
+            ToDevice::Odometry {
+                seq,
+                stamp_us,
+                odometry,
+            } => (*seq, *stamp_us, self.odometry(odometry)),
+            ToDevice::Landmark {
+                seq,
+                stamp_us,
+                id,
+                range,
+                bearing,
+            } => (*seq, *stamp_us, self.sighting(*id, *range, *bearing)),
+            ToDevice::YawRate { seq, stamp_us, .. } => (*seq, *stamp_us, StepResult::Ignored),
+            ToDevice::Scan(chunk) => (chunk.seq, chunk.stamp_us, StepResult::Ignored),
+        };
+        self.status.events = self.status.events.saturating_add(1);
+        if let StepResult::Rejected { .. } = result {
+            self.status.rejected = self.status.rejected.saturating_add(1);
+        }
+        ToHost::Estimate(self.estimate(seq, stamp_us, result))
+    }
+
+    fn odometry(&mut self, odometry: &Odometry) -> StepResult {
+        if self.active != EstimatorKind::Ekf {
+            return StepResult::Ignored;
+        }
+        let r = match *odometry {
+            Odometry::Increment { dx, dy, dtheta } => {
+                self.ekf.predict_increment(&Pose2::new(dx, dy, dtheta))
+            }
+            Odometry::Velocity { v, omega, dt } => self.ekf.predict_velocity(v, omega, dt),
+            // Ticks need the wheel geometry: used by the grid estimator only.
+            Odometry::EncoderTicks { .. } => return StepResult::Ignored,
+        };
+        match r {
+            Ok(()) => StepResult::Applied,
+            Err(e) => StepResult::Rejected { reason: e as u8 },
+        }
+    }
+
+    fn sighting(&mut self, id: u32, range: f32, bearing: f32) -> StepResult {
+        if self.active != EstimatorKind::Ekf {
+            return StepResult::Ignored;
+        }
+        let z = RangeBearing::new(range, bearing);
+        match observe_known(self.ekf, &mut self.ids, id, &z) {
+            Ok(Observed::Added { .. }) => StepResult::Added,
+            Ok(Observed::Updated {
+                outcome: UpdateOutcome::Accepted { .. },
+                ..
+            }) => StepResult::Applied,
+            Ok(Observed::Updated {
+                outcome: UpdateOutcome::Gated { .. },
+                ..
+            }) => StepResult::Gated,
+            Err(e) => StepResult::Rejected { reason: e as u8 },
+        }
+    }
+
+    fn command(&mut self, seq: u32, command: &Command) -> ToHost {
+        match *command {
+            Command::Reset { x, y, theta } => self.reset(Pose2::new(x, y, theta)),
+            // Only the EKF is built into this session.
+            Command::SelectEstimator(_) => self.reset(Pose2::new(0.0, 0.0, 0.0)),
+            Command::ReportStatus => {}
+        }
+        ToHost::Status {
+            seq,
+            estimator: self.active,
+            status: self.status,
+            stack_peak_bytes: 0,
+        }
+    }
+
+    fn reset(&mut self, pose: Pose2<f32>) {
+        let config = if self.ekf_config.is_valid() {
+            self.ekf_config
+        } else {
+            *self.ekf.config()
+        };
+        if self.ekf.init(config, pose).is_err() {
+            // A non-finite pose: restart at the origin instead.
+            let _ = self.ekf.init(config, Pose2::new(0.0, 0.0, 0.0));
+        }
+        self.ids.clear();
+        let (ok, bad) = (self.status.frames_ok, self.status.frames_bad);
+        self.status = Status {
+            frames_ok: ok,
+            frames_bad: bad,
+            ..Status::default()
+        };
+    }
+
+    fn estimate(&mut self, seq: u32, stamp_us: u64, result: StepResult) -> Estimate {
+        let pose = self.ekf.pose();
+        let p = self.ekf.pose_covariance();
+        self.status.landmarks = u16::try_from(self.ekf.landmark_count()).unwrap_or(u16::MAX);
+        Estimate {
+            seq,
+            stamp_us,
+            estimator: self.active,
+            result,
+            pose: [pose.x, pose.y, pose.theta],
+            covariance: [
+                p[(0, 0)],
+                p[(0, 1)],
+                p[(0, 2)],
+                p[(1, 1)],
+                p[(1, 2)],
+                p[(2, 2)],
+            ],
+            status: self.status,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ekf::state_dim;
+    use crate::wire::encode_frame;
+
+    fn frames(msgs: &[ToDevice]) -> std::vec::Vec<u8> {
+        let mut out = std::vec::Vec::new();
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        for m in msgs {
+            out.extend_from_slice(encode_frame(m, &mut buf).unwrap());
+        }
+        out
+    }
+
+    fn velocity(seq: u32, v: f32, omega: f32) -> ToDevice {
+        ToDevice::Odometry {
+            seq,
+            stamp_us: u64::from(seq) * 100_000,
+            odometry: Odometry::Velocity { v, omega, dt: 0.1 },
+        }
+    }
+
+    fn sighting(seq: u32, id: u32, range: f32, bearing: f32) -> ToDevice {
+        ToDevice::Landmark {
+            seq,
+            stamp_us: u64::from(seq) * 100_000,
+            id,
+            range,
+            bearing,
+        }
+    }
+
+    #[test]
+    fn replies_match_direct_calls_on_the_filter() {
+        let msgs = [
+            sighting(1, 40, 2.0, 0.3),
+            velocity(2, 0.5, 0.1),
+            sighting(3, 40, 1.95, 0.33),
+            sighting(4, 41, 3.0, -0.5),
+            velocity(5, 0.5, 0.1),
+            sighting(6, 41, 2.9, -0.52),
+            sighting(7, 40, f32::NAN, 0.0),
+        ];
+        let mut ekf = EkfSlam::<f32, { state_dim(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut session = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+        let mut replies = std::vec::Vec::new();
+        for b in frames(&msgs) {
+            replies.extend(session.receive(b));
+        }
+        let mut direct = EkfSlam::<f32, { state_dim(4) }>::new(EkfConfig::DEFAULT_F32);
+        let a = direct.add_landmark(&RangeBearing::new(2.0, 0.3)).unwrap();
+        direct.predict_velocity(0.5, 0.1, 0.1).unwrap();
+        direct.update(a, &RangeBearing::new(1.95, 0.33)).unwrap();
+        let b = direct.add_landmark(&RangeBearing::new(3.0, -0.5)).unwrap();
+        direct.predict_velocity(0.5, 0.1, 0.1).unwrap();
+        direct.update(b, &RangeBearing::new(2.9, -0.52)).unwrap();
+
+        assert_eq!(replies.len(), msgs.len());
+        let results: std::vec::Vec<_> = replies
+            .iter()
+            .map(|r| match r {
+                ToHost::Estimate(e) => (e.seq, e.result),
+                other => panic!("{other:?}"),
+            })
+            .collect();
+        let nonfinite = StepResult::Rejected {
+            reason: crate::EkfError::NonFiniteInput as u8,
+        };
+        assert_eq!(
+            results,
+            [
+                (1, StepResult::Added),
+                (2, StepResult::Applied),
+                (3, StepResult::Applied),
+                (4, StepResult::Added),
+                (5, StepResult::Applied),
+                (6, StepResult::Applied),
+                (7, nonfinite),
+            ]
+        );
+        let ToHost::Estimate(last) = replies[6] else {
+            unreachable!()
+        };
+        let pose = direct.pose();
+        assert_eq!(last.pose, [pose.x, pose.y, pose.theta]);
+        let p = direct.pose_covariance();
+        assert_eq!(last.covariance[0], p[(0, 0)]);
+        assert_eq!(last.covariance[4], p[(1, 2)]);
+        assert_eq!(last.status.landmarks, 2);
+        assert_eq!(last.status.events, 7);
+        assert_eq!(last.status.rejected, 1);
+        assert_eq!(last.status.frames_ok, 7);
+    }
+
+    #[test]
+    fn bad_frames_are_counted_and_commands_answered_with_status() {
+        let mut ekf = EkfSlam::<f32, { state_dim(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut session = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+        let mut bytes = frames(&[sighting(1, 7, 2.0, 0.0)]);
+        bytes.extend_from_slice(&[1, 2, 3, 0, 0xff, 0xfe, 0]);
+        bytes.extend(frames(&[
+            ToDevice::Command {
+                seq: 2,
+                command: Command::Reset {
+                    x: 1.0,
+                    y: 2.0,
+                    theta: 0.5,
+                },
+            },
+            ToDevice::Command {
+                seq: 3,
+                command: Command::SelectEstimator(EstimatorKind::Grid),
+            },
+            velocity(4, 0.0, 0.0),
+        ]));
+        let replies: std::vec::Vec<_> = bytes.iter().filter_map(|&b| session.receive(b)).collect();
+        assert_eq!(replies.len(), 4);
+        match replies[1] {
+            ToHost::Status { seq, status, .. } => {
+                assert_eq!(seq, 2);
+                assert_eq!(status.frames_bad, 2);
+                assert_eq!(status.landmarks, 0);
+                assert_eq!(status.events, 0);
+            }
+            other => panic!("{other:?}"),
+        }
+        // No grid in this session: it stays on the EKF, restarted at the origin.
+        assert!(matches!(
+            replies[2],
+            ToHost::Status {
+                seq: 3,
+                estimator: EstimatorKind::Ekf,
+                ..
+            }
+        ));
+        match replies[3] {
+            ToHost::Estimate(e) => {
+                assert_eq!(e.seq, 4);
+                assert_eq!(e.pose, [0.0, 0.0, 0.0]);
+                assert_eq!(e.status.frames_ok, 4);
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+}

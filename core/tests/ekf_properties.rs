@@ -1,0 +1,182 @@
+//! Property tests of the EKF over random sequences of steps, in f32 and f64: the active
+//! covariance stays symmetric positive semi-definite, the heading stays wrapped, the
+//! inactive part of the state is never touched, and refused steps change nothing.
+
+use microslam::Real;
+use microslam::ekf::{CovarianceUpdate, EkfConfig, EkfSlam, state_dim};
+use microslam::geometry::Pose2;
+use microslam::sensors::range_bearing::RangeBearing;
+use nalgebra::DMatrix;
+use proptest::prelude::*;
+
+const L: usize = 6;
+const N: usize = state_dim(L);
+
+#[derive(Clone, Debug)]
+enum Op {
+    Velocity(f64, f64, f64),
+    Increment(f64, f64, f64),
+    /// Update landmark `i % n` with the predicted measurement plus an offset.
+    Update(usize, f64, f64),
+    Add(f64, f64),
+    /// Input with a NaN or infinity somewhere: must be refused without effect.
+    Bad(usize, f64),
+}
+
+fn op() -> impl Strategy<Value = Op> {
+    let special = prop_oneof![Just(f64::NAN), Just(f64::INFINITY), Just(f64::NEG_INFINITY)];
+    prop_oneof![
+        3 => (-1.0..2.0f64, -2.0..2.0f64, 0.0..0.5f64).prop_map(|(v, w, dt)| Op::Velocity(v, w, dt)),
+        2 => (-0.3..0.5f64, -0.2..0.2f64, -0.5..0.5f64).prop_map(|(x, y, t)| Op::Increment(x, y, t)),
+        4 => (0..64usize, -0.3..0.3f64, -0.1..0.1f64).prop_map(|(i, dr, db)| Op::Update(i, dr, db)),
+        2 => (0.3..8.0f64, -3.1..3.1f64).prop_map(|(r, b)| Op::Add(r, b)),
+        1 => (0..6usize, special).prop_map(|(w, v)| Op::Bad(w, v)),
+    ]
+}
+
+/// Applies one op; returns `true` when the filter refused it.
+fn apply<T: Real>(ekf: &mut EkfSlam<T, N>, op: &Op) -> bool {
+    let t = T::lit;
+    match *op {
+        Op::Velocity(v, w, dt) => {
+            let _ = ekf.predict_velocity(t(v), t(w), t(dt));
+            false
+        }
+        Op::Increment(x, y, th) => {
+            let _ = ekf.predict_increment(&Pose2::new(t(x), t(y), t(th)));
+            false
+        }
+        Op::Update(i, dr, db) => {
+            let n = ekf.landmark_count();
+            if n == 0 {
+                return false;
+            }
+            let idx = i % n;
+            let Some(l) = ekf.landmark(idx) else {
+                return false;
+            };
+            let Some(p) = ekf.config().sensor.predict(&ekf.pose(), &l) else {
+                return false;
+            };
+            let z = RangeBearing::new(p.z.range + t(dr), p.z.bearing + t(db));
+            if z.range > T::ZERO {
+                let _ = ekf.update(idx, &z);
+            }
+            false
+        }
+        Op::Add(r, b) => {
+            let _ = ekf.add_landmark(&RangeBearing::new(t(r), t(b)));
+            false
+        }
+        Op::Bad(which, v) => {
+            let v = t(v);
+            let results = [
+                ekf.predict_velocity(v, T::ZERO, t(0.1)).is_err(),
+                ekf.predict_velocity(T::ZERO, T::ZERO, v).is_err(),
+                ekf.predict_increment(&Pose2::new(T::ZERO, v, T::ZERO))
+                    .is_err(),
+                ekf.add_landmark(&RangeBearing::new(v, T::ZERO)).is_err(),
+                ekf.add_landmark(&RangeBearing::new(T::ONE, v)).is_err(),
+                ekf.update(0, &RangeBearing::new(T::ONE, v)).is_err(),
+            ];
+            results[which]
+        }
+    }
+}
+
+fn active_as_f64<T: Real>(ekf: &EkfSlam<T, N>) -> DMatrix<f64> {
+    let p = ekf.active_covariance();
+    DMatrix::from_fn(p.nrows(), p.ncols(), |i, j| p[(i, j)].to_f64())
+}
+
+fn check_invariants<T: Real>(ekf: &EkfSlam<T, N>) -> Result<(), TestCaseError> {
+    let k = ekf.active_dim();
+    let p = active_as_f64(ekf);
+    for i in 0..k {
+        for j in 0..k {
+            prop_assert!(p[(i, j)].is_finite());
+            prop_assert_eq!(p[(i, j)], p[(j, i)], "asymmetric at ({}, {})", i, j);
+        }
+    }
+    let trace = p.trace();
+    let min_eig = p.clone().symmetric_eigen().eigenvalues.min();
+    prop_assert!(
+        min_eig >= -1e-6 * trace,
+        "min eigenvalue {} with trace {}",
+        min_eig,
+        trace
+    );
+    let th = ekf.pose().theta.to_f64();
+    prop_assert!(th > -core::f64::consts::PI - 1e-6 && th <= core::f64::consts::PI + 1e-6);
+    prop_assert!(ekf.active_mean().iter().all(|v| v.finite()));
+    // Nothing outside the active block was ever written.
+    let full = ekf.full_covariance();
+    for j in 0..N {
+        for i in 0..N {
+            if i >= k || j >= k {
+                prop_assert!(
+                    full[(i, j)] == T::ZERO,
+                    "inactive entry ({}, {}) touched",
+                    i,
+                    j
+                );
+            }
+        }
+    }
+    prop_assert!(ekf.full_mean().iter().skip(k).all(|v| *v == T::ZERO));
+    Ok(())
+}
+
+fn run<T: Real>(config: EkfConfig<T>, ops: &[Op]) -> Result<(), TestCaseError> {
+    let mut ekf = EkfSlam::<T, N>::new(config);
+    for op in ops {
+        let before_mean = ekf.active_mean().to_vec();
+        let before_cov = active_as_f64(&ekf);
+        let must_refuse = matches!(op, Op::Bad(..));
+        let refused = apply(&mut ekf, op);
+        if must_refuse {
+            prop_assert!(refused, "{:?} was accepted", op);
+            prop_assert_eq!(ekf.active_mean(), &before_mean[..]);
+            prop_assert_eq!(active_as_f64(&ekf), before_cov);
+        }
+        check_invariants(&ekf)?;
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    #[test]
+    fn f64_joseph(ops in proptest::collection::vec(op(), 1..80)) {
+        run(EkfConfig::DEFAULT_F64, &ops)?;
+    }
+
+    #[test]
+    fn f64_symmetric(ops in proptest::collection::vec(op(), 1..80)) {
+        run(EkfConfig { covariance_update: CovarianceUpdate::Symmetric, ..EkfConfig::DEFAULT_F64 }, &ops)?;
+    }
+
+    #[test]
+    fn f32_joseph(ops in proptest::collection::vec(op(), 1..80)) {
+        run(EkfConfig::DEFAULT_F32, &ops)?;
+    }
+
+    #[test]
+    fn f32_symmetric(ops in proptest::collection::vec(op(), 1..80)) {
+        run(EkfConfig { covariance_update: CovarianceUpdate::Symmetric, ..EkfConfig::DEFAULT_F32 }, &ops)?;
+    }
+
+    /// Both covariance forms give the same answer (up to rounding) with the optimal gain.
+    #[test]
+    fn joseph_equals_symmetric_form(ops in proptest::collection::vec(op(), 1..60)) {
+        let mut a = EkfSlam::<f64, N>::new(EkfConfig::DEFAULT_F64);
+        let mut b = EkfSlam::<f64, N>::new(EkfConfig { covariance_update: CovarianceUpdate::Symmetric, ..EkfConfig::DEFAULT_F64 });
+        for op in &ops {
+            apply(&mut a, op);
+            apply(&mut b, op);
+        }
+        let (pa, pb) = (active_as_f64(&a), active_as_f64(&b));
+        prop_assert!((pa.clone() - pb).abs().max() <= 1e-9 * (1.0 + pa.abs().max()));
+    }
+}

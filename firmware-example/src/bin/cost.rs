@@ -1,0 +1,192 @@
+//! Instruction counts per estimator step, under QEMU with `-icount shift=6`.
+//!
+//! With `-icount shift=6` QEMU's virtual clock advances 64 ns per executed instruction;
+//! SysTick, clocked from the 25 MHz core clock of mps2-an386, ticks every 40 ns. So
+//! `instructions = ticks · 40 / 64`, the same on every run. The ratio is checked at start
+//! on a block of 1000 `nop`s, and the cost of an empty measurement is subtracted.
+//!
+//! Prints one line per figure on UART0 (`-serial stdio`) and exits through semihosting.
+//! These are instructions, not cycles: a Cortex-M4F runs this FPU-heavy code at roughly
+//! 1–1.5 cycles per instruction.
+#![no_std]
+#![no_main]
+
+use core::fmt::Write;
+
+use cortex_m::peripheral::SYST;
+use cortex_m::peripheral::syst::SystClkSource;
+use cortex_m_rt::{ExceptionFrame, entry, exception};
+use firmware_example::board::{self, Serial};
+use microslam::ekf::{CovarianceUpdate, EkfConfig, EkfSlam, UpdateOutcome, state_dim};
+use microslam::sensors::range_bearing::RangeBearing;
+use panic_probe as _;
+use static_cell::ConstStaticCell;
+
+type Ekf<const N: usize> = EkfSlam<f32, N>;
+const ZEROED: EkfConfig<f32> = firmware_example::config::ZEROED_EKF_CONFIG;
+
+static EKF16: ConstStaticCell<Ekf<{ state_dim(16) }>> = ConstStaticCell::new(Ekf::new(ZEROED));
+static EKF32: ConstStaticCell<Ekf<{ state_dim(32) }>> = ConstStaticCell::new(Ekf::new(ZEROED));
+static EKF64: ConstStaticCell<Ekf<{ state_dim(64) }>> = ConstStaticCell::new(Ekf::new(ZEROED));
+
+/// Calls per figure: the reported value is the mean.
+const REPEAT: u32 = 8;
+
+/// Counts SysTick ticks of a closure (the counter must not wrap: 2²⁴ ticks ≈ 10 M
+/// instructions, far above any step here).
+struct Ticks {
+    syst: SYST,
+    empty: u32,
+}
+
+impl Ticks {
+    const RELOAD: u32 = 0x00FF_FFFF;
+
+    fn new(mut syst: SYST) -> Self {
+        syst.set_clock_source(SystClkSource::Core);
+        syst.set_reload(Self::RELOAD);
+        syst.clear_current();
+        syst.enable_counter();
+        let mut t = Self { syst, empty: 0 };
+        t.empty = t.raw(|| {});
+        t
+    }
+
+    #[inline(never)]
+    fn raw(&mut self, f: impl FnOnce()) -> u32 {
+        self.syst.clear_current();
+        let _ = self.syst.has_wrapped();
+        let start = SYST::get_current();
+        f();
+        let end = SYST::get_current();
+        if self.syst.has_wrapped() {
+            return u32::MAX;
+        }
+        start.wrapping_sub(end) & Self::RELOAD
+    }
+
+    /// Instructions executed by `f` (ticks · 40 / 64, empty measurement subtracted).
+    fn instructions(&mut self, f: impl FnOnce()) -> u32 {
+        let t = self.raw(f).saturating_sub(self.empty);
+        (u64::from(t) * 40 / 64) as u32
+    }
+}
+
+/// A 1000-instruction block to check the tick/instruction ratio.
+#[inline(never)]
+fn thousand_nops() {
+    // SAFETY: only `nop`s.
+    unsafe { core::arch::asm!(".rept 1000", "nop", ".endr", options(nomem, nostack)) };
+}
+
+/// Range and bearing of landmark `i` as the filter predicts it (so updates pass the gate),
+/// slightly perturbed.
+fn predicted<const N: usize>(slam: &Ekf<N>, i: usize, k: u32) -> Option<RangeBearing<f32>> {
+    let p = slam.pose();
+    let l = slam.landmark(i)?;
+    let (dx, dy) = (l[0] - p.x, l[1] - p.y);
+    let range = libm::sqrtf(dx * dx + dy * dy);
+    let bearing = libm::atan2f(dy, dx) - p.theta;
+    let wobble = (k % 3) as f32 * 0.01 - 0.01;
+    Some(RangeBearing::new(range + wobble, bearing - wobble))
+}
+
+/// Maps `n` landmarks on a ring while driving, so the covariance is dense.
+fn build_map<const N: usize>(slam: &mut Ekf<N>, n: usize) -> Result<(), microslam::EkfError> {
+    slam.init(
+        firmware_example::config::EKF_CONFIG,
+        microslam::Pose2::new(0.0, 0.0, 0.0),
+    )?;
+    for i in 0..n {
+        slam.predict_velocity(0.2, 0.05, 0.1)?;
+        let bearing = (i as f32) * 0.7 - 2.0 * libm::floorf(i as f32 * 0.7 / 6.283) * 3.1416;
+        slam.add_landmark(&RangeBearing::new(2.0 + (i % 5) as f32 * 0.4, bearing))?;
+    }
+    Ok(())
+}
+
+fn measure<const N: usize>(
+    out: &mut Serial,
+    ticks: &mut Ticks,
+    slam: &mut Ekf<N>,
+    n: usize,
+) -> core::fmt::Result {
+    if build_map(slam, n).is_err() {
+        return writeln!(out, "error ekf n={n} map");
+    }
+    let mut predict = 0u32;
+    for _ in 0..REPEAT {
+        predict += ticks.instructions(|| {
+            let _ = slam.predict_velocity(0.2, 0.05, 0.1);
+        });
+    }
+    let mut figures = [0u32; 2];
+    for (form, total) in [CovarianceUpdate::Joseph, CovarianceUpdate::Symmetric]
+        .into_iter()
+        .zip(figures.iter_mut())
+    {
+        let mut config = *slam.config();
+        config.covariance_update = form;
+        if slam.set_config(config).is_err() {
+            return writeln!(out, "error ekf n={n} config");
+        }
+        for k in 0..REPEAT {
+            let i = (k as usize * 5) % n;
+            let Some(z) = predicted(slam, i, k) else {
+                return writeln!(out, "error ekf n={n} landmark");
+            };
+            let mut outcome = None;
+            *total += ticks.instructions(|| outcome = Some(slam.update(i, &z)));
+            if !matches!(outcome, Some(Ok(UpdateOutcome::Accepted { .. }))) {
+                return writeln!(out, "error ekf n={n} update not accepted");
+            }
+        }
+    }
+    writeln!(
+        out,
+        "ekf n={} predict={} update_joseph={} update_symmetric={}",
+        n,
+        predict / REPEAT,
+        figures[0] / REPEAT,
+        figures[1] / REPEAT
+    )
+}
+
+fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
+    writeln!(
+        out,
+        "calibration nops=1000 instructions={}",
+        ticks.instructions(thousand_nops)
+    )?;
+    measure(out, ticks, EKF16.take(), 16)?;
+    measure(out, ticks, EKF32.take(), 32)?;
+    measure(out, ticks, EKF64.take(), 64)?;
+    writeln!(
+        out,
+        "stack_peak_bytes={}",
+        firmware_example::stack::peak_bytes()
+    )?;
+    writeln!(out, "done")
+}
+
+#[entry]
+fn main() -> ! {
+    let Some(cp) = cortex_m::Peripherals::take() else {
+        board::halt(2)
+    };
+    let (mut out, _led) = board::init();
+    let mut ticks = Ticks::new(cp.SYST);
+    let code = if run(&mut out, &mut ticks).is_ok() {
+        0
+    } else {
+        1
+    };
+    let _ = embedded_io::Write::flush(&mut out);
+    board::halt(code)
+}
+
+#[exception]
+unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
+    defmt::error!("HardFault at pc = {:#010x}", frame.pc());
+    board::halt(3)
+}

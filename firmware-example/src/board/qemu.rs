@@ -1,0 +1,159 @@
+//! QEMU `mps2-an386` (Cortex-M4F): CMSDK APB UART0 and an FPGA I/O LED; semihosting for
+//! exit codes and for defmt output.
+
+use core::convert::Infallible;
+
+use defmt_semihosting as _;
+
+/// UART0 of the mps2 boards.
+const UART0_BASE: usize = 0x4000_4000;
+/// FPGA I/O block: register 0 drives the two user LEDs.
+const FPGAIO_LED: usize = 0x4002_8000;
+
+const DATA: usize = 0x00;
+const STATE: usize = 0x04;
+const CTRL: usize = 0x08;
+const BAUDDIV: usize = 0x10;
+const STATE_TX_FULL: u32 = 1 << 0;
+const STATE_RX_FULL: u32 = 1 << 1;
+const CTRL_TX_RX_ENABLE: u32 = 0b11;
+
+/// The serial port of this board.
+pub type Serial = CmsdkUart;
+/// The heartbeat LED of this board.
+pub type Led = FpgaLed;
+
+/// A CMSDK APB UART (ARM's example UART, modelled by QEMU): one byte of buffer each way.
+pub struct CmsdkUart {
+    base: usize,
+}
+
+impl CmsdkUart {
+    /// Enables transmitter and receiver of the UART at `base`.
+    ///
+    /// # Safety
+    /// `base` must be the address of a CMSDK UART, and only one `CmsdkUart` may drive it.
+    pub unsafe fn new(base: usize) -> Self {
+        let uart = Self { base };
+        uart.write_reg(BAUDDIV, 16);
+        uart.write_reg(CTRL, CTRL_TX_RX_ENABLE);
+        uart
+    }
+
+    fn read_reg(&self, offset: usize) -> u32 {
+        // SAFETY: `new`'s contract: `base` is a UART's register block, owned by `self`.
+        unsafe { core::ptr::read_volatile((self.base + offset) as *const u32) }
+    }
+
+    fn write_reg(&self, offset: usize, value: u32) {
+        // SAFETY: as in `read_reg`.
+        unsafe { core::ptr::write_volatile((self.base + offset) as *mut u32, value) }
+    }
+
+    fn rx_ready(&self) -> bool {
+        self.read_reg(STATE) & STATE_RX_FULL != 0
+    }
+
+    fn tx_ready(&self) -> bool {
+        self.read_reg(STATE) & STATE_TX_FULL == 0
+    }
+}
+
+impl embedded_io::ErrorType for CmsdkUart {
+    type Error = Infallible;
+}
+
+impl embedded_io::Read for CmsdkUart {
+    /// Waits for the first byte, then takes what else is ready.
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
+        if buf.is_empty() {
+            return Ok(0);
+        }
+        while !self.rx_ready() {}
+        let mut n = 0;
+        for slot in buf.iter_mut() {
+            if !self.rx_ready() {
+                break;
+            }
+            *slot = self.read_reg(DATA) as u8;
+            n += 1;
+        }
+        Ok(n)
+    }
+}
+
+impl embedded_io::ReadReady for CmsdkUart {
+    fn read_ready(&mut self) -> Result<bool, Infallible> {
+        Ok(self.rx_ready())
+    }
+}
+
+impl embedded_io::Write for CmsdkUart {
+    /// Waits until the transmitter takes one byte.
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
+        let Some(&b) = buf.first() else {
+            return Ok(0);
+        };
+        while !self.tx_ready() {}
+        self.write_reg(DATA, u32::from(b));
+        Ok(1)
+    }
+
+    fn flush(&mut self) -> Result<(), Infallible> {
+        while !self.tx_ready() {}
+        Ok(())
+    }
+}
+
+/// Writes text (for the `cost` binary's report).
+impl core::fmt::Write for CmsdkUart {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        embedded_io::Write::write_all(self, s.as_bytes()).map_err(|_| core::fmt::Error)
+    }
+}
+
+/// One of the two user LEDs of the FPGA I/O block.
+pub struct FpgaLed {
+    mask: u32,
+}
+
+impl embedded_hal::digital::ErrorType for FpgaLed {
+    type Error = Infallible;
+}
+
+impl embedded_hal::digital::OutputPin for FpgaLed {
+    fn set_low(&mut self) -> Result<(), Infallible> {
+        self.update(false);
+        Ok(())
+    }
+
+    fn set_high(&mut self) -> Result<(), Infallible> {
+        self.update(true);
+        Ok(())
+    }
+}
+
+impl FpgaLed {
+    fn update(&mut self, on: bool) {
+        let reg = FPGAIO_LED as *mut u32;
+        // SAFETY: the FPGA I/O LED register; only `FpgaLed`s (one per bit) write it, from
+        // the main thread (no interrupt touches it).
+        unsafe {
+            let v = core::ptr::read_volatile(reg);
+            let v = if on { v | self.mask } else { v & !self.mask };
+            core::ptr::write_volatile(reg, v);
+        }
+    }
+}
+
+/// Takes the board: UART0 and LED 0. Call once.
+pub fn init() -> (Serial, Led) {
+    // SAFETY: UART0's address on mps2-an386, and `init` is called once.
+    let uart = unsafe { CmsdkUart::new(UART0_BASE) };
+    (uart, FpgaLed { mask: 1 })
+}
+
+/// Ends the program: QEMU exits with `code` (semihosting).
+pub fn halt(code: i32) -> ! {
+    semihosting::process::exit(code)
+}

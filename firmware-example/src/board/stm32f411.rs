@@ -1,0 +1,48 @@
+//! STM32F411 on a Nucleo-F411RE: USART2 on PA2/PA3 (the ST-LINK's virtual COM port) at
+//! 115 200 baud, user LED LD2 on PA5, 100 MHz from the internal oscillator; defmt over RTT.
+
+use defmt_rtt as _;
+use stm32f4xx_hal::gpio::{Output, PA5};
+use stm32f4xx_hal::pac;
+use stm32f4xx_hal::prelude::*;
+use stm32f4xx_hal::rcc::Config;
+
+use crate::nb_io::NbSerial;
+
+/// Baud rate of the link to the host.
+pub const BAUD: u32 = 115_200;
+
+/// The serial port of this board.
+pub type Serial = NbSerial<stm32f4xx_hal::serial::Serial<pac::USART2>>;
+/// The heartbeat LED of this board.
+pub type Led = PA5<Output>;
+
+/// Clocks, USART2 and the LED. Call once.
+pub fn init() -> (Serial, Led) {
+    let Some(dp) = pac::Peripherals::take() else {
+        defmt::error!("peripherals taken twice");
+        halt(2)
+    };
+    let mut rcc = dp.RCC.freeze(Config::hsi().sysclk(100.MHz()));
+    let gpioa = dp.GPIOA.split(&mut rcc);
+    let led = gpioa.pa5.into_push_pull_output();
+    let serial = match dp
+        .USART2
+        .serial((gpioa.pa2, gpioa.pa3), BAUD.bps(), &mut rcc)
+    {
+        Ok(s) => s,
+        Err(_) => {
+            defmt::error!("USART2 configuration refused");
+            halt(2)
+        }
+    };
+    (NbSerial(serial), led)
+}
+
+/// Stops here (a debugger sees the fault); `code` is logged.
+pub fn halt(code: i32) -> ! {
+    defmt::error!("halted with code {}", code);
+    loop {
+        cortex_m::asm::wfi();
+    }
+}

@@ -1,0 +1,128 @@
+//! The command line: `host-sim [replay|sim] …`. Each subcommand's work lives in its own
+//! module; this file only parses and dispatches.
+
+use crate::readers::DatasetSpec;
+use anyhow::Result;
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+/// Replay recorded datasets and simulations through the microslam estimators.
+///
+/// Without a subcommand, runs the built-in simulator scenario (`host-sim sim`) and writes
+/// its results to `out/sim`.
+#[derive(Debug, Parser)]
+#[command(name = "host-sim", version, about, long_about = None)]
+pub struct Cli {
+    /// No progress bar and no summary: for scripts.
+    #[arg(long, short, global = true)]
+    pub quiet: bool,
+    /// What to do (default: `sim`).
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Replay a recorded dataset through the landmark EKF-SLAM and score it against
+    /// ground truth.
+    Replay(ReplayArgs),
+    /// Run the built-in deterministic simulator (landmark field, robot driving loops)
+    /// through the landmark EKF-SLAM and score it.
+    Sim(SimArgs),
+}
+
+/// How sightings are associated with landmarks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AssociationMode {
+    /// The sighting's id (barcode) names the landmark.
+    Known,
+    /// Ids hidden; individual compatibility nearest neighbour (seed 1, Fig. 11).
+    Icnn,
+    /// Ids hidden; joint compatibility branch and bound over each batch of sightings.
+    Jcbb,
+}
+
+/// Scalar the filter runs on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Default)]
+pub enum Precision {
+    /// Single precision, as on the microcontroller.
+    F32,
+    /// Double precision.
+    #[default]
+    F64,
+}
+
+/// Options of `host-sim replay`.
+#[derive(Debug, Clone, Args)]
+pub struct ReplayArgs {
+    /// Dataset: `mrclam:<dir>` (a folder, or a name under `$SLAM_DATASETS/mrclam`, e.g.
+    /// `mrclam:dataset6`).
+    #[arg(long, short)]
+    pub dataset: DatasetSpec,
+    /// Robot whose log is replayed.
+    #[arg(long, default_value_t = 1)]
+    pub robot: u8,
+    /// Data association (default: from the config file, `known` if none).
+    #[arg(long, short)]
+    pub association: Option<AssociationMode>,
+    /// Estimator settings (TOML); default: the built-in defaults of the dataset
+    /// (`host-sim/configs/<family>.toml`).
+    #[arg(long, short)]
+    pub config: Option<PathBuf>,
+    /// Output folder for metrics.json, trajectories and pictures.
+    #[arg(long, short, default_value = "out/replay")]
+    pub out: PathBuf,
+    /// Scalar the filter runs on.
+    #[arg(long, value_enum, default_value_t = Precision::F64)]
+    pub precision: Precision,
+    /// Skip the PNG pictures (faster).
+    #[arg(long)]
+    pub no_plots: bool,
+}
+
+/// Options of `host-sim sim`.
+#[derive(Debug, Clone, Args)]
+pub struct SimArgs {
+    /// Seed of the noise generator: the same seed gives the same run.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output folder.
+    #[arg(long, short, default_value = "out/sim")]
+    pub out: PathBuf,
+    /// Data association.
+    #[arg(long, short, value_enum, default_value_t = AssociationMode::Known)]
+    pub association: AssociationMode,
+    /// Estimator and scenario settings (TOML); default `host-sim/configs/sim.toml`.
+    #[arg(long, short)]
+    pub config: Option<PathBuf>,
+    /// Scalar the filter runs on.
+    #[arg(long, value_enum, default_value_t = Precision::F64)]
+    pub precision: Precision,
+    /// Skip the PNG pictures.
+    #[arg(long)]
+    pub no_plots: bool,
+}
+
+impl Default for SimArgs {
+    fn default() -> Self {
+        Self {
+            seed: 1,
+            out: PathBuf::from("out/sim"),
+            association: AssociationMode::Known,
+            config: None,
+            precision: Precision::F64,
+            no_plots: false,
+        }
+    }
+}
+
+/// Runs what the command line asks for.
+pub fn run(cli: &Cli) -> Result<()> {
+    match &cli.command {
+        Some(Command::Replay(args)) => crate::replay::run_cli(args, cli.quiet),
+        Some(Command::Sim(args)) => crate::sim::run_cli(args, cli.quiet),
+        None => crate::sim::run_cli(&SimArgs::default(), cli.quiet),
+    }
+}

@@ -1,0 +1,2 @@
+//! Estimator settings from TOML files, with documented per-dataset defaults in
+//! `host-sim/configs/`.

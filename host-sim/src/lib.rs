@@ -1,0 +1,24 @@
+//! # host-sim
+//!
+//! The host side of microslam: dataset readers that turn recorded logs into
+//! [`microslam::event::Event`] streams, a deterministic simulator, the replay loop that
+//! feeds the estimators, metrics against ground truth, and pictures.
+//!
+//! - [`cli`]: the command line (`replay`, `sim`).
+//! - [`datasets`]: the one place that finds the shared datasets folder.
+//! - [`readers`]: dataset files → time-ordered events + ground truth.
+//! - [`replay`]: events → estimator → estimates; never parses anything.
+//! - [`sim`]: the built-in simulator.
+//! - [`metrics`]: ATE, landmark error, NEES/NIS, association purity → `metrics.json`.
+//! - [`output`]: TUM trajectories and PNG pictures.
+//! - [`config`]: estimator settings from TOML files.
+#![deny(missing_docs)]
+
+pub mod cli;
+pub mod config;
+pub mod datasets;
+pub mod metrics;
+pub mod output;
+pub mod readers;
+pub mod replay;
+pub mod sim;

@@ -1,0 +1,1 @@
+//! Files written after a run: TUM trajectories, `metrics.json`, PNG pictures.

@@ -1,0 +1,127 @@
+//! UTIAS MRCLAM (Leung, Barfoot, Liu 2011): one robot's odometry, sightings and ground
+//! truth.
+//!
+//! Files in the dataset folder (tab-separated, 4 `#` header lines):
+//! - `Robot<k>_Odometry.dat`: time [s], v [m/s], ω [rad/s] → [`EventKind::Velocity`];
+//! - `Robot<k>_Measurement.dat`: time, **barcode**, range [m], bearing [rad] →
+//!   [`EventKind::Sighting`] with [`Identity::Unique`]`(subject)`; the barcode is mapped
+//!   to a subject through `Barcodes.dat`. Subjects 1–5 are the robots: their sightings are
+//!   dropped, as are barcodes that `Barcodes.dat` does not list (counted in
+//!   [`Recording::dropped_sightings`]);
+//! - `Robot<k>_Groundtruth.dat` (optional: dataset 1 has none): time, x, y, θ;
+//! - `Landmark_Groundtruth.dat`: subject, x, y, σx, σy.
+
+use super::text::{ReadError, invalid, read_table};
+use super::{Recording, TrueLandmark, TruePose, sort_events};
+use microslam::event::{Event, EventKind, Identity, Sighting};
+use microslam::geometry::Pose2;
+use microslam::sensors::range_bearing::RangeBearing;
+use std::collections::HashMap;
+use std::path::Path;
+
+/// Subjects 1..=5 are robots; landmarks are 6 and up.
+pub const LAST_ROBOT_SUBJECT: u32 = 5;
+
+/// Reads robot `robot`'s log from the MRCLAM folder `dir`.
+pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
+    let file = |name: String| dir.join(name);
+    let barcodes_path = file("Barcodes.dat".into());
+    let barcodes = read_table::<2>(&barcodes_path)?;
+    let mut subject_of = HashMap::new();
+    for row in &barcodes {
+        let subject = whole(&barcodes_path, row.line, row.values[0], "subject")?;
+        let barcode = whole(&barcodes_path, row.line, row.values[1], "barcode")?;
+        subject_of.insert(barcode, subject);
+    }
+
+    let odo_path = file(format!("Robot{robot}_Odometry.dat"));
+    let odometry = read_table::<3>(&odo_path)?;
+    let meas_path = file(format!("Robot{robot}_Measurement.dat"));
+    let measurements = read_table::<4>(&meas_path)?;
+
+    let mut events = Vec::with_capacity(odometry.len() + measurements.len());
+    for row in &odometry {
+        let [t, v, omega] = row.values;
+        events.push(Event::new(t, EventKind::Velocity { v, omega }));
+    }
+    let mut dropped = 0;
+    for row in &measurements {
+        let [t, code, range, bearing] = row.values;
+        let code = whole(&meas_path, row.line, code, "barcode")?;
+        if !(range > 0.0) {
+            return Err(invalid(
+                &meas_path,
+                row.line,
+                format!("range {range} is not positive"),
+            )
+            .into());
+        }
+        match subject_of.get(&code) {
+            Some(&subject) if subject > LAST_ROBOT_SUBJECT => events.push(Event::new(
+                t,
+                EventKind::Sighting(Sighting {
+                    identity: Identity::Unique(subject),
+                    z: RangeBearing::new(range, bearing),
+                    covariance: None,
+                }),
+            )),
+            _ => dropped += 1,
+        }
+    }
+    sort_events(&mut events)?;
+
+    let gt_path = file(format!("Robot{robot}_Groundtruth.dat"));
+    let mut ground_truth = Vec::new();
+    if gt_path.exists() {
+        for row in read_table::<4>(&gt_path)? {
+            let [stamp, x, y, theta] = row.values;
+            ground_truth.push(TruePose {
+                stamp,
+                pose: Pose2::new(x, y, theta),
+            });
+        }
+        ground_truth.sort_by(|a, b| a.stamp.total_cmp(&b.stamp));
+    }
+
+    let lm_path = file("Landmark_Groundtruth.dat".into());
+    let mut landmarks = Vec::new();
+    if lm_path.exists() {
+        for row in read_table::<5>(&lm_path)? {
+            let id = whole(&lm_path, row.line, row.values[0], "subject")?;
+            landmarks.push(TrueLandmark {
+                id,
+                position: [row.values[1], row.values[2]],
+            });
+        }
+    }
+
+    let first = events.first().map(|e| e.stamp);
+    let initial_pose = first.and_then(|t| crate::metrics::interpolate_pose(&ground_truth, t));
+    let name = format!(
+        "mrclam/{}/robot{robot}",
+        dir.file_name()
+            .map(|n| n.to_string_lossy())
+            .unwrap_or_default()
+    );
+    Ok(Recording {
+        name,
+        events,
+        ground_truth,
+        landmarks,
+        initial_pose,
+        dropped_sightings: dropped,
+    })
+}
+
+/// A field that must hold a non-negative whole number.
+fn whole(path: &Path, line: usize, v: f64, what: &str) -> Result<u32, ReadError> {
+    if v >= 0.0 && v.fract() == 0.0 && v <= f64::from(u32::MAX) {
+        Ok(v as u32)
+    } else {
+        Err(invalid(
+            path,
+            line,
+            format!("{what} `{v}` is not a whole number"),
+        ))
+    }
+}

@@ -1,0 +1,87 @@
+//! The firmware under QEMU answers a stream of wire frames exactly as the host does.
+//!
+//! Needs `qemu-system-arm` and the firmware ELF (built by `.ci/firmware.sh`), so it is
+//! `#[ignore]`d in plain `cargo test`; run it with
+//! `cargo test -p microslam-replay-tests --test firmware_qemu -- --ignored`.
+
+use std::time::Duration;
+
+use microslam::wire::{StepResult, ToDevice, ToHost};
+use microslam_replay_tests::firmware::{
+    encode_all, firmware_elf, host_replies, run_in_qemu, synthetic_drive, with_line_noise,
+};
+
+/// Bits of every f32, so that equality means bit for bit (and NaN = NaN).
+fn bits(reply: &ToHost) -> Vec<u8> {
+    let mut r = *reply;
+    if let ToHost::Status {
+        stack_peak_bytes, ..
+    } = &mut r
+    {
+        *stack_peak_bytes = 0; // measured on the device only
+    }
+    let mut buf = [0u8; 256];
+    postcard::to_slice(&r, &mut buf).expect("fits").to_vec()
+}
+
+#[test]
+#[ignore = "needs qemu-system-arm and the firmware ELF: run by .ci/firmware.sh"]
+fn firmware_in_qemu_equals_host_bit_for_bit_on_a_synthetic_drive() {
+    let messages = synthetic_drive();
+    let (bytes, noise) = with_line_noise(&encode_all(&messages), 97);
+    let expected = host_replies(&bytes);
+    assert_eq!(expected.len(), messages.len(), "one reply per message");
+    let landmarks_added = expected
+        .iter()
+        .filter(|r| matches!(r, ToHost::Estimate(e) if e.result == StepResult::Added))
+        .count();
+    assert!(
+        landmarks_added >= 12,
+        "the drive maps every landmark (twice: reset)"
+    );
+
+    let elf = firmware_elf();
+    assert!(
+        elf.exists(),
+        "{} missing: run .ci/firmware.sh",
+        elf.display()
+    );
+    let run = run_in_qemu(
+        &elf,
+        bytes.clone(),
+        expected.len(),
+        Duration::from_secs(240),
+    );
+    println!(
+        "{} frames ({} bytes, {} noise bursts) → {} replies in {:.2} s",
+        messages.len(),
+        bytes.len(),
+        noise,
+        run.replies.len(),
+        run.elapsed.as_secs_f64()
+    );
+    assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
+    assert_eq!(run.replies.len(), expected.len(), "every message answered");
+    for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
+        assert_eq!(
+            bits(got),
+            bits(want),
+            "reply {i} differs:\n{got:?}\n{want:?}"
+        );
+    }
+    // The last reply answers the status request: device counters and its stack peak.
+    let Some(ToHost::Status {
+        seq,
+        status,
+        stack_peak_bytes,
+        ..
+    }) = run.replies.last()
+    else {
+        panic!("last reply is not a status");
+    };
+    assert_eq!(*seq, messages.last().map(ToDevice::seq).unwrap_or(0));
+    assert_eq!(status.frames_bad, noise, "every noise burst counted once");
+    assert_eq!(status.frames_ok as usize, messages.len());
+    println!("firmware stack peak: {stack_peak_bytes} bytes");
+    assert!(*stack_peak_bytes > 0);
+}
