@@ -12,11 +12,13 @@
 //! - [`metrics`]: ATE, landmark error, NEES/NIS, association purity → `metrics.json`.
 //! - [`output`]: TUM trajectories and PNG pictures.
 //! - [`config`]: estimator settings from TOML files.
+//! - [`grid_replay`]: the grid particle filter (SLAM, localization) on CARMEN lidar logs.
 #![deny(missing_docs)]
 
 pub mod cli;
 pub mod config;
 pub mod datasets;
+pub mod grid_replay;
 pub mod metrics;
 pub mod output;
 pub mod readers;

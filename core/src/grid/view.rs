@@ -99,10 +99,10 @@ impl<'a> GridView<'a> {
         let row = y as usize * w;
         if x0 >= 0 && (x0 as usize) + 16 <= w {
             let start = row + x0 as usize;
-            if let Some(chunk) = self.cells.get(start..start + 16) {
-                if let Ok(bytes) = <&[i8; 16]>::try_from(chunk) {
-                    return bool_bytes_to_mask(bytes, self.occupied_above) & ((1u32 << n) - 1);
-                }
+            if let Some(chunk) = self.cells.get(start..start + 16)
+                && let Ok(bytes) = <&[i8; 16]>::try_from(chunk)
+            {
+                return bool_bytes_to_mask(bytes, self.occupied_above) & ((1u32 << n) - 1);
             }
         }
         let mut mask = 0u32;

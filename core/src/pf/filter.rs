@@ -332,10 +332,10 @@ fn score_particles<const P: usize>(
     let mut scored = 0;
     for i in 0..P {
         if repeats(i) {
-            if let Some(prev) = shifts.get(i - 1).copied() {
-                if let Some(s) = shifts.get_mut(i) {
-                    *s = prev;
-                }
+            if let Some(prev) = shifts.get(i - 1).copied()
+                && let Some(s) = shifts.get_mut(i)
+            {
+                *s = prev;
             }
         } else {
             scored += 1;

@@ -129,6 +129,25 @@ impl GridPfConfig {
         },
     };
 
+    /// [`GridPfConfig::DEFAULT`] adjusted for few particles and beams (the firmware's
+    /// P = 32 and 90 beams, tuned on the Intel log with every second beam): more heading
+    /// noise (0.4° per step + 0.1 rad/m) so 32 particles still cover the odometry's heading
+    /// drift, likelihood 0.05 per unit to make up for half the beams, and resampling at
+    /// N_eff ≤ 0.9 P.
+    pub const MICROCONTROLLER: Self = Self {
+        filter: FilterConfig {
+            motion_noise: MotionNoise {
+                heading_std: 0.007,
+                heading_std_per_metre: 0.1,
+                ..MotionNoise::INDOOR
+            },
+            log_likelihood_per_unit: 0.05,
+            resample_neff_fraction: 0.9,
+            ..Self::DEFAULT.filter
+        },
+        ..Self::DEFAULT
+    };
+
     /// `true` when every setting is finite and in range.
     pub fn is_valid(&self) -> bool {
         self.resolution.is_finite()

@@ -142,10 +142,10 @@ impl<T: Real, const N: usize> ImuAligner<T, N> {
         }
         if self.len > 0 {
             let last = (self.next + N - 1) % N;
-            if let Some(s) = self.samples.get(last) {
-                if stamp < s.0 {
-                    return Err(ImuError::OutOfOrder);
-                }
+            if let Some(s) = self.samples.get(last)
+                && stamp < s.0
+            {
+                return Err(ImuError::OutOfOrder);
             }
         }
         if let Some(slot) = self.samples.get_mut(self.next) {

@@ -1,5 +1,7 @@
 //! Scores of an estimate against ground truth.
 
+pub mod relations;
+
 use crate::readers::TruePose;
 use microslam::geometry::{Pose2, wrap_angle};
 

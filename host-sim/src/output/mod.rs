@@ -1,1 +1,3 @@
 //! Files written after a run: TUM trajectories, `metrics.json`, PNG pictures.
+
+pub mod grid_map;

@@ -22,7 +22,9 @@ pub struct Relation {
 }
 
 /// Reads a relations file (`#` lines and blank lines skipped).
-pub fn parse<R: BufRead>(reader: R) -> Result<Vec<Relation>, Box<dyn std::error::Error>> {
+pub fn parse<R: BufRead>(
+    reader: R,
+) -> Result<Vec<Relation>, Box<dyn std::error::Error + Send + Sync>> {
     let mut out = Vec::new();
     for (i, line) in reader.lines().enumerate() {
         let line = line?;
@@ -52,8 +54,15 @@ pub fn parse<R: BufRead>(reader: R) -> Result<Vec<Relation>, Box<dyn std::error:
     Ok(out)
 }
 
+/// Reads a relations file.
+pub fn read(path: &std::path::Path) -> anyhow::Result<Vec<Relation>> {
+    let file = std::fs::File::open(path)
+        .map_err(|e| anyhow::anyhow!("opening {}: {e}", path.display()))?;
+    parse(std::io::BufReader::new(file)).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+}
+
 /// The relation error summary (the keys of `metrics.json`'s `"relations"`).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct RelationError {
     /// Relations whose both stamps matched a processed scan.
     pub used: usize,

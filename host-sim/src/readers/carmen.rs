@@ -6,8 +6,10 @@
 //! backwards 265 times and some scans are < 10 ms apart, so order and motion must never
 //! be derived from stamp differences — use the odometry pose increments between scans.
 
+use anyhow::{Context, Result};
 use std::collections::BTreeMap;
-use std::io::BufRead;
+use std::io::{BufRead, BufReader};
+use std::path::Path;
 
 /// A laser scan message (`FLASER` front, `RLASER` rear).
 #[derive(Clone, Debug, PartialEq)]
@@ -92,9 +94,24 @@ fn num(tok: Option<&str>, line: usize, what: &str) -> Result<f64, CarmenError> {
         })
 }
 
+/// Reads a CARMEN log file: `.gz` files are decompressed (flate2), anything else is read
+/// as text.
+pub fn read(path: &Path) -> Result<CarmenLog> {
+    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let gz = path.extension().is_some_and(|e| e == "gz");
+    let log = if gz {
+        parse(BufReader::new(flate2::read::GzDecoder::new(file)))
+    } else {
+        parse(BufReader::new(file))
+    };
+    log.map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+}
+
 /// Parses a CARMEN log. Laser messages with a wrong field count are errors (they would
 /// silently shift poses and stamps); unknown message types are counted and skipped.
-pub fn parse<R: BufRead>(reader: R) -> Result<CarmenLog, Box<dyn std::error::Error>> {
+pub fn parse<R: BufRead>(
+    reader: R,
+) -> std::result::Result<CarmenLog, Box<dyn std::error::Error + Send + Sync>> {
     let mut log = CarmenLog::default();
     for (i, line) in reader.lines().enumerate() {
         let line = line?;
