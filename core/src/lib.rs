@@ -9,6 +9,11 @@
 //!   and a compile-time maximum number of landmarks; data association in
 //!   [`association`]: known ids, ICNN and JCBB (joint compatibility over a batch of
 //!   sightings), all with fixed capacity.
+//! - [`pf::GridSlam`] / [`pf::GridLocalizer`]: the grid particle filter — lidar scans
+//!   scored by map correlation with a local shift search against a saturating `i8`
+//!   log-odds [`grid::OccupancyGrid`] (SLAM) or a fixed, borrowed map (localization, e.g.
+//!   from flash); wheel odometry, IMU yaw-rate filtering and stream alignment in
+//!   [`sensors`].
 //! - [`event::Event`]: one time-stamped sensor sample; readers produce them, estimators
 //!   consume them.
 //! - `wire` (feature `wire`): the messages between a host and the device on a serial line,
@@ -54,8 +59,10 @@ pub mod error;
 pub mod event;
 pub mod gate;
 pub mod geometry;
+pub mod grid;
 mod log;
 pub mod motion;
+pub mod pf;
 pub mod scalar;
 pub mod sensors;
 #[cfg(feature = "wire")]

@@ -33,6 +33,56 @@ pub enum Command {
     /// Stream a dataset to the firmware (under QEMU or on a board) and compare its
     /// estimates with the host's, bit for bit.
     Hil(HilArgs),
+    /// Localize on a saved grid map (`map.yaml` from `replay --filter grid-slam`) with the
+    /// grid particle filter.
+    Localize(LocalizeArgs),
+}
+
+/// Which estimator a replay drives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Default)]
+pub enum FilterKind {
+    /// Landmark EKF-SLAM (landmark datasets).
+    #[default]
+    EkfSlam,
+    /// Grid particle-filter SLAM (lidar datasets).
+    GridSlam,
+}
+
+/// Options of the grid particle filter shared by `replay` and `localize`.
+#[derive(Debug, Clone, Args)]
+pub struct GridArgs {
+    /// Particles (grid filter).
+    #[arg(long, default_value_t = 200)]
+    pub particles: usize,
+    /// Half-width k of the (2k+1)² shift window, cells (default 4: 9 × 9).
+    #[arg(long)]
+    pub window: Option<u8>,
+    /// Beams used per scan (decimated from the log's; default all).
+    #[arg(long)]
+    pub beams: Option<usize>,
+    /// Benchmark relations file (default: a `*.relations` file next to the log).
+    #[arg(long)]
+    pub relations: Option<PathBuf>,
+}
+
+/// Options of `host-sim localize`.
+#[derive(Debug, Clone, Args)]
+pub struct LocalizeArgs {
+    /// The map: `map.yaml` (ROS map_server) next to its PGM.
+    #[arg(long)]
+    pub map: PathBuf,
+    /// Dataset: `carmen:<file>`.
+    #[arg(long, short)]
+    pub dataset: DatasetSpec,
+    /// Grid filter settings (TOML, see `grid_replay::GridToml`).
+    #[arg(long, short)]
+    pub config: Option<PathBuf>,
+    /// Grid filter options.
+    #[command(flatten)]
+    pub grid: GridArgs,
+    /// Output folder.
+    #[arg(long, short, default_value = "out/localize")]
+    pub out: PathBuf,
 }
 
 /// How sightings are associated with landmarks.
@@ -83,6 +133,16 @@ pub struct ReplayArgs {
     /// Skip the PNG pictures (faster).
     #[arg(long)]
     pub no_plots: bool,
+    /// Estimator: `ekf-slam` (landmark datasets) or `grid-slam` (lidar datasets; the
+    /// default for `carmen:` and `thor:`).
+    #[arg(long, value_enum)]
+    pub filter: Option<FilterKind>,
+    /// Grid filter options.
+    #[command(flatten)]
+    pub grid: GridArgs,
+    /// THOR run number (`thor:` datasets: 20 or 21).
+    #[arg(long, default_value_t = 20)]
+    pub run: u32,
 }
 
 /// Options of `host-sim sim`.
@@ -154,6 +214,7 @@ pub fn run(cli: &Cli) -> Result<()> {
         Some(Command::Replay(args)) => crate::replay::run_cli(args, cli.quiet),
         Some(Command::Sim(args)) => crate::sim::run_cli(args, cli.quiet),
         Some(Command::Hil(args)) => crate::hil::run_cli(args, cli.quiet),
+        Some(Command::Localize(args)) => crate::grid_replay::localize_cli(args, cli.quiet),
         None => crate::sim::run_cli(&SimArgs::default(), cli.quiet),
     }
 }

@@ -14,12 +14,14 @@
 //! - [`config`]: estimator settings from TOML files.
 //! - [`faults`]: fault injection into event streams (drops, duplicates, reordering,
 //!   corrupted readings, clock jumps).
+//! - [`grid_replay`]: the grid particle filter (SLAM, localization) on CARMEN lidar logs.
 #![deny(missing_docs)]
 
 pub mod cli;
 pub mod config;
 pub mod datasets;
 pub mod faults;
+pub mod grid_replay;
 pub mod hil;
 pub mod metrics;
 pub mod output;

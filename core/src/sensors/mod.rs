@@ -1,4 +1,7 @@
 //! Sensor models: what a sensor measures, given the robot pose and the world.
 
 pub mod camera;
+pub mod imu;
+pub mod lidar;
 pub mod range_bearing;
+pub mod wheel_odometry;

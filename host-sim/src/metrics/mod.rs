@@ -20,6 +20,7 @@
 
 mod alignment;
 mod assignment;
+pub mod relations;
 
 pub use alignment::{Rigid, apply, first_pose, se2_least_squares, wrap};
 pub use assignment::{max_gain, min_cost};

@@ -1,10 +1,11 @@
 //! Files written after a run: TUM trajectories, `metrics.json`, PNG pictures; the
 //! progress bar and the one-line summary.
 
+pub mod grid_map;
 mod plots;
 mod tum;
 
-pub use plots::{draw_errors, draw_map};
+pub use plots::{draw_errors, draw_map, write_png};
 pub use tum::{tum_line, write_tum};
 
 use crate::metrics::Metrics;

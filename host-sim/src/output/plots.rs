@@ -26,7 +26,8 @@ fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
     anyhow!("plot: {e}")
 }
 
-fn encode(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<()> {
+/// Writes an 8-bit RGB image (`w · h · 3` bytes, rows top to bottom) as a PNG.
+pub fn write_png(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<()> {
     let file = std::fs::File::create(path).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);
     enc.set_color(png::ColorType::Rgb);
@@ -164,7 +165,7 @@ pub fn draw_map(
             .map_err(err)?;
         root.present().map_err(err)?;
     }
-    encode(path, MAP_PX, MAP_PX, &buf)
+    write_png(path, MAP_PX, MAP_PX, &buf)
 }
 
 /// Points of the 95 % ellipse of a 2-D Gaussian.
@@ -257,5 +258,5 @@ pub fn draw_errors(
             .map_err(err)?;
         root.present().map_err(err)?;
     }
-    encode(path, ERR_W, ERR_H, &buf)
+    write_png(path, ERR_W, ERR_H, &buf)
 }

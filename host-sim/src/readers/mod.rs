@@ -3,8 +3,10 @@
 //! Readers do no estimation; the replay loop does no parsing. A truncated or corrupt line
 //! is an error naming the file and the line number.
 
+pub mod carmen;
 pub mod mrclam;
 mod text;
+pub mod thor;
 
 pub use text::ReadError;
 
@@ -18,6 +20,11 @@ use std::str::FromStr;
 pub enum DatasetSpec {
     /// UTIAS MRCLAM: a folder with `Robot<k>_Odometry.dat` etc.
     Mrclam(String),
+    /// A CARMEN lidar log (`.clf`, `.log`, `.log.gz`): a path, or relative to the
+    /// datasets folder (e.g. `carmen:intel/intel-raw-part.clf`).
+    Carmen(String),
+    /// THOR `.npz` files: a folder, or a name under the datasets folder (`thor:thor`).
+    Thor(String),
 }
 
 impl FromStr for DatasetSpec {
@@ -25,8 +32,10 @@ impl FromStr for DatasetSpec {
     fn from_str(s: &str) -> Result<Self, String> {
         match s.split_once(':') {
             Some(("mrclam", dir)) if !dir.is_empty() => Ok(Self::Mrclam(dir.to_owned())),
+            Some(("carmen", file)) if !file.is_empty() => Ok(Self::Carmen(file.to_owned())),
+            Some(("thor", dir)) if !dir.is_empty() => Ok(Self::Thor(dir.to_owned())),
             _ => Err(format!(
-                "unknown dataset `{s}`: expected `mrclam:<dir>` (e.g. mrclam:dataset6)"
+                "unknown dataset `{s}`: expected `mrclam:<dir>` (e.g. mrclam:dataset6), `carmen:<file>` or `thor:<dir>`"
             )),
         }
     }
@@ -37,6 +46,8 @@ impl DatasetSpec {
     pub fn family(&self) -> &'static str {
         match self {
             Self::Mrclam(_) => "mrclam",
+            Self::Carmen(_) => "carmen",
+            Self::Thor(_) => "thor",
         }
     }
 }
@@ -83,6 +94,12 @@ pub fn read(spec: &DatasetSpec, robot: u8) -> Result<Recording> {
         DatasetSpec::Mrclam(dir) => {
             let path = crate::datasets::resolve("mrclam", dir)?;
             Ok(mrclam::read(&path, robot)?)
+        }
+        DatasetSpec::Carmen(_) | DatasetSpec::Thor(_) => {
+            bail!(
+                "`{}` datasets are replayed with `--filter grid-slam`",
+                spec.family()
+            )
         }
     }
 }

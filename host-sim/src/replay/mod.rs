@@ -21,6 +21,12 @@ use std::time::Instant;
 
 /// `host-sim replay`.
 pub fn run_cli(args: &ReplayArgs, quiet: bool) -> Result<()> {
+    use crate::cli::FilterKind;
+    use crate::readers::DatasetSpec;
+    let lidar = matches!(args.dataset, DatasetSpec::Carmen(_) | DatasetSpec::Thor(_));
+    if args.filter == Some(FilterKind::GridSlam) || (args.filter.is_none() && lidar) {
+        return crate::grid_replay::replay_cli(args, quiet);
+    }
     let started = Instant::now();
     let settings = Settings::load_for(
         args.dataset.family(),

@@ -1,0 +1,181 @@
+//! A borrowed, read-only occupancy map: what scans are scored against.
+
+use super::{GridError, GridGeometry};
+
+/// Read-only log-odds cells (row-major, row 0 at the grid's bottom edge) with their
+/// geometry and occupied threshold. Borrows from an [`super::OccupancyGrid`] or from any
+/// `&[i8]`, e.g. a `&'static [i8]` map kept in flash for localization.
+#[derive(Clone, Copy, Debug)]
+pub struct GridView<'a> {
+    cells: &'a [i8],
+    geometry: GridGeometry,
+    occupied_above: i8,
+}
+
+/// Widest window [`GridView::occupied_row_mask`] answers in one call, cells.
+pub const MAX_MASK_WIDTH: u32 = 16;
+
+impl<'a> GridView<'a> {
+    /// A view of `cells` (`geometry.width × geometry.height` values, row-major); a cell is
+    /// occupied when its value is above `occupied_above`.
+    pub fn new(
+        cells: &'a [i8],
+        geometry: GridGeometry,
+        occupied_above: i8,
+    ) -> Result<Self, GridError> {
+        if !geometry.is_valid() {
+            return Err(GridError::InvalidGeometry);
+        }
+        if geometry.width.checked_mul(geometry.height) != Some(cells.len()) {
+            return Err(GridError::SizeMismatch);
+        }
+        Ok(Self {
+            cells,
+            geometry,
+            occupied_above,
+        })
+    }
+
+    /// A view over cells whose length is known to be `width × height` (for
+    /// [`super::OccupancyGrid::view`]); an invalid geometry only makes every point off-grid.
+    pub(crate) fn from_trusted(
+        cells: &'a [i8],
+        geometry: GridGeometry,
+        occupied_above: i8,
+    ) -> Self {
+        Self {
+            cells,
+            geometry,
+            occupied_above,
+        }
+    }
+
+    /// Size, resolution and origin.
+    #[inline]
+    pub fn geometry(&self) -> &GridGeometry {
+        &self.geometry
+    }
+
+    /// The occupied threshold.
+    #[inline]
+    pub fn occupied_above(&self) -> i8 {
+        self.occupied_above
+    }
+
+    /// All cells, row-major.
+    #[inline]
+    pub fn cells(&self) -> &'a [i8] {
+        self.cells
+    }
+
+    /// Log-odds of cell `(ix, iy)`, `None` off the grid.
+    #[inline]
+    pub fn log_odds(&self, ix: i32, iy: i32) -> Option<i8> {
+        if !self.geometry.contains(ix, iy) {
+            return None;
+        }
+        self.cells
+            .get(iy as usize * self.geometry.width + ix as usize)
+            .copied()
+    }
+
+    /// `true` when `(ix, iy)` is on the grid and occupied.
+    #[inline]
+    pub fn is_occupied(&self, ix: i32, iy: i32) -> bool {
+        self.log_odds(ix, iy)
+            .is_some_and(|v| v > self.occupied_above)
+    }
+
+    /// Occupancy of the `n ≤ 16` cells `(x0 + k, y)`, `k < n`, as bits (bit `k` set when
+    /// occupied; cells off the grid are not occupied). The scoring hot loop: one 16-byte
+    /// compare when the window lies inside the row.
+    #[inline]
+    pub fn occupied_row_mask(&self, x0: i32, y: i32, n: u32) -> u32 {
+        let n = n.min(MAX_MASK_WIDTH);
+        let w = self.geometry.width;
+        if y < 0 || y as usize >= self.geometry.height {
+            return 0;
+        }
+        let row = y as usize * w;
+        if x0 >= 0 && (x0 as usize) + 16 <= w {
+            let start = row + x0 as usize;
+            if let Some(chunk) = self.cells.get(start..start + 16)
+                && let Ok(bytes) = <&[i8; 16]>::try_from(chunk)
+            {
+                return bool_bytes_to_mask(bytes, self.occupied_above) & ((1u32 << n) - 1);
+            }
+        }
+        let mut mask = 0u32;
+        for k in 0..n {
+            if self.is_occupied(x0.saturating_add(k as i32), y) {
+                mask |= 1 << k;
+            }
+        }
+        mask
+    }
+}
+
+/// Bit `k` set when `bytes[k] > t`: one vector compare into 0/1 bytes, then each group of
+/// eight 0/1 bytes gathered into 8 bits by one multiplication (every partial product
+/// lands on its own bit, so nothing carries).
+#[inline]
+fn bool_bytes_to_mask(bytes: &[i8; 16], t: i8) -> u32 {
+    const GATHER: u64 = 0x0102_0408_1020_4080;
+    let mut flags = [0u8; 16];
+    for (f, b) in flags.iter_mut().zip(bytes) {
+        *f = u8::from(*b > t);
+    }
+    let (groups, _) = flags.as_chunks::<8>();
+    let mut mask = 0u32;
+    for (g, group) in groups.iter().enumerate() {
+        let bits = u64::from_le_bytes(*group).wrapping_mul(GATHER) >> 56;
+        mask |= (bits as u32) << (8 * g);
+    }
+    mask
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn masks_match_cell_queries_everywhere() {
+        let g = GridGeometry::centred(23, 7, 0.1);
+        let cells: Vec<i8> = (0..23 * 7)
+            .map(|i| ((i * 37 + 11) % 61) as i8 - 30)
+            .collect();
+        let view = GridView::new(&cells, g, 5).unwrap();
+        for y in -2..9 {
+            for x0 in -20..26 {
+                for n in [1u32, 5, 9, 16] {
+                    let mut want = 0u32;
+                    for k in 0..n {
+                        if view.is_occupied(x0 + k as i32, y) {
+                            want |= 1 << k;
+                        }
+                    }
+                    assert_eq!(view.occupied_row_mask(x0, y, n), want, "{x0} {y} {n}");
+                }
+            }
+        }
+        assert!(!view.is_occupied(-1, 0) && view.log_odds(23, 0).is_none());
+    }
+
+    #[test]
+    fn wrong_sizes_are_refused() {
+        let cells = [0i8; 12];
+        let g = GridGeometry::centred(4, 4, 0.1);
+        assert_eq!(
+            GridView::new(&cells, g, 0).err(),
+            Some(GridError::SizeMismatch)
+        );
+        let bad = GridGeometry {
+            resolution: 0.0,
+            ..GridGeometry::centred(4, 3, 0.1)
+        };
+        assert_eq!(
+            GridView::new(&cells, bad, 0).err(),
+            Some(GridError::InvalidGeometry)
+        );
+    }
+}

@@ -1,0 +1,430 @@
+//! The seed's observation model: map correlation of a scan's end points with the occupied
+//! cells, optionally range-weighted, over a `(2k+1) × (2k+1)` window of cell shifts
+//! (seed 2, eqs. 21 and 24).
+//!
+//! `corr(shift) = Σ_i w_i · 1[cell(end point i) + shift is occupied]`, with
+//! `w_i = range_i^γ` (γ = 0: the plain count). Weights are fixed point
+//! ([`WEIGHT_ONE`] = 1.0) and sums are integers, so every evaluation order gives the same
+//! score — the fast search and the brute-force reference agree exactly, on every target.
+//!
+//! The fast search ([`search_window`]) converts each end point to its cell once per
+//! particle (not once per shift), treats the shifts as index offsets into the `2k+1` rows
+//! of `2k+1` bytes around it, and adds the beam's weight masked by the occupancy test to
+//! all shifts of a row at once: no per-shift coordinate arithmetic, no bounds check per
+//! cell, no branch on the map's content, so the compiler vectorises the row. Windows that
+//! reach over the grid's edge take a checked path. Identical particles are scored once
+//! (in [`ParticleFilter::update`](super::ParticleFilter::update)).
+//! [`search_window_brute_force`] is the plain triple loop, kept as the reference.
+
+use crate::geometry::Pose2;
+use crate::grid::{GridView, floor_i32};
+use crate::sensors::lidar::LidarScan;
+
+/// The fixed-point weight that stands for 1.0 (a beam of the unweighted count).
+pub const WEIGHT_ONE: u32 = 256;
+/// Largest weight of one beam (2²⁰ = range^γ of 4096): keeps sums of up to 4096 beams
+/// inside a `u32`.
+pub const MAX_WEIGHT: u32 = 1 << 20;
+/// Largest half-width `k` of the shift window (15 × 15 shifts).
+pub const MAX_SHIFT_WINDOW: u8 = 7;
+/// Number of shifts of the largest window.
+pub const MAX_SHIFTS: usize =
+    (2 * MAX_SHIFT_WINDOW as usize + 1) * (2 * MAX_SHIFT_WINDOW as usize + 1);
+
+/// A usable lidar end point in the robot frame with its correlation weight.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ScanPoint {
+    /// x in the robot frame, metres.
+    pub x: f32,
+    /// y in the robot frame, metres.
+    pub y: f32,
+    /// Fixed-point weight `range^γ` ([`WEIGHT_ONE`] = 1.0).
+    pub weight: u32,
+    /// Measured range, metres.
+    pub range: f32,
+}
+
+/// Up to `B` end points of one scan, prepared once per scan for all particles.
+///
+/// RAM: 16 · B bytes + 16.
+#[derive(Clone, Debug)]
+pub struct ScanPoints<const B: usize> {
+    points: [ScanPoint; B],
+    len: usize,
+    thinned: bool,
+}
+
+impl<const B: usize> Default for ScanPoints<B> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const B: usize> ScanPoints<B> {
+    /// No points.
+    pub const fn new() -> Self {
+        Self {
+            points: [ScanPoint {
+                x: 0.0,
+                y: 0.0,
+                weight: 0,
+                range: 0.0,
+            }; B],
+            len: 0,
+            thinned: false,
+        }
+    }
+
+    /// Replaces the content with the usable beams of `scan`, every `decimation`-th one,
+    /// weighted by `range^range_weight_exponent`. When more than `B` beams would be used,
+    /// the decimation is raised until they fit ([`ScanPoints::was_thinned`] tells).
+    /// Returns the number of points.
+    pub fn load(
+        &mut self,
+        scan: &LidarScan<'_>,
+        decimation: usize,
+        range_weight_exponent: f32,
+    ) -> usize {
+        let mut dec = decimation.max(1);
+        if B > 0 && scan.ranges.len().div_ceil(dec) > B {
+            dec = scan.ranges.len().div_ceil(B);
+        }
+        self.thinned = dec != decimation.max(1);
+        self.len = 0;
+        if B == 0 {
+            return 0;
+        }
+        let gamma = if range_weight_exponent.is_finite() {
+            range_weight_exponent
+        } else {
+            0.0
+        };
+        for (slot, beam) in self.points.iter_mut().zip(scan.beams(dec)) {
+            let w = if gamma == 0.0 {
+                1.0
+            } else {
+                libm::powf(beam.range, gamma)
+            };
+            let fixed = libm::roundf(w * WEIGHT_ONE as f32);
+            let weight = if fixed.is_nan() || fixed < 1.0 {
+                1
+            } else if fixed >= MAX_WEIGHT as f32 {
+                MAX_WEIGHT
+            } else {
+                fixed as u32
+            };
+            *slot = ScanPoint {
+                x: beam.robot_point.0,
+                y: beam.robot_point.1,
+                weight,
+                range: beam.range,
+            };
+            self.len += 1;
+        }
+        self.len
+    }
+
+    /// The points loaded.
+    pub fn as_slice(&self) -> &[ScanPoint] {
+        self.points.get(..self.len).unwrap_or(&[])
+    }
+
+    /// `true` when the last [`ScanPoints::load`] had to raise the decimation to fit `B`.
+    pub fn was_thinned(&self) -> bool {
+        self.thinned
+    }
+}
+
+/// The best shift of one particle's scan.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ShiftScore {
+    /// Best shift along x, cells.
+    pub dx: i32,
+    /// Best shift along y, cells.
+    pub dy: i32,
+    /// Correlation at the best shift (fixed point, [`WEIGHT_ONE`] = 1.0).
+    pub score: u32,
+}
+
+/// The cell of a robot-frame point seen from `pose` — the one formula both searches use.
+#[inline]
+pub fn end_cell(
+    map: &GridView<'_>,
+    pose: &Pose2<f32>,
+    sin: f32,
+    cos: f32,
+    p: &ScanPoint,
+) -> (i32, i32) {
+    let wx = pose.x + cos * p.x - sin * p.y;
+    let wy = pose.y + sin * p.x + cos * p.y;
+    let (u, v) = map.geometry().world_to_grid(wx, wy);
+    (floor_i32(u), floor_i32(v))
+}
+
+/// Picks the best shift from the scores of a `(2k+1)²` window (row-major, `dy` outer):
+/// the highest score; on a tie the unshifted particle if it is among the best, otherwise
+/// the first in row-major order.
+pub fn best_shift(scores: &[u32], half_width: u8) -> ShiftScore {
+    let k = i32::from(half_width.min(MAX_SHIFT_WINDOW));
+    let n = (2 * k + 1) as usize;
+    let centre = n * n / 2;
+    let mut best = (centre, scores.get(centre).copied().unwrap_or(0));
+    for (i, s) in scores.iter().take(n * n).enumerate() {
+        if *s > best.1 {
+            best = (i, *s);
+        }
+    }
+    ShiftScore {
+        dx: (best.0 % n) as i32 - k,
+        dy: (best.0 / n) as i32 - k,
+        score: best.1,
+    }
+}
+
+/// Correlation of the scan seen from `pose` for every shift of the window of half-width
+/// `half_width` (clamped to [`MAX_SHIFT_WINDOW`]); writes the `(2k+1)²` scores into
+/// `scores` (row-major, `dy` outer) and returns the best. The fast search.
+pub fn search_window(
+    map: &GridView<'_>,
+    pose: &Pose2<f32>,
+    points: &[ScanPoint],
+    half_width: u8,
+    scores: &mut [u32; MAX_SHIFTS],
+) -> ShiftScore {
+    let hw = half_width.min(MAX_SHIFT_WINDOW);
+    match hw {
+        0 => search_fixed::<1>(map, pose, points, scores),
+        1 => search_fixed::<3>(map, pose, points, scores),
+        2 => search_fixed::<5>(map, pose, points, scores),
+        3 => search_fixed::<7>(map, pose, points, scores),
+        4 => search_fixed::<9>(map, pose, points, scores),
+        5 => search_fixed::<11>(map, pose, points, scores),
+        6 => search_fixed::<13>(map, pose, points, scores),
+        _ => search_fixed::<15>(map, pose, points, scores),
+    }
+}
+
+/// [`search_window`] for a window of `N = 2k+1` cells: each window row is `N` bytes read
+/// once, and every shift's score grows by the beam's weight masked by the occupancy
+/// test — no branches on the map's content, so the compiler vectorises the row.
+fn search_fixed<const N: usize>(
+    map: &GridView<'_>,
+    pose: &Pose2<f32>,
+    points: &[ScanPoint],
+    scores: &mut [u32; MAX_SHIFTS],
+) -> ShiftScore {
+    let k = (N / 2) as i32;
+    let mut acc = [[0u32; N]; N];
+    let (sin, cos) = libm::sincosf(pose.theta);
+    let g = map.geometry();
+    let (w, h) = (g.width, g.height);
+    let cells = map.cells();
+    let t = map.occupied_above();
+    for p in points {
+        let (cx, cy) = end_cell(map, pose, sin, cos, p);
+        let (x0, y0) = (cx.saturating_sub(k), cy.saturating_sub(k));
+        let inside = x0 >= 0 && y0 >= 0 && (x0 as usize) + N <= w && (y0 as usize) + N <= h;
+        let weight = p.weight;
+        if inside {
+            let base = y0 as usize * w + x0 as usize;
+            for (r, row_acc) in acc.iter_mut().enumerate() {
+                let start = base + r * w;
+                let Some(Ok(row)) = cells.get(start..start + N).map(<&[i8; N]>::try_from) else {
+                    continue;
+                };
+                for (s, c) in row_acc.iter_mut().zip(row) {
+                    *s = s.wrapping_add(weight & 0u32.wrapping_sub(u32::from(*c > t)));
+                }
+            }
+        } else {
+            for (r, row_acc) in acc.iter_mut().enumerate() {
+                for (b, s) in row_acc.iter_mut().enumerate() {
+                    if map.is_occupied(x0.saturating_add(b as i32), y0.saturating_add(r as i32)) {
+                        *s = s.wrapping_add(weight);
+                    }
+                }
+            }
+        }
+    }
+    for (dst, src) in scores.iter_mut().zip(acc.as_flattened()) {
+        *dst = *src;
+    }
+    best_shift(&scores[..N * N], (N / 2) as u8)
+}
+
+/// The brute-force reference of [`search_window`]: for every shift, for every point,
+/// look the shifted end cell up. Same result, (2k+1)² lookups per point.
+pub fn search_window_brute_force(
+    map: &GridView<'_>,
+    pose: &Pose2<f32>,
+    points: &[ScanPoint],
+    half_width: u8,
+    scores: &mut [u32; MAX_SHIFTS],
+) -> ShiftScore {
+    let hw = half_width.min(MAX_SHIFT_WINDOW);
+    let k = i32::from(hw);
+    let n = (2 * k + 1) as usize;
+    let (sin, cos) = libm::sincosf(pose.theta);
+    for dy in -k..=k {
+        for dx in -k..=k {
+            let mut sum = 0u32;
+            for p in points {
+                let (cx, cy) = end_cell(map, pose, sin, cos, p);
+                if map.is_occupied(cx.saturating_add(dx), cy.saturating_add(dy)) {
+                    sum = sum.wrapping_add(p.weight);
+                }
+            }
+            if let Some(s) = scores.get_mut((dy + k) as usize * n + (dx + k) as usize) {
+                *s = sum;
+            }
+        }
+    }
+    best_shift(&scores[..n * n], hw)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::GridGeometry;
+    use crate::sensors::lidar::LidarGeometry;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn best_shift_tie_rules() {
+        // 3 × 3 window: centre tied with a corner → centre wins.
+        let s = [5, 0, 0, 0, 5, 0, 0, 0, 0];
+        assert_eq!(
+            best_shift(&s, 1),
+            ShiftScore {
+                dx: 0,
+                dy: 0,
+                score: 5
+            }
+        );
+        // Two off-centre maxima → the first in row-major order.
+        let s = [0, 0, 7, 0, 5, 0, 7, 0, 0];
+        assert_eq!(
+            best_shift(&s, 1),
+            ShiftScore {
+                dx: 1,
+                dy: -1,
+                score: 7
+            }
+        );
+    }
+
+    fn random_map(seed: u64, w: usize, h: usize, density: f64) -> (Vec<i8>, GridGeometry) {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let cells = (0..w * h)
+            .map(|_| {
+                if rng.random_bool(density) {
+                    40
+                } else {
+                    rng.random_range(-30..20)
+                }
+            })
+            .collect();
+        (cells, GridGeometry::centred(w, h, 0.05))
+    }
+
+    #[test]
+    fn fast_search_equals_brute_force() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        for trial in 0..60 {
+            let (cells, g) = random_map(trial, 64 + trial as usize % 9, 48, 0.15);
+            let view = GridView::new(&cells, g, 20).unwrap();
+            let ranges: Vec<f32> = (0..90).map(|_| rng.random_range(0.05..2.5)).collect();
+            let mut pts = ScanPoints::<90>::new();
+            let geometry = LidarGeometry {
+                first_angle: -3.0,
+                angle_increment: 6.0 / 90.0,
+                ..LidarGeometry::CARMEN_SICK_180
+            };
+            pts.load(
+                &LidarScan::new(&ranges, geometry),
+                1,
+                [0.0, 2.0, 0.7][trial as usize % 3],
+            );
+            // Poses inside, near the border and off the grid.
+            let pose = Pose2::new(
+                rng.random_range(-2.5..2.5),
+                rng.random_range(-1.8..1.8),
+                rng.random_range(-4.0..4.0),
+            );
+            let k = (trial % 8) as u8;
+            let (mut a, mut b) = ([0u32; MAX_SHIFTS], [0u32; MAX_SHIFTS]);
+            let fast = search_window(&view, &pose, pts.as_slice(), k, &mut a);
+            let slow = search_window_brute_force(&view, &pose, pts.as_slice(), k, &mut b);
+            let n = (2 * k as usize + 1).pow(2);
+            assert_eq!(a[..n], b[..n], "trial {trial}");
+            assert_eq!(fast, slow, "trial {trial}");
+            assert!(fast.score > 0 || trial % 8 == 0);
+        }
+    }
+
+    #[test]
+    fn planted_offset_is_found() {
+        // Walls of a ~2 m × 1.5 m room; the scan is taken at the true pose and scored from a
+        // pose off by (+3, −2) cells: the search must answer (−3, +2).
+        let g = GridGeometry::centred(100, 100, 0.05);
+        let mut cells = vec![0i8; 100 * 100];
+        let truth = Pose2::new(0.12, -0.07, 0.3f32);
+        let mut ranges = Vec::new();
+        let geometry = LidarGeometry {
+            first_angle: -3.1,
+            angle_increment: 6.2 / 120.0,
+            ..LidarGeometry::CARMEN_SICK_180
+        };
+        for i in 0..120 {
+            // Ray cast against the axis-aligned room [-1, 1] × [-0.75, 0.75].
+            let a = truth.theta + geometry.beam_angle(i);
+            let (s, c) = a.sin_cos();
+            // Walls kept off the cell borders (which fall on multiples of 5 cm).
+            let tx = if c > 0.0 {
+                (1.012 - truth.x) / c
+            } else {
+                (-1.012 - truth.x) / c
+            };
+            let ty = if s > 0.0 {
+                (0.763 - truth.y) / s
+            } else {
+                (-0.763 - truth.y) / s
+            };
+            ranges.push(tx.min(ty));
+        }
+        for (i, r) in ranges.iter().enumerate() {
+            let a = truth.theta + geometry.beam_angle(i);
+            let (x, y) = (truth.x + r * a.cos(), truth.y + r * a.sin());
+            if let Some((ix, iy)) = g.world_to_cell(x, y) {
+                cells[iy * 100 + ix] = 50;
+            }
+        }
+        let view = GridView::new(&cells, g, 20).unwrap();
+        let mut pts = ScanPoints::<180>::new();
+        pts.load(&LidarScan::new(&ranges, geometry), 1, 0.0);
+        let off = Pose2::new(truth.x + 3.0 * 0.05, truth.y - 2.0 * 0.05, truth.theta);
+        let mut s = [0u32; MAX_SHIFTS];
+        let best = search_window(&view, &off, pts.as_slice(), 4, &mut s);
+        assert_eq!((best.dx, best.dy), (-3, 2), "{best:?}");
+        let at_truth = search_window(&view, &truth, pts.as_slice(), 4, &mut s);
+        assert_eq!((at_truth.dx, at_truth.dy), (0, 0));
+        assert!(best.score >= 100 * WEIGHT_ONE, "{best:?}");
+    }
+
+    #[test]
+    fn weights_and_thinning() {
+        let ranges = [1.0f32, 2.0, 0.01, 3.0, 1e5];
+        let g = LidarGeometry::CARMEN_SICK_180;
+        let mut pts = ScanPoints::<8>::new();
+        assert_eq!(pts.load(&LidarScan::new(&ranges, g), 1, 2.0), 3);
+        let w: Vec<u32> = pts.as_slice().iter().map(|p| p.weight).collect();
+        assert_eq!(w, vec![256, 1024, 2304]);
+        let mut few = ScanPoints::<2>::new();
+        few.load(&LidarScan::new(&ranges, g), 1, 0.0);
+        assert!(few.was_thinned());
+        assert_eq!(few.as_slice().len(), 2); // beams 0 and 3 (decimation raised to 3)
+        let mut none = ScanPoints::<0>::new();
+        assert_eq!(none.load(&LidarScan::new(&ranges, g), 1, 0.0), 0);
+    }
+}

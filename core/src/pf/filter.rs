@@ -1,0 +1,345 @@
+//! The particle filter over robot poses: predict with noisy inputs, weight by map
+//! correlation with the shift search, move each particle to its best shift, resample.
+
+use super::correlation::{MAX_SHIFTS, ScanPoint, ShiftScore, WEIGHT_ONE, search_window};
+use super::prediction::drive_arc;
+use super::resampling::resample;
+use super::{FilterConfig, PfError};
+use crate::geometry::Pose2;
+use crate::grid::GridView;
+use rand_core::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+use rand_xoshiro::Xoshiro128PlusPlus;
+
+/// `P` weighted pose hypotheses with their own random number generator.
+///
+/// RAM: `28·P + 40` bytes (P = 32: 936 bytes; P = 200: 5.6 KB) plus the config.
+#[derive(Clone, Debug)]
+pub struct ParticleFilter<const P: usize> {
+    poses: [Pose2<f32>; P],
+    log_weights: [f32; P],
+    scratch: [Pose2<f32>; P],
+    rng: Xoshiro128PlusPlus,
+    config: FilterConfig,
+    last_neff: f32,
+    resamples: u32,
+    updates: u32,
+}
+
+/// What one correlation update did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct UpdateReport {
+    /// Index of the heaviest particle (before resampling).
+    pub best: usize,
+    /// Pose of the heaviest particle, after its shift.
+    pub best_pose: Pose2<f32>,
+    /// Its shift search result.
+    pub best_shift: ShiftScore,
+    /// Effective number of particles `1 / Σ w²` after the update, before resampling.
+    pub n_eff: f32,
+    /// `true` when the particles were resampled.
+    pub resampled: bool,
+    /// Particles scored (identical neighbours are scored once).
+    pub scored: usize,
+}
+
+impl<const P: usize> ParticleFilter<P> {
+    /// `P` particles at `start` with equal weights, the generator seeded from `config.seed`.
+    pub fn new(config: FilterConfig, start: Pose2<f32>) -> Result<Self, PfError> {
+        if !config.is_valid() {
+            return Err(PfError::InvalidConfig);
+        }
+        if P == 0 {
+            return Err(PfError::NoParticles);
+        }
+        if !start.is_finite() {
+            return Err(PfError::NonFiniteInput);
+        }
+        let w = -libm::logf(P as f32);
+        Ok(Self {
+            poses: [start; P],
+            log_weights: [w; P],
+            scratch: [start; P],
+            rng: Xoshiro128PlusPlus::seed_from_u64(config.seed),
+            config,
+            last_neff: P as f32,
+            resamples: 0,
+            updates: 0,
+        })
+    }
+
+    /// Puts all particles at `pose`, spread by Gaussian noise of `std_xy` metres and
+    /// `std_theta` radians, with equal weights (the generator continues).
+    pub fn reset_around(
+        &mut self,
+        pose: Pose2<f32>,
+        std_xy: f32,
+        std_theta: f32,
+    ) -> Result<(), PfError> {
+        if !(pose.is_finite() && std_xy.is_finite() && std_theta.is_finite()) {
+            return Err(PfError::NonFiniteInput);
+        }
+        let w = -libm::logf(P as f32);
+        for (p, lw) in self.poses.iter_mut().zip(self.log_weights.iter_mut()) {
+            let nx: f32 = StandardNormal.sample(&mut self.rng);
+            let ny: f32 = StandardNormal.sample(&mut self.rng);
+            let nt: f32 = StandardNormal.sample(&mut self.rng);
+            *p = Pose2::new(
+                pose.x + std_xy.abs() * nx,
+                pose.y + std_xy.abs() * ny,
+                super::prediction::wrap(pose.theta + std_theta.abs() * nt),
+            );
+            *lw = w;
+        }
+        self.last_neff = P as f32;
+        Ok(())
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &FilterConfig {
+        &self.config
+    }
+
+    /// Particle poses.
+    pub fn poses(&self) -> &[Pose2<f32>; P] {
+        &self.poses
+    }
+
+    /// Normalised log-weights (`log Σ exp = 0` after every update).
+    pub fn log_weights(&self) -> &[f32; P] {
+        &self.log_weights
+    }
+
+    /// Index of the heaviest particle (the first of equals).
+    pub fn best_index(&self) -> usize {
+        let mut best = 0;
+        for (i, w) in self.log_weights.iter().enumerate() {
+            if *w
+                > self
+                    .log_weights
+                    .get(best)
+                    .copied()
+                    .unwrap_or(f32::NEG_INFINITY)
+            {
+                best = i;
+            }
+        }
+        best
+    }
+
+    /// Pose of the heaviest particle: the estimate (seed).
+    pub fn best_pose(&self) -> Pose2<f32> {
+        self.poses
+            .get(self.best_index())
+            .copied()
+            .unwrap_or_default()
+    }
+
+    /// Effective number of particles after the last update.
+    pub fn n_eff(&self) -> f32 {
+        self.last_neff
+    }
+
+    /// How often the particles were resampled.
+    pub fn resample_count(&self) -> u32 {
+        self.resamples
+    }
+
+    /// How many updates were applied.
+    pub fn update_count(&self) -> u32 {
+        self.updates
+    }
+
+    /// Moves every particle along the arc `(distance, heading_change)` with its own noisy
+    /// copy of the input ([`super::MotionNoise`]). A non-finite input is refused and
+    /// nothing moves.
+    pub fn predict(&mut self, distance: f32, heading_change: f32) -> Result<(), PfError> {
+        if !(distance.is_finite() && heading_change.is_finite()) {
+            return Err(PfError::NonFiniteInput);
+        }
+        let (sd, st, ss) = self.config.motion_noise.std_devs(distance, heading_change);
+        for p in self.poses.iter_mut() {
+            let n1: f32 = StandardNormal.sample(&mut self.rng);
+            let n2: f32 = StandardNormal.sample(&mut self.rng);
+            let n3: f32 = StandardNormal.sample(&mut self.rng);
+            let moved = drive_arc(p, distance + sd * n1, heading_change + st * n2, ss * n3);
+            if moved.is_finite() {
+                *p = moved;
+            }
+        }
+        Ok(())
+    }
+
+    /// Velocity form: `(v, ω)` held for `dt` seconds (`dt ≥ 0`).
+    pub fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError> {
+        if !(v.is_finite() && omega.is_finite() && dt.is_finite()) {
+            return Err(PfError::NonFiniteInput);
+        }
+        if dt < 0.0 {
+            return Err(PfError::NegativeTimeStep);
+        }
+        self.predict(v * dt, omega * dt)
+    }
+
+    /// Weights the particles by the correlation of `points` with `map`: each particle is
+    /// scored over the shift window, moved to its best shift, and its log-weight grows by
+    /// `log_likelihood_per_unit · corr`. Then resamples when `N_eff ≤ fraction · P`.
+    ///
+    /// With no points the filter is unchanged and [`PfError::EmptyScan`] is returned.
+    pub fn update(
+        &mut self,
+        map: &GridView<'_>,
+        points: &[ScanPoint],
+    ) -> Result<UpdateReport, PfError> {
+        if points.is_empty() {
+            return Err(PfError::EmptyScan);
+        }
+        let res = map.geometry().resolution;
+        let scale = self.config.log_likelihood_per_unit / WEIGHT_ONE as f32;
+        let k = self.config.shift_window_cells;
+        let mut shifts = [ShiftScore {
+            dx: 0,
+            dy: 0,
+            score: 0,
+        }; P];
+        let scored = score_particles(map, &self.poses, points, k, &mut shifts);
+        for (p, s) in self.poses.iter_mut().zip(shifts.iter()) {
+            p.x += s.dx as f32 * res;
+            p.y += s.dy as f32 * res;
+        }
+        for (lw, s) in self.log_weights.iter_mut().zip(shifts.iter()) {
+            *lw += scale * s.score as f32;
+        }
+        self.normalise();
+        self.updates = self.updates.wrapping_add(1);
+        let best = self.best_index();
+        let report = UpdateReport {
+            best,
+            best_pose: self.poses.get(best).copied().unwrap_or_default(),
+            best_shift: shifts.get(best).copied().unwrap_or(ShiftScore {
+                dx: 0,
+                dy: 0,
+                score: 0,
+            }),
+            n_eff: self.last_neff,
+            resampled: self.last_neff <= self.config.resample_neff_fraction * P as f32,
+            scored,
+        };
+        if report.resampled {
+            self.resample();
+        }
+        Ok(report)
+    }
+
+    /// Subtracts the log of the total weight and computes `N_eff`.
+    fn normalise(&mut self) {
+        let max = self
+            .log_weights
+            .iter()
+            .copied()
+            .fold(f32::NEG_INFINITY, f32::max);
+        if !max.is_finite() {
+            let w = -libm::logf(P as f32);
+            self.log_weights.fill(w);
+            self.last_neff = P as f32;
+            return;
+        }
+        let mut sum = 0.0f32;
+        for lw in self.log_weights.iter_mut() {
+            *lw = (*lw - max).max(-1.0e4);
+            sum += libm::expf(*lw);
+        }
+        let log_sum = libm::logf(sum);
+        let mut sum_sq = 0.0f32;
+        for lw in self.log_weights.iter_mut() {
+            *lw -= log_sum;
+            let w = libm::expf(*lw);
+            sum_sq += w * w;
+        }
+        self.last_neff = if sum_sq > 0.0 { 1.0 / sum_sq } else { P as f32 };
+    }
+
+    /// Draws `P` particles by the configured scheme; weights become equal.
+    pub fn resample(&mut self) {
+        let mut weights = [0.0f32; P];
+        for (w, lw) in weights.iter_mut().zip(self.log_weights.iter()) {
+            *w = libm::expf(*lw);
+        }
+        let poses = &self.poses;
+        let scratch = &mut self.scratch;
+        resample(&weights, self.config.resampling, &mut self.rng, |k, j| {
+            if let (Some(dst), Some(src)) = (scratch.get_mut(k), poses.get(j)) {
+                *dst = *src;
+            }
+        });
+        self.poses.copy_from_slice(&self.scratch);
+        self.log_weights.fill(-libm::logf(P as f32));
+        self.resamples = self.resamples.wrapping_add(1);
+    }
+}
+
+/// Best shift of every particle; a particle equal to its predecessor (copies after
+/// resampling that did not move) reuses its result. Returns how many were scored.
+#[cfg(not(feature = "parallel"))]
+fn score_particles<const P: usize>(
+    map: &GridView<'_>,
+    poses: &[Pose2<f32>; P],
+    points: &[ScanPoint],
+    half_width: u8,
+    shifts: &mut [ShiftScore; P],
+) -> usize {
+    let mut scores = [0u32; MAX_SHIFTS];
+    let mut scored = 0;
+    let mut previous: Option<(&Pose2<f32>, ShiftScore)> = None;
+    for (p, shift) in poses.iter().zip(shifts.iter_mut()) {
+        *shift = match previous {
+            Some((q, s)) if q == p => s,
+            _ => {
+                scored += 1;
+                search_window(map, p, points, half_width, &mut scores)
+            }
+        };
+        previous = Some((p, *shift));
+    }
+    scored
+}
+
+/// [`score_particles`] on all cores (feature `parallel`): every particle is scored
+/// independently, so the result is the same as on one core.
+#[cfg(feature = "parallel")]
+fn score_particles<const P: usize>(
+    map: &GridView<'_>,
+    poses: &[Pose2<f32>; P],
+    points: &[ScanPoint],
+    half_width: u8,
+    shifts: &mut [ShiftScore; P],
+) -> usize {
+    use rayon::prelude::*;
+    let repeats = |i: usize| i > 0 && poses.get(i) == poses.get(i - 1);
+    shifts
+        .par_iter_mut()
+        .enumerate()
+        .with_min_len(8)
+        .for_each(|(i, shift)| {
+            if !repeats(i) {
+                let mut scores = [0u32; MAX_SHIFTS];
+                if let Some(p) = poses.get(i) {
+                    *shift = search_window(map, p, points, half_width, &mut scores);
+                }
+            }
+        });
+    let mut scored = 0;
+    for i in 0..P {
+        if repeats(i) {
+            if let Some(prev) = shifts.get(i - 1).copied()
+                && let Some(s) = shifts.get_mut(i)
+            {
+                *s = prev;
+            }
+        } else {
+            scored += 1;
+        }
+    }
+    scored
+}

@@ -1,0 +1,112 @@
+//! Localization against a fixed map: the grid filter without map writes.
+
+use super::correlation::ScanPoints;
+use super::prediction::arc_between;
+use super::{GridPfConfig, ParticleFilter, PfError, StepReport};
+use crate::geometry::Pose2;
+use crate::grid::{GridView, ScanIntegration};
+use crate::sensors::lidar::LidarScan;
+
+/// Localizer with `P` particles and at most `B` beams per scan on a borrowed map (owned
+/// grid's [`crate::grid::OccupancyGrid::view`] or a `&'static` map in flash).
+///
+/// RAM: `28·P + 16·B` bytes plus ~100; the map is not copied.
+pub struct GridLocalizer<'m, const P: usize, const B: usize> {
+    map: GridView<'m>,
+    filter: ParticleFilter<P>,
+    points: ScanPoints<B>,
+    config: GridPfConfig,
+    pose: Pose2<f32>,
+}
+
+impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
+    /// A localizer on `map` with all particles at `start` (see
+    /// [`GridLocalizer::reset_around`] for an uncertain start).
+    pub fn new(
+        map: GridView<'m>,
+        config: GridPfConfig,
+        start: Pose2<f32>,
+    ) -> Result<Self, PfError> {
+        if !config.is_valid() {
+            return Err(PfError::InvalidConfig);
+        }
+        Ok(Self {
+            map,
+            filter: ParticleFilter::new(config.filter, start)?,
+            points: ScanPoints::new(),
+            config,
+            pose: start,
+        })
+    }
+
+    /// Spreads the particles around `pose` (Gaussian, `std_xy` m, `std_theta` rad).
+    pub fn reset_around(
+        &mut self,
+        pose: Pose2<f32>,
+        std_xy: f32,
+        std_theta: f32,
+    ) -> Result<(), PfError> {
+        self.filter.reset_around(pose, std_xy, std_theta)?;
+        self.pose = pose;
+        Ok(())
+    }
+
+    /// The estimate (heaviest particle after the last scan).
+    pub fn pose(&self) -> Pose2<f32> {
+        self.pose
+    }
+
+    /// The particles.
+    pub fn filter(&self) -> &ParticleFilter<P> {
+        &self.filter
+    }
+
+    /// The map.
+    pub fn map(&self) -> &GridView<'m> {
+        &self.map
+    }
+
+    /// Prediction with the arc `(distance, heading_change)`.
+    pub fn predict(&mut self, distance: f32, heading_change: f32) -> Result<(), PfError> {
+        self.filter.predict(distance, heading_change)
+    }
+
+    /// Prediction with `(v, ω)` held for `dt` seconds.
+    pub fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError> {
+        self.filter.predict_velocity(v, omega, dt)
+    }
+
+    /// Prediction with odometry poses before and after the step.
+    pub fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError> {
+        if !(from.is_finite() && to.is_finite()) {
+            return Err(PfError::NonFiniteInput);
+        }
+        let (d, t) = arc_between(from, to);
+        self.filter.predict(d, t)
+    }
+
+    /// Scores the scan against the map, shifts, reweights and resamples.
+    pub fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
+        if !scan.geometry.is_valid() {
+            return Err(PfError::InvalidScan);
+        }
+        let beams = self.points.load(
+            scan,
+            self.config.beam_decimation,
+            self.config.range_weight_exponent,
+        );
+        if beams == 0 {
+            return Err(PfError::EmptyScan);
+        }
+        let u = self.filter.update(&self.map, self.points.as_slice())?;
+        self.pose = u.best_pose;
+        Ok(StepReport {
+            pose: u.best_pose,
+            n_eff: u.n_eff,
+            resampled: u.resampled,
+            beams,
+            score: u.best_shift.score,
+            map: ScanIntegration::default(),
+        })
+    }
+}

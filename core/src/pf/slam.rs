@@ -1,0 +1,171 @@
+//! The seed's grid SLAM: one shared occupancy grid, written by the best particle.
+
+use super::correlation::ScanPoints;
+use super::prediction::arc_between;
+use super::{GridPfConfig, ParticleFilter, PfError};
+use crate::geometry::Pose2;
+use crate::grid::{OccupancyGrid, ScanIntegration};
+use crate::sensors::lidar::LidarScan;
+
+/// Grid SLAM with `P` particles, at most `B` beams per scan, on a borrowed `W × H` grid.
+///
+/// The grid is borrowed so that it can live in a `static` (built in place with
+/// [`OccupancyGrid::new`]); the filter itself is small: `28·P + 16·B` bytes plus ~100
+/// (P = 32, B = 90: ~2.5 KB).
+///
+/// The first scan builds the map at the start pose; every later scan is scored by all
+/// particles (each moved to its best shift) and then written into the grid at the pose of
+/// the heaviest particle, which is the estimate.
+pub struct GridSlam<'g, const W: usize, const H: usize, const P: usize, const B: usize> {
+    map: &'g mut OccupancyGrid<W, H>,
+    filter: ParticleFilter<P>,
+    points: ScanPoints<B>,
+    config: GridPfConfig,
+    scans: u32,
+    pose: Pose2<f32>,
+}
+
+/// What one scan did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StepReport {
+    /// The estimate after the scan (heaviest particle).
+    pub pose: Pose2<f32>,
+    /// Effective number of particles before resampling (P for the first scan).
+    pub n_eff: f32,
+    /// `true` when the particles were resampled.
+    pub resampled: bool,
+    /// Beams used for scoring and mapping.
+    pub beams: usize,
+    /// Correlation of the best particle at its best shift (fixed point).
+    pub score: u32,
+    /// Map writing (SLAM only; zero for the localizer).
+    pub map: ScanIntegration,
+}
+
+impl<'g, const W: usize, const H: usize, const P: usize, const B: usize> GridSlam<'g, W, H, P, B> {
+    /// SLAM on `map` (cleared here) starting at `start`. The map's resolution must be
+    /// the configured one.
+    pub fn new(
+        map: &'g mut OccupancyGrid<W, H>,
+        config: GridPfConfig,
+        start: Pose2<f32>,
+    ) -> Result<Self, PfError> {
+        if !config.is_valid() {
+            return Err(PfError::InvalidConfig);
+        }
+        if map.geometry().resolution != config.resolution {
+            return Err(PfError::MapMismatch);
+        }
+        let filter = ParticleFilter::new(config.filter, start)?;
+        map.reset();
+        Ok(Self {
+            map,
+            filter,
+            points: ScanPoints::new(),
+            config,
+            scans: 0,
+            pose: start,
+        })
+    }
+
+    /// The estimate: the heaviest particle's pose after the last scan (or the prediction
+    /// of the last estimate's particle set before any scan).
+    pub fn pose(&self) -> Pose2<f32> {
+        self.pose
+    }
+
+    /// The map.
+    pub fn map(&self) -> &OccupancyGrid<W, H> {
+        self.map
+    }
+
+    /// The particles.
+    pub fn filter(&self) -> &ParticleFilter<P> {
+        &self.filter
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &GridPfConfig {
+        &self.config
+    }
+
+    /// Scans processed.
+    pub fn scans(&self) -> u32 {
+        self.scans
+    }
+
+    /// Prediction with the arc `(distance, heading_change)` driven since the last step.
+    pub fn predict(&mut self, distance: f32, heading_change: f32) -> Result<(), PfError> {
+        self.filter.predict(distance, heading_change)
+    }
+
+    /// Prediction with `(v, ω)` held for `dt` seconds.
+    pub fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError> {
+        self.filter.predict_velocity(v, omega, dt)
+    }
+
+    /// Prediction with the odometry poses before and after the step (only their
+    /// difference is used, so the odometry frame does not matter).
+    pub fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError> {
+        if !(from.is_finite() && to.is_finite()) {
+            return Err(PfError::NonFiniteInput);
+        }
+        let (d, t) = arc_between(from, to);
+        self.filter.predict(d, t)
+    }
+
+    /// Processes one scan: scores all particles (except for the first scan), moves them
+    /// to their best shifts, resamples if needed, and writes the scan into the map at the
+    /// estimate.
+    pub fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
+        if !scan.geometry.is_valid() {
+            return Err(PfError::InvalidScan);
+        }
+        let beams = self.points.load(
+            scan,
+            self.config.beam_decimation,
+            self.config.range_weight_exponent,
+        );
+        if beams == 0 {
+            return Err(PfError::EmptyScan);
+        }
+        let mut report = StepReport {
+            pose: self.pose,
+            n_eff: P as f32,
+            resampled: false,
+            beams,
+            score: 0,
+            map: ScanIntegration::default(),
+        };
+        if self.scans == 0 {
+            report.pose = self.filter.best_pose();
+        } else {
+            let u = self
+                .filter
+                .update(&self.map.view(), self.points.as_slice())?;
+            report.pose = u.best_pose;
+            report.n_eff = u.n_eff;
+            report.resampled = u.resampled;
+            report.score = u.best_shift.score;
+        }
+        report.map = self
+            .map
+            .integrate_scan(&report.pose, scan, self.points_decimation(scan))
+            .map_err(|_| PfError::NonFiniteInput)?;
+        self.pose = report.pose;
+        self.scans = self.scans.saturating_add(1);
+        Ok(report)
+    }
+
+    /// The decimation [`ScanPoints::load`] used (raised when the scan has more than `B`
+    /// beams), so the map gets the same beams that were scored.
+    fn points_decimation(&self, scan: &LidarScan<'_>) -> usize {
+        let dec = self.config.beam_decimation.max(1);
+        if B > 0 && scan.ranges.len().div_ceil(dec) > B {
+            scan.ranges.len().div_ceil(B)
+        } else {
+            dec
+        }
+    }
+}

@@ -1,0 +1,116 @@
+//! The grid particle filter on real lidar logs: the Intel Research Lab CARMEN log against
+//! the benchmark relations, the localizer on the map SLAM built, and THOR's Hokuyo scan
+//! geometry. Bounds are what was measured, plus a small margin.
+
+use host_sim::datasets::dataset_path;
+use host_sim::grid_replay::{self, GridRunOptions};
+use host_sim::metrics::relations;
+use microslam::geometry::Pose2;
+use microslam::grid::GridView;
+use microslam::pf::GridPfConfig;
+use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+
+fn intel() -> (
+    host_sim::readers::carmen::CarmenLog,
+    Vec<relations::Relation>,
+) {
+    let log = grid_replay::read_log(&dataset_path("intel/intel-raw-part.clf").expect("Intel log"))
+        .expect("read");
+    let rels =
+        relations::read(&dataset_path("intel/intel.relations").expect("relations")).expect("read");
+    (log, rels)
+}
+
+#[test]
+fn intel_log_is_read_in_file_order() {
+    let (log, rels) = intel();
+    let scans: Vec<_> = log.lasers().collect();
+    assert_eq!(scans.len(), 5505);
+    assert!(scans.iter().all(|s| s.ranges.len() == 180 && !s.rear));
+    // Real data: the stamps go backwards 265 times in file order (see the datasets README).
+    let backwards = scans.windows(2).filter(|w| w[1].stamp < w[0].stamp).count();
+    assert_eq!(backwards, 265);
+    assert_eq!(rels.len(), 2984);
+}
+
+#[test]
+fn intel_grid_slam_relation_error() {
+    let (log, rels) = intel();
+    let options = GridRunOptions {
+        particles: 200,
+        config: GridPfConfig::DEFAULT,
+        lidar: grid_replay::carmen_lidar(180),
+    };
+    let run = grid_replay::run_slam(&log, &options, &|_| {}).expect("run");
+    let e = grid_replay::relation_error(&run, &rels);
+    println!("P=200, 180 beams: {e:?}");
+    assert_eq!(e.used, 1030);
+    // Measured: 0.0243 ± 0.0280 m, 0.290 ± 0.272° (seeds 1–3: 0.0265–0.0282 m).
+    assert!(e.trans_mean_m < 0.03, "{e:?}");
+    assert!(e.rot_mean_deg < 0.35, "{e:?}");
+
+    // Localization on the map SLAM built, from the first scan's pose.
+    let view = GridView::new(
+        &run.cells,
+        run.geometry,
+        options.config.log_odds.occupied_above,
+    )
+    .expect("map");
+    let loc = grid_replay::run_localizer(&log, &view, Pose2::IDENTITY, &options, &|_| {})
+        .expect("localize");
+    let el = grid_replay::relation_error(&loc, &rels);
+    println!("localizer on that map: {el:?}");
+    // Measured: 0.0326 ± 0.0455 m, 0.310 ± 0.324°.
+    assert!(el.trans_mean_m < 0.04, "{el:?}");
+}
+
+#[test]
+fn intel_grid_slam_microcontroller_settings() {
+    // P = 32 particles, 90 of the 180 beams: the firmware's settings.
+    let (log, rels) = intel();
+    let mut config = GridPfConfig::MICROCONTROLLER;
+    config.beam_decimation = 2;
+    let options = GridRunOptions {
+        particles: 32,
+        config,
+        lidar: grid_replay::carmen_lidar(180),
+    };
+    let run = grid_replay::run_slam(&log, &options, &|_| {}).expect("run");
+    let e = grid_replay::relation_error(&run, &rels);
+    println!("P=32, 90 beams: {e:?}");
+    assert!(e.trans_mean_m < 0.06, "{e:?}"); // measured 0.0495 (seeds 1–3: 0.036–0.046 m)
+}
+
+#[test]
+fn thor_hokuyo_scan_geometry() {
+    let path = dataset_path("thor/test_ranges.npy").expect("THOR scan");
+    let bytes = std::fs::read(&path).expect("read");
+    let npy = npyz::NpyFile::new(&bytes[..]).expect("npy");
+    let ranges: Vec<f32> = match npy.dtype() {
+        npyz::DType::Plain(t) if t.size_field() == 8 => npy
+            .into_vec::<f64>()
+            .expect("f64")
+            .into_iter()
+            .map(|v| v as f32)
+            .collect(),
+        _ => npy.into_vec::<f32>().expect("f32"),
+    };
+    // 1081 beams from −135° to +135° in 0.25° steps: the last beam looks at +135°.
+    assert_eq!(ranges.len(), 1081);
+    let g = LidarGeometry::THOR_HOKUYO;
+    assert!((g.beam_angle(1080).to_degrees() - 135.0).abs() < 1e-3);
+    assert!((g.beam_angle(540)).abs() < 1e-6);
+    let scan = LidarScan::new(&ranges, g);
+    let (valid, not_finite, no_return, out_of_range) = scan.census();
+    println!(
+        "THOR scan: {valid} valid, {not_finite} not finite, {no_return} no return, {out_of_range} out of range"
+    );
+    assert_eq!(valid + not_finite + no_return + out_of_range, 1081);
+    assert!(valid > 900, "{valid}");
+    // Every end point lies within 30 m of the sensor, which sits 0.298 m ahead of the axle.
+    for b in scan.beams(1) {
+        let (dx, dy) = (b.robot_point.0 - 0.29833, b.robot_point.1);
+        assert!(((dx * dx + dy * dy).sqrt() - b.range).abs() < 1e-3);
+        assert!(b.range < 30.0);
+    }
+}
