@@ -17,6 +17,19 @@
 //! prediction with a polar measurement), and all noise is configuration (eq. 9's constant
 //! `Q` is gone).
 //!
+//! # Numerical safeguards
+//!
+//! Written down as PX4's EKF2 does, and exercised by the fuzz targets in `fuzz/`:
+//! - every step checks its inputs and the finiteness of what it would write *before*
+//!   writing; an update that would leave a negative variance is refused
+//!   ([`EkfError::NumericalFailure`]) — the state is then exactly what it was;
+//! - the covariance is kept exactly symmetric (only the upper triangle is computed);
+//! - as a last resort, a prediction caps the robot's variances at
+//!   [`MAX_POSITION_VARIANCE`] and [`MAX_HEADING_VARIANCE`], and a new landmark's at
+//!   [`MAX_POSITION_VARIANCE`], by scaling their rows and columns (a congruence, which
+//!   keeps `P` positive semi-definite). A robot or landmark that uncertain is lost;
+//!   without the cap, `f32` cancellation in the next update would break the covariance.
+//!
 //! # Memory
 //!
 //! `size_of::<EkfSlam<T, N>>() = (N² + N) · size_of::<T>() + EKF_OVERHEAD_BYTES(T)`; for
@@ -62,6 +75,13 @@ use nalgebra::{ArrayStorage, Matrix2, Matrix2x3, Matrix3, SMatrix, SVector, Vect
 pub const fn state_dim(max_landmarks: usize) -> usize {
     3 + 2 * max_landmarks
 }
+
+/// Cap on the robot's heading variance, rad² (π²: beyond it the heading is unknown and
+/// the linearisation meaningless).
+pub const MAX_HEADING_VARIANCE: f64 = core::f64::consts::PI * core::f64::consts::PI;
+
+/// Cap on the robot's x and y variances, m² (a standard deviation of 1 km).
+pub const MAX_POSITION_VARIANCE: f64 = 1.0e6;
 
 /// Bytes an `f32` filter uses beyond its mean and covariance (configuration, counters).
 pub const EKF_OVERHEAD_BYTES_F32: usize = 88;
@@ -403,6 +423,11 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         &self.covariance
     }
 
+    /// The largest variance of the active block: bounds every covariance entry (P is PSD).
+    fn max_variance(&self) -> T {
+        max_abs((0..self.active_dim()).map(|i| self.covariance[(i, i)]))
+    }
+
     fn reject<R>(&mut self, e: EkfError) -> Result<R, EkfError> {
         crate::log::debug!("ekf: step refused: {}", e);
         self.counters.rejected = self.counters.rejected.saturating_add(1);
@@ -453,11 +478,29 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
     ) -> Result<(), EkfError> {
         let a = &step.wrt_pose;
         let p_rr = self.covariance.fixed_view::<3, 3>(0, 0).into_owned();
-        let mut new_rr = a * p_rr * a.transpose() + q;
-        if !step.pose.is_finite() || !new_rr.iter().all(|v| v.finite()) {
+        let new_rr = a * p_rr * a.transpose() + q;
+        // |P_RM| ≤ max variance (P is PSD), so A P_RM is bounded by 3 · max|A| · max variance.
+        let cross_bound = T::lit(3.0) * max_abs(a.iter().copied()) * self.max_variance();
+        if !step.pose.is_finite() || !new_rr.iter().all(|v| v.finite()) || !cross_bound.finite() {
             return self.reject(EkfError::NumericalFailure);
         }
+        // Last-resort variance caps (see the module docs): scale the robot's rows and
+        // columns by D = diag(s) — a congruence, so P stays positive semi-definite.
+        let caps = [
+            T::lit(MAX_POSITION_VARIANCE),
+            T::lit(MAX_POSITION_VARIANCE),
+            T::lit(MAX_HEADING_VARIANCE),
+        ];
+        let mut scale = [T::ONE; 3];
+        for (i, (s, cap)) in scale.iter_mut().zip(caps).enumerate() {
+            if new_rr[(i, i)] > cap {
+                *s = (cap / new_rr[(i, i)]).sqrt();
+            }
+        }
+        let d = Matrix3::from_diagonal(&nalgebra::Vector3::new(scale[0], scale[1], scale[2]));
+        let mut new_rr = d * new_rr * d;
         symmetrise3(&mut new_rr);
+        let a = d * a;
         self.covariance
             .fixed_view_mut::<3, 3>(0, 0)
             .copy_from(&new_rr);
@@ -559,7 +602,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         if !(z.range.finite() && z.bearing.finite()) {
             return Err(EkfError::NonFiniteInput);
         }
-        if !is_positive(z.range) {
+        if !z.is_valid() {
             return Err(EkfError::InvalidRange);
         }
         let r = r
@@ -637,38 +680,60 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             gain[(i, 0)] = row[0];
             gain[(i, 1)] = row[1];
         }
-        // The mean correction is checked before anything is written.
-        let mut correction_ok = true;
-        for i in 0..k {
-            let dx = gain[(i, 0)] * inn.nu[0] + gain[(i, 1)] * inn.nu[1];
-            correction_ok &= (self.mean[i] + dx).finite();
-        }
-        if !correction_ok {
+        // Nothing is written before the step is known to stay finite: with `D = K R − A Hᵀ`
+        // bounded by `2|K|(|R| + |S|) + |M|`, every new covariance entry is bounded by
+        // `max var + 2|K|·(|M| + |K|(|R| + |S|))` (entrywise maxima).
+        let (g0, g1) = split_columns(&gain, k);
+        let (m0, m1) = split_columns(&m, k);
+        let gmax = max_abs(g0.iter().chain(g1).copied());
+        let mmax = max_abs(m0.iter().chain(m1).copied());
+        let sr = max_abs(inn.s.iter().chain(r.iter()).copied());
+        let bound = self.max_variance() + T::lit(16.0) * gmax * (mmax + gmax * sr);
+        if !bound.finite() {
             return self.reject(EkfError::NumericalFailure);
+        }
+        let li = 3 + 2 * index;
+        let form = self.config.covariance_update;
+        let aux = match form {
+            CovarianceUpdate::Joseph => self.joseph_terms(k, li, &inn, &gain, &m, &r),
+            CovarianceUpdate::Symmetric => symmetric_terms(k, &gain, &inn.s),
+        };
+        // Every new variance is computed here exactly as the pass below will, so that an
+        // update that would leave a negative variance (f32 cancellation after absurd
+        // inputs) is refused before anything is written.
+        let (a0, a1) = split_columns(&aux, k);
+        for i in 0..k {
+            let (ki0, ki1) = (g0[i], g1[i]);
+            let new = match form {
+                CovarianceUpdate::Joseph => {
+                    self.covariance[(i, i)]
+                        + ((a0[i] * ki0 + a1[i] * ki1) - (ki0 * m0[i] + ki1 * m1[i]))
+                }
+                CovarianceUpdate::Symmetric => {
+                    self.covariance[(i, i)] - (a0[i] * ki0 + a1[i] * ki1)
+                }
+            };
+            let dx = ki0 * inn.nu[0] + ki1 * inn.nu[1];
+            if !(new >= T::ZERO && new.finite() && (self.mean[i] + dx).finite()) {
+                return self.reject(EkfError::NumericalFailure);
+            }
         }
         for i in 0..k {
             self.mean[i] += gain[(i, 0)] * inn.nu[0] + gain[(i, 1)] * inn.nu[1];
         }
         self.mean[2] = wrap_angle(self.mean[2]);
-        let li = 3 + 2 * index;
-        match self.config.covariance_update {
-            CovarianceUpdate::Joseph => self.joseph_update(k, li, &inn, &gain, &m, &r),
-            CovarianceUpdate::Symmetric => self.symmetric_update(k, &gain, &inn.s),
+        match form {
+            CovarianceUpdate::Joseph => self.joseph_update(k, &gain, &m, &aux),
+            CovarianceUpdate::Symmetric => self.symmetric_update(k, &gain, &aux),
         }
         self.counters.updates = self.counters.updates.saturating_add(1);
         Ok(UpdateOutcome::Accepted { nis })
     }
 
-    /// `P ← P − K S Kᵀ` on the upper triangle, mirrored.
-    fn symmetric_update(&mut self, k: usize, gain: &SMatrix<T, N, 2>, s: &Matrix2<T>) {
+    /// `P ← P − K S Kᵀ` on the upper triangle, mirrored; `ks = K S` from [`symmetric_terms`].
+    fn symmetric_update(&mut self, k: usize, gain: &SMatrix<T, N, 2>, ks: &SMatrix<T, N, 2>) {
         let (g0, g1) = split_columns(gain, k);
-        // KS = K S; P_ij −= (KS)_i · K_j.
-        let mut ks = SMatrix::<T, N, 2>::zeros();
-        for i in 0..k {
-            ks[(i, 0)] = g0[i] * s[(0, 0)] + g1[i] * s[(1, 0)];
-            ks[(i, 1)] = g0[i] * s[(0, 1)] + g1[i] * s[(1, 1)];
-        }
-        let (ks0, ks1) = split_columns(&ks, k);
+        let (ks0, ks1) = split_columns(ks, k);
         let data = self.covariance.as_mut_slice();
         for (j, (&gj0, &gj1)) in g0.iter().zip(g1).enumerate() {
             let Some((upper, diagonal, mirror)) = column_and_mirror(data, N, j) else {
@@ -686,20 +751,20 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         }
     }
 
-    /// Joseph form `(I − KH) P (I − KH)ᵀ + K R Kᵀ` in one pass over the upper triangle.
+    /// `D = K R − A Hᵀ` of the Joseph form (see [`EkfSlam::joseph_update`]).
     ///
-    /// With `M = P Hᵀ` and `A = P − K Mᵀ` (= (I − KH) P), the result is
-    /// `A − (A Hᵀ) Kᵀ + K R Kᵀ = P − K Mᵀ + D Kᵀ` with `D = K R − A Hᵀ`. `A Hᵀ` needs only
-    /// the five columns of `A` where `H` is nonzero, so `A` is never stored.
-    fn joseph_update(
-        &mut self,
+    /// With `M = P Hᵀ` and `A = P − K Mᵀ` (= (I − KH) P), the Joseph result is
+    /// `A − (A Hᵀ) Kᵀ + K R Kᵀ = P − K Mᵀ + D Kᵀ`. `A Hᵀ` needs only the five columns of
+    /// `A` where `H` is nonzero, so `A` is never stored.
+    fn joseph_terms(
+        &self,
         k: usize,
         li: usize,
         inn: &Innovation<T>,
         gain: &SMatrix<T, N, 2>,
         m: &SMatrix<T, N, 2>,
         r: &Matrix2<T>,
-    ) {
+    ) -> SMatrix<T, N, 2> {
         let (g0, g1) = split_columns(gain, k);
         let (m0, m1) = split_columns(m, k);
         let (hr, hl) = (&inn.jacobian_robot, &inn.jacobian_landmark);
@@ -720,7 +785,21 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             d[(i, 0)] = ki0 * r[(0, 0)] + ki1 * r[(1, 0)] - b0;
             d[(i, 1)] = ki0 * r[(0, 1)] + ki1 * r[(1, 1)] - b1;
         }
-        let (d0, d1) = split_columns(&d, k);
+        d
+    }
+
+    /// Joseph form `(I − KH) P (I − KH)ᵀ + K R Kᵀ = P − K Mᵀ + D Kᵀ` in one pass over the
+    /// upper triangle, mirrored; `d` from [`EkfSlam::joseph_terms`].
+    fn joseph_update(
+        &mut self,
+        k: usize,
+        gain: &SMatrix<T, N, 2>,
+        m: &SMatrix<T, N, 2>,
+        d: &SMatrix<T, N, 2>,
+    ) {
+        let (g0, g1) = split_columns(gain, k);
+        let (m0, m1) = split_columns(m, k);
+        let (d0, d1) = split_columns(d, k);
         let data = self.covariance.as_mut_slice();
         for j in 0..k {
             let (kj0, kj1, mj0, mj1) = (g0[j], g1[j], m0[j], m1[j]);
@@ -773,18 +852,36 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let g = self.config.sensor.landmark_from(&self.pose(), z);
         let k = self.active_dim();
         let p_rr = self.covariance.fixed_view::<3, 3>(0, 0).into_owned();
-        let mut p_pp = g.wrt_robot * p_rr * g.wrt_robot.transpose()
+        let p_pp = g.wrt_robot * p_rr * g.wrt_robot.transpose()
             + g.wrt_measurement * r * g.wrt_measurement.transpose();
+        // Last-resort cap, as for the robot: scale the new rows and columns (a congruence).
+        let cap = T::lit(MAX_POSITION_VARIANCE);
+        let scale = Vector2::new(
+            if p_pp[(0, 0)] > cap {
+                (cap / p_pp[(0, 0)]).sqrt()
+            } else {
+                T::ONE
+            },
+            if p_pp[(1, 1)] > cap {
+                (cap / p_pp[(1, 1)]).sqrt()
+            } else {
+                T::ONE
+            },
+        );
+        let d = Matrix2::from_diagonal(&scale);
+        let mut p_pp = d * p_pp * d;
         let off = (p_pp[(0, 1)] + p_pp[(1, 0)]) * T::lit(0.5);
         p_pp[(0, 1)] = off;
         p_pp[(1, 0)] = off;
-        if !g.landmark.iter().chain(p_pp.iter()).all(|v| v.finite()) {
+        let g_robot = d * g.wrt_robot;
+        let cross_bound = T::lit(3.0) * max_abs(g_robot.iter().copied()) * self.max_variance();
+        if !g.landmark.iter().chain(p_pp.iter()).all(|v| v.finite()) || !cross_bound.finite() {
             return self.reject(EkfError::NumericalFailure);
         }
         // P_pX = G_R P[0..3, 0..k], one column at a time.
         for j in 0..k {
             let col = self.covariance.fixed_view::<3, 1>(0, j).into_owned();
-            let v = g.wrt_robot * col;
+            let v = g_robot * col;
             self.covariance.fixed_view_mut::<2, 1>(k, j).copy_from(&v);
             self.covariance
                 .fixed_view_mut::<1, 2>(j, k)
@@ -798,6 +895,21 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         self.landmarks += 1;
         Ok(index)
     }
+}
+
+/// `K S` of the optimal-gain form `P − K S Kᵀ`.
+fn symmetric_terms<T: Real, const N: usize>(
+    k: usize,
+    gain: &SMatrix<T, N, 2>,
+    s: &Matrix2<T>,
+) -> SMatrix<T, N, 2> {
+    let (g0, g1) = split_columns(gain, k);
+    let mut ks = SMatrix::<T, N, 2>::zeros();
+    for (i, (&a, &b)) in g0.iter().zip(g1).enumerate() {
+        ks[(i, 0)] = a * s[(0, 0)] + b * s[(1, 0)];
+        ks[(i, 1)] = a * s[(0, 1)] + b * s[(1, 1)];
+    }
+    ks
 }
 
 /// The first `k` entries of the two columns of an `N × 2` matrix.
@@ -823,6 +935,14 @@ fn column_and_mirror<T>(
     // Each chunk is one column of length n > j, so `get_mut(j)` never fails.
     let mirror = left.chunks_exact_mut(n).filter_map(move |c| c.get_mut(j));
     Some((upper, diagonal, mirror))
+}
+
+/// The largest absolute value (NaN propagates as NaN, an empty sequence gives 0).
+fn max_abs<T: Real>(values: impl Iterator<Item = T>) -> T {
+    values.fold(T::ZERO, |acc, v| {
+        let a = v.abs();
+        if a > acc || !a.finite() { a } else { acc }
+    })
 }
 
 /// `x > 0`, false for NaN.

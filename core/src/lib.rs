@@ -6,8 +6,9 @@
 //! - [`sensors::camera`]: pinhole / RGB-D camera geometry: a detection's pixel and depth
 //!   to a range-bearing sighting with its covariance, pixels back to the robot and world.
 //! - [`ekf::EkfSlam`]: landmark EKF-SLAM with range-bearing sightings of signs or markers
-//!   and a compile-time maximum number of landmarks; known-id association in
-//!   [`association`].
+//!   and a compile-time maximum number of landmarks; data association in
+//!   [`association`]: known ids, ICNN and JCBB (joint compatibility over a batch of
+//!   sightings), all with fixed capacity.
 //! - [`pf::GridSlam`] / [`pf::GridLocalizer`]: the grid particle filter — lidar scans
 //!   scored by map correlation with a local shift search against a saturating `i8`
 //!   log-odds [`grid::OccupancyGrid`] (SLAM) or a fixed, borrowed map (localization, e.g.

@@ -202,3 +202,31 @@ fn init_clears_the_previous_run() {
     };
     assert_eq!(slam.init(bad, Pose2::IDENTITY), Err(EkfError::InvalidNoise));
 }
+
+#[test]
+fn robot_variances_are_capped_without_breaking_positive_definiteness() {
+    use microslam::ekf::{MAX_HEADING_VARIANCE, MAX_POSITION_VARIANCE};
+    let mut slam = Slam::new(EkfConfig::DEFAULT_F64);
+    slam.add_landmark(&RangeBearing::new(2.0, 0.5)).unwrap();
+    // A turn of 10⁶ rad with 5 % noise per radian: σ_θ = 5·10⁴ rad without the cap.
+    slam.predict_increment(&Pose2::new(3.0e4, 0.0, 1.0e6))
+        .unwrap();
+    let p = slam.active_covariance().clone_owned();
+    assert!(
+        p[(2, 2)] <= MAX_HEADING_VARIANCE * (1.0 + 1e-12),
+        "{}",
+        p[(2, 2)]
+    );
+    assert!(
+        p[(0, 0)] <= MAX_POSITION_VARIANCE * (1.0 + 1e-12),
+        "{}",
+        p[(0, 0)]
+    );
+    assert!(
+        (p[(2, 2)] - MAX_HEADING_VARIANCE).abs() < 1e-6,
+        "the cap is reached, not undershot"
+    );
+    let trace = p.trace();
+    let min_eig = p.symmetric_eigen().eigenvalues.min();
+    assert!(min_eig >= -1e-9 * trace, "{min_eig}");
+}

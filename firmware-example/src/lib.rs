@@ -66,7 +66,7 @@ where
                 let _ = serial.write_all(frame);
             }
             replies = replies.wrapping_add(1);
-            if replies % HEARTBEAT_EVENTS == 0 {
+            if replies.is_multiple_of(HEARTBEAT_EVENTS) {
                 led_on = !led_on;
                 let _ = if led_on {
                     led.set_high()

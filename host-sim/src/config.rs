@@ -1,2 +1,306 @@
 //! Estimator settings from TOML files, with documented per-dataset defaults in
-//! `host-sim/configs/`.
+//! `host-sim/configs/<family>.toml` (compiled in). A file given on the command line is
+//! laid over the defaults: it only needs the keys it changes.
+
+use crate::cli::AssociationMode;
+use anyhow::{Context, Result, bail};
+use microslam::association::AssociationConfig;
+use microslam::ekf::{CovarianceUpdate, EkfConfig};
+use microslam::gate::{ChiSquareGate, chi_square_quantile};
+use microslam::geometry::Pose2;
+use microslam::motion::{IncrementNoise, VelocityNoise};
+use microslam::scalar::Real;
+use microslam::sensors::range_bearing::RangeBearingSensor;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Built-in defaults per dataset family.
+const BUILTIN: &[(&str, &str)] = &[
+    ("mrclam", include_str!("../configs/mrclam.toml")),
+    ("sim", include_str!("../configs/sim.toml")),
+];
+
+/// All settings of a landmark-SLAM replay.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Settings {
+    /// Odometry noise.
+    pub odometry: OdometrySettings,
+    /// Sighting noise, gate and sensor mount.
+    pub sighting: SightingSettings,
+    /// Data association.
+    pub association: AssociationSettings,
+    /// Filter options.
+    pub filter: FilterSettings,
+    /// Simulator scenario (only in `sim.toml`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scenario: Option<crate::sim::Scenario>,
+}
+
+/// See `configs/mrclam.toml` for the meaning of each field.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+#[allow(missing_docs)]
+pub struct OdometrySettings {
+    pub linear_std: f64,
+    pub linear_std_per_mps: f64,
+    pub angular_std: f64,
+    pub angular_std_per_radps: f64,
+    pub angular_std_per_mps: f64,
+    pub max_gap_s: f64,
+}
+
+/// See `configs/mrclam.toml` for the meaning of each field.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+#[allow(missing_docs)]
+pub struct SightingSettings {
+    pub range_std: f64,
+    pub bearing_std: f64,
+    pub update_gate_probability: f64,
+    pub min_range: f64,
+    pub max_range: f64,
+    pub mount: [f64; 3],
+}
+
+/// See `configs/mrclam.toml` for the meaning of each field.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+#[allow(missing_docs)]
+pub struct AssociationSettings {
+    pub mode: AssociationMode,
+    pub individual_probability: f64,
+    pub new_landmark_probability: f64,
+    pub joint_probability: f64,
+    pub max_search_nodes: u32,
+    pub batch_window_s: f64,
+    pub ambiguity_margin: f64,
+}
+
+/// See `configs/mrclam.toml` for the meaning of each field.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+#[allow(missing_docs)]
+pub struct FilterSettings {
+    pub covariance_update: CovarianceUpdateSetting,
+}
+
+/// The covariance update form, as written in the file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CovarianceUpdateSetting {
+    /// Joseph form.
+    Joseph,
+    /// `P − K S Kᵀ`, symmetric.
+    Symmetric,
+}
+
+impl Settings {
+    /// The built-in defaults of a dataset family (`mrclam`, `sim`).
+    pub fn builtin(family: &str) -> Result<Self> {
+        let text = builtin_text(family)?;
+        toml::from_str(text).with_context(|| format!("built-in config {family}.toml"))
+    }
+
+    /// The defaults of `family` with the file `path` (if any) laid over them, for the
+    /// association `mode` (`None`: the file's own `association.mode`).
+    ///
+    /// With an unknown-id mode (ICNN, JCBB), the `[unknown_ids]` table of the files, when
+    /// present, is laid over the rest: association needs noise figures that keep the
+    /// filter consistent, which are not always those that score best with known ids.
+    pub fn load_for(
+        family: &str,
+        path: Option<&Path>,
+        mode: Option<AssociationMode>,
+    ) -> Result<Self> {
+        let mut base: toml::Table = toml::from_str(builtin_text(family)?)?;
+        if let Some(path) = path {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read config {}", path.display()))?;
+            let over: toml::Table =
+                toml::from_str(&text).with_context(|| format!("config {}", path.display()))?;
+            merge(&mut base, over);
+        }
+        let unknown = base.remove("unknown_ids");
+        if let Some(mode) = mode {
+            let mut table = toml::Table::new();
+            table.insert("mode".into(), toml::Value::try_from(mode)?);
+            merge(
+                &mut base,
+                toml::Table::from_iter([("association".to_owned(), toml::Value::Table(table))]),
+            );
+        }
+        let file_mode = base
+            .get("association")
+            .and_then(|a| a.get("mode"))
+            .and_then(|m| m.as_str())
+            .unwrap_or("known")
+            .to_owned();
+        if file_mode != "known"
+            && let Some(toml::Value::Table(over)) = unknown
+        {
+            merge(&mut base, over);
+        }
+        let settings: Self = toml::Value::Table(base)
+            .try_into()
+            .with_context(|| match path {
+                Some(p) => format!("config {}", p.display()),
+                None => format!("built-in config {family}.toml"),
+            })?;
+        settings.validate()?;
+        Ok(settings)
+    }
+
+    /// [`Settings::load_for`] with the association mode of the files.
+    pub fn load(family: &str, path: Option<&Path>) -> Result<Self> {
+        Self::load_for(family, path, None)
+    }
+
+    /// Checks ranges of values that TOML types cannot.
+    pub fn validate(&self) -> Result<()> {
+        let o = &self.odometry;
+        let s = &self.sighting;
+        let a = &self.association;
+        let non_negative = [
+            o.linear_std,
+            o.linear_std_per_mps,
+            o.angular_std,
+            o.angular_std_per_radps,
+            o.angular_std_per_mps,
+            s.range_std,
+            s.bearing_std,
+            s.min_range,
+            a.batch_window_s,
+            a.ambiguity_margin,
+        ];
+        if non_negative.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            bail!("noise figures, ranges and windows must be finite and non-negative");
+        }
+        if !(o.max_gap_s.is_finite() && o.max_gap_s > 0.0 && s.max_range > s.min_range) {
+            bail!("max_gap_s must be positive and max_range > min_range");
+        }
+        for p in [
+            s.update_gate_probability,
+            a.individual_probability,
+            a.new_landmark_probability,
+            a.joint_probability,
+        ] {
+            if !(p > 0.0 && p < 1.0) {
+                bail!("probabilities must be inside (0, 1), got {p}");
+            }
+        }
+        if a.new_landmark_probability < a.individual_probability {
+            bail!("new_landmark_probability must not be below individual_probability");
+        }
+        if s.mount.iter().any(|v| !v.is_finite()) {
+            bail!("sensor mount must be finite");
+        }
+        Ok(())
+    }
+
+    /// The EKF configuration in scalar `T`.
+    pub fn ekf_config<T: Real>(&self) -> EkfConfig<T> {
+        let o = &self.odometry;
+        let s = &self.sighting;
+        let l = T::lit;
+        EkfConfig {
+            // Increments are not used with velocity odometry; kept at zero noise.
+            increment_noise: IncrementNoise {
+                translation_std: T::ZERO,
+                translation_std_per_metre: T::ZERO,
+                rotation_std: T::ZERO,
+                rotation_std_per_radian: T::ZERO,
+                rotation_std_per_metre: T::ZERO,
+            },
+            velocity_noise: VelocityNoise {
+                linear_std: l(o.linear_std),
+                linear_std_per_mps: l(o.linear_std_per_mps),
+                angular_std: l(o.angular_std),
+                angular_std_per_radps: l(o.angular_std_per_radps),
+                angular_std_per_mps: l(o.angular_std_per_mps),
+            },
+            range_std: l(s.range_std),
+            bearing_std: l(s.bearing_std),
+            sensor: RangeBearingSensor::new(Pose2::new(
+                l(s.mount[0]),
+                l(s.mount[1]),
+                l(s.mount[2]),
+            )),
+            gate: ChiSquareGate::from_threshold(l(chi_square_quantile(
+                s.update_gate_probability,
+                2,
+            ))),
+            covariance_update: match self.filter.covariance_update {
+                CovarianceUpdateSetting::Joseph => CovarianceUpdate::Joseph,
+                CovarianceUpdateSetting::Symmetric => CovarianceUpdate::Symmetric,
+            },
+        }
+    }
+
+    /// The association configuration in scalar `T`.
+    pub fn association_config<T: Real>(&self) -> AssociationConfig<T> {
+        let a = &self.association;
+        AssociationConfig {
+            individual_gate: ChiSquareGate::from_threshold(T::lit(chi_square_quantile(
+                a.individual_probability,
+                2,
+            ))),
+            new_landmark_threshold: T::lit(chi_square_quantile(a.new_landmark_probability, 2)),
+            joint_probability: a.joint_probability,
+            max_search_nodes: a.max_search_nodes,
+            ambiguity_margin: T::lit(a.ambiguity_margin),
+        }
+    }
+}
+
+fn builtin_text(family: &str) -> Result<&'static str> {
+    BUILTIN
+        .iter()
+        .find(|(f, _)| *f == family)
+        .map(|(_, t)| *t)
+        .with_context(|| format!("no built-in config for dataset family `{family}`"))
+}
+
+/// Deep merge of TOML tables: values of `over` replace those of `base`.
+fn merge(base: &mut toml::Table, over: toml::Table) {
+    for (k, v) in over {
+        match (base.get_mut(&k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
+            (_, v) => {
+                base.insert(k, v);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn builtins_parse_and_overlay_changes_only_given_keys() {
+        let base = Settings::load("mrclam", None).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.toml");
+        std::fs::write(&p, "[sighting]\nrange_std = 0.25\n").unwrap();
+        let s = Settings::load("mrclam", Some(&p)).unwrap();
+        assert_eq!(s.sighting.range_std, 0.25);
+        assert_eq!(s.sighting.bearing_std, base.sighting.bearing_std);
+        assert_eq!(s.odometry, base.odometry);
+        Settings::load("sim", None).unwrap();
+        std::fs::write(&p, "[sighting]\nrange_sdt = 0.25\n").unwrap();
+        assert!(
+            Settings::load("mrclam", Some(&p)).is_err(),
+            "typos are refused"
+        );
+        std::fs::write(&p, "[sighting]\nrange_std = -1.0\n").unwrap();
+        assert!(Settings::load("mrclam", Some(&p)).is_err());
+        // The unknown-id overlay applies to ICNN/JCBB only.
+        std::fs::write(&p, "[unknown_ids.sighting]\nrange_std = 0.3\n").unwrap();
+        let known = Settings::load_for("mrclam", Some(&p), Some(AssociationMode::Known)).unwrap();
+        let jcbb = Settings::load_for("mrclam", Some(&p), Some(AssociationMode::Jcbb)).unwrap();
+        assert_eq!(known.sighting.range_std, base.sighting.range_std);
+        assert_eq!(jcbb.sighting.range_std, 0.3);
+        assert_eq!(jcbb.association.mode, AssociationMode::Jcbb);
+    }
+}

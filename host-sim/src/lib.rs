@@ -13,11 +13,14 @@
 //! - [`output`]: TUM trajectories and PNG pictures.
 //! - [`config`]: estimator settings from TOML files.
 //! - [`grid_replay`]: the grid particle filter (SLAM, localization) on CARMEN lidar logs.
+//! - [`faults`]: fault injection into event streams (drops, duplicates, reordering,
+//!   corrupted readings, clock jumps).
 #![deny(missing_docs)]
 
 pub mod cli;
 pub mod config;
 pub mod datasets;
+pub mod faults;
 pub mod grid_replay;
 pub mod metrics;
 pub mod output;

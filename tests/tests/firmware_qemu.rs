@@ -6,7 +6,7 @@
 
 use std::time::Duration;
 
-use microslam::wire::{StepResult, ToDevice, ToHost};
+use microslam::wire::{Command, EventsToWire, StepResult, ToDevice, ToHost};
 use microslam_replay_tests::firmware::{
     encode_all, firmware_elf, host_replies, run_in_qemu, synthetic_drive, with_line_noise,
 };
@@ -84,4 +84,89 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_a_synthetic_drive() {
     assert_eq!(status.frames_ok as usize, messages.len());
     println!("firmware stack peak: {stack_peak_bytes} bytes");
     assert!(*stack_peak_bytes > 0);
+}
+
+/// MRCLAM dataset 6, robot 1 (62 k odometry samples, 1.9 k sightings of 15 landmarks with
+/// known ids) as wire frames: the firmware's EKF equals the host's bit for bit at every
+/// one of the ~65 k estimates.
+#[test]
+#[ignore = "needs qemu-system-arm, the firmware ELF and the datasets: run by .ci/firmware.sh"]
+fn firmware_in_qemu_equals_host_bit_for_bit_on_mrclam_dataset6() {
+    let dir = host_sim::datasets::resolve("mrclam", "dataset6").expect("MRCLAM dataset 6");
+    let recording = host_sim::readers::mrclam::read(&dir, 1).expect("robot 1 reads");
+    let mut to_wire = EventsToWire::new();
+    let start = recording.initial_pose.unwrap_or_default();
+    let mut messages = vec![ToDevice::Command {
+        seq: 0,
+        command: Command::Reset {
+            x: start.x as f32,
+            y: start.y as f32,
+            theta: start.theta as f32,
+        },
+    }];
+    for e in &recording.events {
+        messages.extend(to_wire.push(e));
+    }
+    messages.push(ToDevice::Command {
+        seq: to_wire.last_seq() + 1,
+        command: Command::ReportStatus,
+    });
+    let bytes = encode_all(&messages);
+    let expected = host_replies(&bytes);
+    assert_eq!(expected.len(), messages.len());
+
+    let elf = firmware_elf();
+    assert!(
+        elf.exists(),
+        "{} missing: run .ci/firmware.sh",
+        elf.display()
+    );
+    let run = run_in_qemu(
+        &elf,
+        bytes.clone(),
+        expected.len(),
+        Duration::from_secs(900),
+    );
+    println!(
+        "mrclam dataset6 robot1: {} events → {} frames ({} bytes) → {} replies in {:.1} s",
+        recording.events.len(),
+        messages.len(),
+        bytes.len(),
+        run.replies.len(),
+        run.elapsed.as_secs_f64()
+    );
+    assert_eq!(run.bad_frames, 0);
+    assert_eq!(run.replies.len(), expected.len(), "every message answered");
+    let mut differing = 0;
+    for (got, want) in run.replies.iter().zip(&expected) {
+        differing += usize::from(bits(got) != bits(want));
+    }
+    assert_eq!(differing, 0, "estimates differing from the host");
+
+    // The firmware's trajectory, for inspection (TUM: t x y z qx qy qz qw).
+    let mut tum = String::new();
+    for r in &run.replies {
+        if let ToHost::Estimate(e) = r {
+            let [x, y, th] = e.pose;
+            let (s, c) = ((th / 2.0).sin(), (th / 2.0).cos());
+            let t = e.stamp_us as f64 * 1e-6;
+            tum.push_str(&format!("{t:.6} {x} {y} 0 0 0 {s} {c}\n"));
+        }
+    }
+    let out = elf.with_extension("mrclam6.tum");
+    std::fs::write(&out, tum).expect("trajectory written");
+    let Some(ToHost::Status {
+        status,
+        stack_peak_bytes,
+        ..
+    }) = run.replies.last()
+    else {
+        panic!("last reply is not a status");
+    };
+    println!(
+        "status: {status:?}, stack peak {stack_peak_bytes} bytes; trajectory in {}",
+        out.display()
+    );
+    assert_eq!(status.landmarks, 15, "dataset 6 has 15 landmarks");
+    assert_eq!(status.frames_bad, 0);
 }

@@ -24,6 +24,12 @@ pub struct AssociationConfig<T> {
     /// Bound on the hypotheses JCBB visits for one batch; past it, the best hypothesis
     /// found so far is used (and the outcome says the search was cut).
     pub max_search_nodes: u32,
+    /// Ambiguity rejection: when the runner-up pairing (ICNN: the second-nearest
+    /// compatible landmark; JCBB: the second-best hypothesis with as many pairings) is
+    /// within this much squared Mahalanobis distance of the best, the sightings on which
+    /// they differ are [`Pairing::Ambiguous`] and dropped rather than risk a wrong update.
+    /// `0` disables it.
+    pub ambiguity_margin: T,
 }
 
 impl<T: Real> AssociationConfig<T> {
@@ -35,6 +41,7 @@ impl<T: Real> AssociationConfig<T> {
             new_landmark_threshold: T::lit(chi_square_quantile(0.9999, 2)),
             joint_probability: 0.99,
             max_search_nodes: 10_000,
+            ambiguity_margin: T::ZERO,
         }
     }
 
@@ -44,6 +51,7 @@ impl<T: Real> AssociationConfig<T> {
             && self.new_landmark_threshold >= self.individual_gate.threshold
             && self.joint_probability > 0.0
             && self.joint_probability < 1.0
+            && self.ambiguity_margin >= T::ZERO
     }
 }
 
@@ -127,6 +135,17 @@ impl<T: Real, const K: usize> Candidates<T, K> {
     /// The nearest compatible landmark, if any.
     pub fn best(&self) -> Option<&Candidate<T>> {
         self.nearest.first()
+    }
+
+    /// `true` when the second-nearest compatible landmark is within `margin` (squared
+    /// Mahalanobis distance) of the nearest.
+    pub fn is_ambiguous(&self, margin: T) -> bool {
+        match (self.nearest.first(), self.nearest.get(1)) {
+            (Some(a), Some(b)) => {
+                b.innovation.mahalanobis_squared - a.innovation.mahalanobis_squared < margin
+            }
+            _ => false,
+        }
     }
 
     /// What to do with the sighting when it pairs with no landmark: a new landmark when

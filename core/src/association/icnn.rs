@@ -5,7 +5,9 @@
 //! none compatible it is a new landmark (or, between the gate and
 //! [`AssociationConfig::new_landmark_threshold`], ambiguous and dropped). Sightings are
 //! decided one at a time, so two sightings of one batch may pick the same landmark: that
-//! is the weakness [`super::jcbb`] removes.
+//! is the weakness [`super::jcbb`] removes. With an
+//! [`AssociationConfig::ambiguity_margin`], a sighting whose two nearest compatible
+//! landmarks are about as near is dropped as ambiguous.
 
 use super::compatibility::{AssociationConfig, Candidates, Pairing};
 use crate::ekf::EkfSlam;
@@ -21,8 +23,9 @@ pub fn icnn<T: Real, const N: usize>(
     if !z.is_valid() {
         return Pairing::Invalid;
     }
-    let candidates = Candidates::<T, 1>::of(slam, z, &config.individual_gate);
+    let candidates = Candidates::<T, 2>::of(slam, z, &config.individual_gate);
     match candidates.best() {
+        Some(_) if candidates.is_ambiguous(config.ambiguity_margin) => Pairing::Ambiguous,
         Some(c) => Pairing::Landmark(c.landmark),
         None => candidates.unpaired_decision(config),
     }
@@ -68,5 +71,20 @@ mod tests {
             icnn(&slam, &RangeBearing::new(f64::NAN, 0.0), &cfg()),
             Pairing::Invalid
         );
+        // Half-way between the two landmarks: the nearest wins without a margin, and the
+        // sighting is ambiguous with one.
+        let z = RangeBearing::new((4.0f64 + 0.25).sqrt(), (0.5f64 / 2.0).atan());
+        let mut c = cfg();
+        c.individual_gate.threshold = 1e3;
+        c.new_landmark_threshold = 1e3;
+        assert!(matches!(icnn(&slam, &z, &c), Pairing::Landmark(_)));
+        let d0 = slam.innovation(0, &z).unwrap().mahalanobis_squared;
+        let d1 = slam.innovation(1, &z).unwrap().mahalanobis_squared;
+        let gap = (d0 - d1).abs();
+        assert!(gap > 1.0 && gap < 10.0, "{d0} {d1}");
+        c.ambiguity_margin = gap * 0.9;
+        assert!(matches!(icnn(&slam, &z, &c), Pairing::Landmark(_)));
+        c.ambiguity_margin = gap * 1.1;
+        assert_eq!(icnn(&slam, &z, &c), Pairing::Ambiguous);
     }
 }

@@ -127,15 +127,24 @@ impl<T: Real, const B: usize, const K: usize> Jcbb<T, B, K> {
             best: [None; B],
             best_pairings: 0,
             best_nis: T::max_value().unwrap_or(T::lit(f64::MAX)),
+            runner_up: None,
             nodes: 0,
             max_nodes: self.config.max_search_nodes,
             truncated: false,
         };
         search.explore(0);
+        // Sightings on which the runner-up differs, when it is nearly as good.
+        let contested = |i: usize| {
+            search.runner_up.is_some_and(|(other, nis)| {
+                nis - search.best_nis < self.config.ambiguity_margin
+                    && other.get(i) != search.best.get(i)
+            })
+        };
         for (i, (out, z)) in pairings.iter_mut().zip(sightings).enumerate() {
             let cands = candidates.get(i);
             *out = match (search.best.get(i).copied().flatten(), cands) {
                 _ if !z.is_valid() => Pairing::Invalid,
+                (Some(_), Some(_)) if contested(i) => Pairing::Ambiguous,
                 (Some(c), Some(cands)) => cands
                     .nearest
                     .get(c)
@@ -175,6 +184,8 @@ struct Search<'a, T: Real, const N: usize, const B: usize, const K: usize> {
     best: [Option<usize>; B],
     best_pairings: usize,
     best_nis: T,
+    /// Second-best hypothesis with as many pairings as the best, and its joint NIS.
+    runner_up: Option<([Option<usize>; B], T)>,
     nodes: u32,
     max_nodes: u32,
     truncated: bool,
@@ -189,17 +200,27 @@ impl<T: Real, const N: usize, const B: usize, const K: usize> Search<'_, T, N, B
         self.nodes += 1;
         let m = self.candidates.len();
         if sighting >= m {
-            if self.depth > self.best_pairings
-                || (self.depth == self.best_pairings && self.nis < self.best_nis)
-            {
-                self.best = [None; B];
-                for &(i, c) in self.pairs.get(..self.depth).unwrap_or(&[]) {
-                    if let Some(b) = self.best.get_mut(i) {
-                        *b = Some(c);
-                    }
+            let mut current = [None; B];
+            for &(i, c) in self.pairs.get(..self.depth).unwrap_or(&[]) {
+                if let Some(b) = current.get_mut(i) {
+                    *b = Some(c);
                 }
+            }
+            if self.depth > self.best_pairings {
+                self.runner_up = None;
+                self.best = current;
                 self.best_pairings = self.depth;
                 self.best_nis = self.nis;
+            } else if self.depth == self.best_pairings {
+                if self.nis < self.best_nis {
+                    if self.depth > 0 {
+                        self.runner_up = Some((self.best, self.best_nis));
+                    }
+                    self.best = current;
+                    self.best_nis = self.nis;
+                } else if self.depth > 0 && self.runner_up.is_none_or(|(_, n)| self.nis < n) {
+                    self.runner_up = Some((current, self.nis));
+                }
             }
             return;
         }
@@ -477,6 +498,32 @@ mod tests {
         let r = jcbb.associate(&empty, &z, &mut out).unwrap();
         assert_eq!(&out[..2], &[Pairing::New, Pairing::New]);
         assert_eq!(r.pairings, 0);
+    }
+
+    #[test]
+    fn near_tie_between_hypotheses_is_ambiguous() {
+        // One sighting half-way between A and B: two one-pairing hypotheses, nearly tied.
+        let (slam, _) = planted();
+        let z = [sighting(Pose2::new(0.0, 0.0, 0.0), 3.0, 0.0)];
+        let mut cfg = AssociationConfig::default_gates();
+        let mut out = [Pairing::Invalid; 1];
+        Jcbb::<f64, 4, 4>::new(cfg)
+            .associate(&slam, &z, &mut out)
+            .unwrap();
+        assert!(matches!(out[0], Pairing::Landmark(_)));
+        cfg.ambiguity_margin = 1.0;
+        Jcbb::<f64, 4, 4>::new(cfg)
+            .associate(&slam, &z, &mut out)
+            .unwrap();
+        assert_eq!(out[0], Pairing::Ambiguous);
+        // The planted batch stays unambiguous: the swapped pairing is not jointly
+        // compatible.
+        let (slam, z) = planted();
+        let mut out = [Pairing::Invalid; 2];
+        Jcbb::<f64, 4, 4>::new(cfg)
+            .associate(&slam, &z, &mut out)
+            .unwrap();
+        assert_eq!(out, [Pairing::Landmark(0), Pairing::Landmark(1)]);
     }
 
     #[test]

@@ -18,6 +18,16 @@ use crate::geometry::{Pose2, wrap_angle};
 use crate::scalar::Real;
 use nalgebra::{Matrix2, Matrix2x3, Vector2};
 
+/// Shortest range the model accepts, metres. Closer than this the bearing's Jacobian
+/// (∝ 1/range) makes the update ill-conditioned, so such sightings and predictions are
+/// refused.
+pub const MIN_RANGE: f64 = 1.0e-3;
+
+/// Longest range the model accepts, metres. Far beyond any landmark sensor; it keeps the
+/// new landmark's covariance, whose across-ray variance grows as range², representable
+/// next to its along-ray variance in `f32` (a 50 km sighting is not).
+pub const MAX_RANGE: f64 = 1.0e3;
+
 /// A range-bearing measurement: range in metres, bearing in radians (CCW positive).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -39,9 +49,13 @@ impl<T: Real> RangeBearing<T> {
         Vector2::new(self.range, self.bearing)
     }
 
-    /// `true` when both components are finite and the range is positive.
+    /// `true` when both components are finite and the range within
+    /// [`MIN_RANGE`]`..=`[`MAX_RANGE`].
     pub fn is_valid(&self) -> bool {
-        self.range.finite() && self.bearing.finite() && self.range > T::ZERO
+        self.range.finite()
+            && self.bearing.finite()
+            && self.range >= T::lit(MIN_RANGE)
+            && self.range <= T::lit(MAX_RANGE)
     }
 }
 
@@ -100,15 +114,15 @@ impl<T: Real> RangeBearingSensor<T> {
     }
 
     /// The observation model `h`: expected range and bearing of `landmark` from `robot`,
-    /// with its Jacobians. `None` when the landmark coincides with the sensor (the bearing
-    /// is undefined there).
+    /// with its Jacobians. `None` when the landmark is closer to the sensor than
+    /// [`MIN_RANGE`] (the bearing is undefined at the sensor).
     pub fn predict(&self, robot: &Pose2<T>, landmark: &Vector2<T>) -> Option<Prediction<T>> {
         let (sx, sy, sth, dsx_dth, dsy_dth) = self.sensor_pose(robot);
         let dx = landmark[0] - sx;
         let dy = landmark[1] - sy;
         let q = dx * dx + dy * dy;
         let r = q.sqrt();
-        if !r.finite() || r <= T::ZERO {
+        if !r.finite() || r < T::lit(MIN_RANGE) {
             return None;
         }
         // ∂r/∂d = d/r, ∂b/∂d = (−d_y, d_x)/q; ∂d/∂(x, y) = −I, ∂d/∂θ = −∂s/∂θ; ∂b/∂θ has −1.

@@ -11,6 +11,8 @@
 //!   panics and never allocates.
 //! - [`scan`]: a lidar scan is longer than one frame; [`ScanAssembler`] puts the chunks of
 //!   one scan back together and drops a scan with a missing chunk.
+//! - [`events`]: [`EventsToWire`] turns the core's event stream into messages (for a
+//!   host streaming a dataset to a device).
 //! - [`session`]: the device side: [`Session`] turns received bytes into estimator steps
 //!   and replies. The firmware runs it behind its UART; a host runs the same code to get
 //!   the reference the firmware must match.
@@ -35,11 +37,13 @@
 //! # Ok::<(), microslam::wire::EncodeError>(())
 //! ```
 
+pub mod events;
 pub mod frame;
 pub mod messages;
 pub mod scan;
 pub mod session;
 
+pub use events::EventsToWire;
 pub use frame::{
     EncodeError, FrameDecoder, FrameError, MAX_FRAME_LEN, MAX_PAYLOAD_LEN, WireCounters,
     encode_frame,

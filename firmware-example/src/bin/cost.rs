@@ -99,7 +99,7 @@ fn build_map<const N: usize>(slam: &mut Ekf<N>, n: usize) -> Result<(), microsla
     )?;
     for i in 0..n {
         slam.predict_velocity(0.2, 0.05, 0.1)?;
-        let bearing = (i as f32) * 0.7 - 2.0 * libm::floorf(i as f32 * 0.7 / 6.283) * 3.1416;
+        let bearing = ((i * 7) % 60) as f32 * 0.1 - 3.0; // spread over (−π, π)
         slam.add_landmark(&RangeBearing::new(2.0 + (i % 5) as f32 * 0.4, bearing))?;
     }
     Ok(())

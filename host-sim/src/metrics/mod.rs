@@ -1,9 +1,40 @@
-//! Scores of an estimate against ground truth.
+//! Scores of a replay against ground truth, written to `metrics.json`.
+//!
+//! - **ATE** (m) and **yaw** RMSE (deg) over the estimates whose stamps lie inside the
+//!   ground truth's span (ground truth interpolated at the estimate stamps), after two
+//!   alignments: `first_pose` (both paths in the frames of their own first poses) and
+//!   `se2` (least-squares rotation + translation, no scale, of the estimated positions
+//!   onto the true ones).
+//! - **Landmark RMSE** (m): estimated landmarks carried by the same transform; known ids
+//!   matched by id, unknown ones by a one-to-one assignment minimising total distance.
+//! - **Association purity** (the textbook cluster purity): each estimated landmark is
+//!   credited with the sightings of its majority true landmark; purity is their share of
+//!   all sightings the filter used (updates and creations). Mixed landmarks lower it,
+//!   duplicates do not: `association_one_to_one_purity` also penalises duplicates by
+//!   pairing estimated and true landmarks one-to-one (maximising shared sightings) and
+//!   counting only the sightings that went to the partner of their true landmark.
+//! - **NEES** of the pose against ground truth (filter frame = world frame: the filter
+//!   starts at the true initial pose), mean over the evaluated estimates whose position
+//!   standard deviation is at least [`NEES_MIN_POSITION_STD`]; **NIS** mean of the
+//!   accepted updates.
 
 pub mod relations;
 
-use crate::readers::TruePose;
-use microslam::geometry::{Pose2, wrap_angle};
+mod alignment;
+mod assignment;
+
+pub use alignment::{Rigid, apply, first_pose, se2_least_squares, wrap};
+pub use assignment::{max_gain, min_cost};
+
+use crate::readers::{Recording, TruePose};
+use crate::replay::ReplayRun;
+use microslam::geometry::Pose2;
+use nalgebra::{Matrix3, Vector2, Vector3};
+use serde::Serialize;
+
+/// Estimates whose position standard deviation `√(σx² + σy²)` is below this (m) are left
+/// out of the NEES: ground-truth noise (millimetres for Vicon) would dominate it.
+pub const NEES_MIN_POSITION_STD: f64 = 0.01;
 
 /// Ground truth linearly interpolated at `stamp` (heading along the shorter arc), or
 /// `None` outside its time span.
@@ -30,6 +61,341 @@ pub fn interpolate_pose(truth: &[TruePose], stamp: f64) -> Option<Pose2<f64>> {
     Some(Pose2::new(
         a.pose.x + s * (b.pose.x - a.pose.x),
         a.pose.y + s * (b.pose.y - a.pose.y),
-        wrap_angle(a.pose.theta + s * wrap_angle(b.pose.theta - a.pose.theta)),
+        wrap(a.pose.theta + s * wrap(b.pose.theta - a.pose.theta)),
     ))
+}
+
+/// Interpolates ground truth at non-decreasing stamps by walking forward (no search):
+/// the same results as [`interpolate_pose`].
+pub struct TruthCursor<'a> {
+    truth: &'a [TruePose],
+    next: usize,
+}
+
+impl<'a> TruthCursor<'a> {
+    /// A cursor at the start of `truth`.
+    pub fn new(truth: &'a [TruePose]) -> Self {
+        Self { truth, next: 0 }
+    }
+
+    /// Ground truth at `stamp`; stamps must not decrease between calls (a smaller one
+    /// falls back to a search).
+    pub fn at(&mut self, stamp: f64) -> Option<Pose2<f64>> {
+        let t = self.truth;
+        if self.next > 0 && t.get(self.next - 1).is_some_and(|p| p.stamp > stamp) {
+            return interpolate_pose(t, stamp);
+        }
+        while t.get(self.next).is_some_and(|p| p.stamp <= stamp) {
+            self.next += 1;
+        }
+        let first = t.first()?;
+        let last = t.last()?;
+        if !(stamp >= first.stamp && stamp <= last.stamp) {
+            return None;
+        }
+        let a = t.get(self.next.checked_sub(1)?)?;
+        let Some(b) = t.get(self.next) else {
+            return Some(a.pose);
+        };
+        let span = b.stamp - a.stamp;
+        let s = if span > 0.0 {
+            (stamp - a.stamp) / span
+        } else {
+            0.0
+        };
+        Some(Pose2::new(
+            a.pose.x + s * (b.pose.x - a.pose.x),
+            a.pose.y + s * (b.pose.y - a.pose.y),
+            wrap(a.pose.theta + s * wrap(b.pose.theta - a.pose.theta)),
+        ))
+    }
+}
+
+/// A figure under both alignments (`null` in JSON when it cannot be computed).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Aligned {
+    /// Both paths in the frames of their own first poses.
+    pub first_pose: Option<f64>,
+    /// Least-squares rotation + translation.
+    pub se2: Option<f64>,
+}
+
+/// The contents of `metrics.json`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Metrics {
+    /// Dataset name.
+    pub dataset: String,
+    /// Odometry steps replayed.
+    pub steps: usize,
+    /// Landmark sightings offered to the estimator.
+    pub sightings: usize,
+    /// Absolute trajectory error, RMSE of positions, metres.
+    pub ate_rmse_m: Aligned,
+    /// RMSE of headings, degrees.
+    pub yaw_rmse_deg: Aligned,
+    /// RMSE of landmark positions, metres.
+    pub landmark_rmse_m: Aligned,
+    /// Landmarks in the final map.
+    pub landmarks_created: usize,
+    /// Cluster purity of the association (see the module docs).
+    pub association_purity: Option<f64>,
+    /// Mean NEES of the pose (3 dof).
+    pub nees_pose_mean: Option<f64>,
+    /// Mean NIS of accepted updates (2 dof).
+    pub nis_mean: Option<f64>,
+    /// Wall time of the whole command (reading, replay, scoring, writing), seconds.
+    pub wall_time_s: f64,
+    /// Time inside the estimator (prediction, association, update), seconds.
+    pub filter_time_s: f64,
+    // ---- extras ----
+    /// Association mode.
+    pub association: String,
+    /// Filter scalar.
+    pub precision: String,
+    /// One-to-one purity: duplicates count as errors too (see the module docs).
+    pub association_one_to_one_purity: Option<f64>,
+    /// True landmarks in the dataset.
+    pub landmarks_true: usize,
+    /// Estimates scored against ground truth.
+    pub evaluated_poses: usize,
+    /// ATE of odometry alone (dead reckoning), same alignments.
+    pub dead_reckoning_ate_rmse_m: Aligned,
+    /// Fraction of evaluated estimates whose NEES is below the 95 % χ²(3) quantile.
+    pub nees_pose_within_95: Option<f64>,
+    /// What the association did.
+    pub counts: crate::replay::AssociationCounts,
+    /// Sightings dropped by the reader (other robots, unknown barcodes).
+    pub reader_dropped_sightings: usize,
+    /// The SE(2) alignment of the estimate onto ground truth: x, y (m), θ (rad).
+    pub se2_alignment: Option<[f64; 3]>,
+}
+
+/// Scores a replay against the recording's ground truth.
+pub fn evaluate(recording: &Recording, run: &ReplayRun) -> Metrics {
+    let truth = &recording.ground_truth;
+    let mut est = Vec::new();
+    let mut gt = Vec::new();
+    let mut nees = Vec::new();
+    let mut cursor = TruthCursor::new(truth);
+    for s in &run.trajectory {
+        let Some(g) = cursor.at(s.stamp) else {
+            continue;
+        };
+        est.push(s.pose);
+        gt.push(g);
+        // The filter starts at the true pose with zero covariance; while it claims less
+        // than NEES_MIN_POSITION_STD of position uncertainty, the ground truth's own noise
+        // dominates the error and the NEES says nothing about the filter.
+        let position_std = (s.covariance[0][0] + s.covariance[1][1]).max(0.0).sqrt();
+        if recording.initial_pose.is_some()
+            && position_std >= NEES_MIN_POSITION_STD
+            && let Some(v) = pose_nees(&s.pose, &g, &s.covariance)
+        {
+            nees.push(v);
+        }
+    }
+    let mut dr_est = Vec::new();
+    let mut dr_gt = Vec::new();
+    let mut cursor = TruthCursor::new(truth);
+    for (t, p) in &run.dead_reckoning {
+        if let Some(g) = cursor.at(*t) {
+            dr_est.push(*p);
+            dr_gt.push(g);
+        }
+    }
+    let transforms = transforms(&est, &gt);
+    let se2_alignment = transforms.1.map(|t| [t.x, t.y, t.theta]);
+    let mut m = Metrics {
+        dataset: recording.name.clone(),
+        steps: run.steps,
+        sightings: run.sightings,
+        landmarks_created: run.landmarks.len(),
+        landmarks_true: recording.landmarks.len(),
+        evaluated_poses: est.len(),
+        association: format!("{:?}", run.mode).to_lowercase(),
+        precision: format!("{:?}", run.precision).to_lowercase(),
+        filter_time_s: run.filter_time.as_secs_f64(),
+        counts: run.counts,
+        reader_dropped_sightings: recording.dropped_sightings,
+        se2_alignment,
+        ..Metrics::default()
+    };
+    let by_alignment = |f: &dyn Fn(&Pose2<f64>) -> Option<f64>| Aligned {
+        first_pose: transforms.0.as_ref().and_then(f),
+        se2: transforms.1.as_ref().and_then(f),
+    };
+    m.ate_rmse_m = by_alignment(&|t| position_rmse(t, &est, &gt));
+    m.yaw_rmse_deg = by_alignment(&|t| yaw_rmse_deg(t, &est, &gt));
+    m.landmark_rmse_m = by_alignment(&|t| landmark_rmse(t, recording, run));
+    let dr = self::transforms(&dr_est, &dr_gt);
+    m.dead_reckoning_ate_rmse_m = Aligned {
+        first_pose: dr.0.and_then(|t| position_rmse(&t, &dr_est, &dr_gt)),
+        se2: dr.1.and_then(|t| position_rmse(&t, &dr_est, &dr_gt)),
+    };
+    m.nees_pose_mean = mean(&nees);
+    let bound = microslam::gate::chi_square_quantile(0.95, 3);
+    m.nees_pose_within_95 = (!nees.is_empty())
+        .then(|| nees.iter().filter(|v| **v <= bound).count() as f64 / nees.len() as f64);
+    m.nis_mean = mean(&run.nis);
+    (m.association_one_to_one_purity, m.association_purity) = purity(recording, run);
+    m
+}
+
+/// First-pose and SE(2) least-squares transforms of the estimate onto the truth.
+pub fn transforms(
+    est: &[Pose2<f64>],
+    gt: &[Pose2<f64>],
+) -> (Option<Pose2<f64>>, Option<Pose2<f64>>) {
+    let fp = est.first().zip(gt.first()).map(|(e, g)| first_pose(e, g));
+    let pe: Vec<[f64; 2]> = est.iter().map(|p| [p.x, p.y]).collect();
+    let pg: Vec<[f64; 2]> = gt.iter().map(|p| [p.x, p.y]).collect();
+    (fp, se2_least_squares(&pe, &pg))
+}
+
+fn mean(v: &[f64]) -> Option<f64> {
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+/// Position RMSE of `t · est` against `gt`.
+pub fn position_rmse(t: &Pose2<f64>, est: &[Pose2<f64>], gt: &[Pose2<f64>]) -> Option<f64> {
+    let r = Rigid::new(t);
+    let sq: Vec<f64> = est
+        .iter()
+        .zip(gt)
+        .map(|(e, g)| {
+            let [x, y] = r.point(e.x, e.y);
+            (x - g.x).powi(2) + (y - g.y).powi(2)
+        })
+        .collect();
+    mean(&sq).map(f64::sqrt)
+}
+
+fn yaw_rmse_deg(t: &Pose2<f64>, est: &[Pose2<f64>], gt: &[Pose2<f64>]) -> Option<f64> {
+    let r = Rigid::new(t);
+    let sq: Vec<f64> = est
+        .iter()
+        .zip(gt)
+        .map(|(e, g)| wrap(r.apply(e).theta - g.theta).powi(2))
+        .collect();
+    mean(&sq).map(|v| v.sqrt().to_degrees())
+}
+
+/// NEES of a pose estimate with covariance `p` against the truth; `None` when `p` is not
+/// invertible (e.g. at the known start).
+pub fn pose_nees(est: &Pose2<f64>, truth: &Pose2<f64>, p: &[[f64; 3]; 3]) -> Option<f64> {
+    let p = Matrix3::from_fn(|r, c| p[r][c]);
+    let inv = p.cholesky()?.inverse();
+    let e = Vector3::new(
+        truth.x - est.x,
+        truth.y - est.y,
+        wrap(truth.theta - est.theta),
+    );
+    let v = (e.transpose() * inv * e)[(0, 0)];
+    v.is_finite().then_some(v)
+}
+
+/// Pairs of (estimated landmark index, true landmark index) used for the landmark error.
+pub fn landmark_pairs(
+    t: &Pose2<f64>,
+    recording: &Recording,
+    run: &ReplayRun,
+) -> Vec<(usize, usize)> {
+    let truth = &recording.landmarks;
+    if run.landmarks.iter().all(|l| l.id.is_some()) && !run.landmarks.is_empty() {
+        return run
+            .landmarks
+            .iter()
+            .enumerate()
+            .filter_map(|(i, l)| {
+                let id = l.id?;
+                truth.iter().position(|t| t.id == id).map(|j| (i, j))
+            })
+            .collect();
+    }
+    let cost: Vec<Vec<f64>> = run
+        .landmarks
+        .iter()
+        .map(|l| {
+            let p = t.transform_point(&Vector2::new(l.position[0], l.position[1]));
+            truth
+                .iter()
+                .map(|g| (p[0] - g.position[0]).hypot(p[1] - g.position[1]))
+                .collect()
+        })
+        .collect();
+    min_cost(&cost)
+}
+
+fn landmark_rmse(t: &Pose2<f64>, recording: &Recording, run: &ReplayRun) -> Option<f64> {
+    let sq: Vec<f64> = landmark_pairs(t, recording, run)
+        .into_iter()
+        .filter_map(|(i, j)| {
+            let l = run.landmarks.get(i)?;
+            let g = recording.landmarks.get(j)?;
+            let p = t.transform_point(&Vector2::new(l.position[0], l.position[1]));
+            Some((p[0] - g.position[0]).powi(2) + (p[1] - g.position[1]).powi(2))
+        })
+        .collect();
+    mean(&sq).map(f64::sqrt)
+}
+
+/// (one-to-one purity, cluster purity) of the association; `None` without sightings.
+fn purity(recording: &Recording, run: &ReplayRun) -> (Option<f64>, Option<f64>) {
+    let mut ids: Vec<u32> = recording.landmarks.iter().map(|l| l.id).collect();
+    for l in &run.landmarks {
+        for id in l.true_ids.keys() {
+            if !ids.contains(id) {
+                ids.push(*id);
+            }
+        }
+    }
+    let total: usize = run.landmarks.iter().flat_map(|l| l.true_ids.values()).sum();
+    if total == 0 {
+        return (None, None);
+    }
+    let gain: Vec<Vec<f64>> = run
+        .landmarks
+        .iter()
+        .map(|l| {
+            ids.iter()
+                .map(|id| *l.true_ids.get(id).unwrap_or(&0) as f64)
+                .collect()
+        })
+        .collect();
+    let matched: f64 = max_gain(&gain).into_iter().map(|(i, j)| gain[i][j]).sum();
+    let cluster: usize = run
+        .landmarks
+        .iter()
+        .map(|l| l.true_ids.values().copied().max().unwrap_or(0))
+        .sum();
+    (
+        Some(matched / total as f64),
+        Some(cluster as f64 / total as f64),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cursor_matches_search_and_stays_inside_the_span() {
+        let truth: Vec<TruePose> = (0..50)
+            .map(|i| TruePose {
+                stamp: f64::from(i) * 0.1,
+                pose: Pose2::new(f64::from(i), -f64::from(i), wrap(f64::from(i) * 0.4)),
+            })
+            .collect();
+        let mut c = TruthCursor::new(&truth);
+        for k in -5..560 {
+            let t = f64::from(k) * 0.00913;
+            assert_eq!(c.at(t), interpolate_pose(&truth, t), "t = {t}");
+        }
+        assert_eq!(c.at(0.05), interpolate_pose(&truth, 0.05), "backwards");
+        // Half-way between samples 3 and 4, heading across the ±π cut handled.
+        let p = interpolate_pose(&truth, 0.35).unwrap();
+        assert!((p.x - 3.5).abs() < 1e-12 && (p.y + 3.5).abs() < 1e-12);
+        assert_eq!(interpolate_pose(&truth, 4.95), None);
+        assert_eq!(interpolate_pose(&truth, -0.01), None);
+    }
 }

@@ -4,8 +4,6 @@
 use anyhow::{Context, Result, bail};
 use microslam::geometry::Pose2;
 use microslam::grid::{GridGeometry, LogOdds};
-use plotters::backend::DrawingBackend;
-use plotters::prelude::BitMapBackend;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -79,14 +77,20 @@ pub fn write_map(
             rgb[i..i + 3].copy_from_slice(&[220, 0, 0]);
         }
     }
-    let png = out.join("map.png");
-    let mut backend = BitMapBackend::new(&png, (w as u32, h as u32));
-    backend
-        .blit_bitmap((0, 0), (w as u32, h as u32), &rgb)
-        .map_err(|e| anyhow::anyhow!("drawing {}: {e:?}", png.display()))?;
-    backend
-        .present()
-        .map_err(|e| anyhow::anyhow!("writing {}: {e:?}", png.display()))?;
+    write_png(&out.join("map.png"), w as u32, h as u32, &rgb)?;
+    Ok(())
+}
+
+/// Writes an 8-bit RGB image as PNG.
+pub fn write_png(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<()> {
+    let file =
+        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    let mut writer = enc.write_header()?;
+    writer.write_image_data(rgb)?;
+    writer.finish()?;
     Ok(())
 }
 

@@ -2,8 +2,8 @@
 //! truth.
 //!
 //! Files in the dataset folder (tab-separated, 4 `#` header lines):
-//! - `Robot<k>_Odometry.dat`: time [s], v [m/s], ω [rad/s] → [`EventKind::Velocity`];
-//! - `Robot<k>_Measurement.dat`: time, **barcode**, range [m], bearing [rad] →
+//! - `Robot<k>_Odometry.dat`: time (s), v (m/s), ω (rad/s) → [`EventKind::Velocity`];
+//! - `Robot<k>_Measurement.dat`: time, **barcode**, range (m), bearing (rad) →
 //!   [`EventKind::Sighting`] with [`Identity::Unique`]`(subject)`; the barcode is mapped
 //!   to a subject through `Barcodes.dat`. Subjects 1–5 are the robots: their sightings are
 //!   dropped, as are barcodes that `Barcodes.dat` does not list (counted in
@@ -11,7 +11,7 @@
 //! - `Robot<k>_Groundtruth.dat` (optional: dataset 1 has none): time, x, y, θ;
 //! - `Landmark_Groundtruth.dat`: subject, x, y, σx, σy.
 
-use super::text::{ReadError, invalid, read_table};
+use super::text::{ReadError, invalid, read_table, read_table_with};
 use super::{Recording, TrueLandmark, TruePose, sort_events};
 use microslam::event::{Event, EventKind, Identity, Sighting};
 use microslam::geometry::Pose2;
@@ -35,20 +35,46 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
     }
 
     let odo_path = file(format!("Robot{robot}_Odometry.dat"));
-    let odometry = read_table::<3>(&odo_path)?;
     let meas_path = file(format!("Robot{robot}_Measurement.dat"));
-    let measurements = read_table::<4>(&meas_path)?;
-
-    let mut events = Vec::with_capacity(odometry.len() + measurements.len());
-    for row in &odometry {
-        let [t, v, omega] = row.values;
-        events.push(Event::new(t, EventKind::Velocity { v, omega }));
-    }
+    let gt_path = file(format!("Robot{robot}_Groundtruth.dat"));
+    // The three large files are parsed in parallel, straight into events and poses.
+    let (odometry, measurements, ground_truth) = std::thread::scope(|s| {
+        let odometry = s.spawn(|| {
+            let mut events = Vec::with_capacity(65_536);
+            read_table_with::<3>(&odo_path, |row| {
+                let [t, v, omega] = row.values;
+                events.push(Event::new(t, EventKind::Velocity { v, omega }));
+            })
+            .map(|()| events)
+        });
+        let truth = s.spawn(|| {
+            let mut poses = Vec::with_capacity(65_536);
+            if gt_path.exists() {
+                read_table_with::<4>(&gt_path, |row| {
+                    let [stamp, x, y, theta] = row.values;
+                    poses.push(TruePose {
+                        stamp,
+                        pose: Pose2::new(x, y, theta),
+                    });
+                })?;
+            }
+            Ok::<_, ReadError>(poses)
+        });
+        let measurements = read_table::<4>(&meas_path);
+        let panicked = |_| anyhow::anyhow!("reader thread panicked");
+        anyhow::Ok((
+            odometry.join().map_err(panicked)?,
+            measurements,
+            truth.join().map_err(panicked)?,
+        ))
+    })?;
+    let (mut events, measurements, mut ground_truth) = (odometry?, measurements?, ground_truth?);
+    events.reserve(measurements.len());
     let mut dropped = 0;
     for row in &measurements {
         let [t, code, range, bearing] = row.values;
         let code = whole(&meas_path, row.line, code, "barcode")?;
-        if !(range > 0.0) {
+        if range <= 0.0 {
             return Err(invalid(
                 &meas_path,
                 row.line,
@@ -69,19 +95,7 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
         }
     }
     sort_events(&mut events)?;
-
-    let gt_path = file(format!("Robot{robot}_Groundtruth.dat"));
-    let mut ground_truth = Vec::new();
-    if gt_path.exists() {
-        for row in read_table::<4>(&gt_path)? {
-            let [stamp, x, y, theta] = row.values;
-            ground_truth.push(TruePose {
-                stamp,
-                pose: Pose2::new(x, y, theta),
-            });
-        }
-        ground_truth.sort_by(|a, b| a.stamp.total_cmp(&b.stamp));
-    }
+    ground_truth.sort_by(|a, b| a.stamp.total_cmp(&b.stamp));
 
     let lm_path = file("Landmark_Groundtruth.dat".into());
     let mut landmarks = Vec::new();

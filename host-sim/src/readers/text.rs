@@ -99,6 +99,28 @@ pub fn read_table<const C: usize>(path: &Path) -> Result<Vec<Row<C>>, ReadError>
 /// Parses the text of a table (see [`read_table`]).
 pub fn parse_table<const C: usize>(path: &Path, text: &str) -> Result<Vec<Row<C>>, ReadError> {
     let mut rows = Vec::with_capacity(text.len() / 32);
+    visit_table(path, text, |row| rows.push(row))?;
+    Ok(rows)
+}
+
+/// Reads a table of `C` numeric columns and hands each row to `visit` (no row vector).
+pub fn read_table_with<const C: usize>(
+    path: &Path,
+    visit: impl FnMut(Row<C>),
+) -> Result<(), ReadError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ReadError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    visit_table(path, &text, visit)
+}
+
+/// Parses the text of a table, handing each row to `visit`.
+pub fn visit_table<const C: usize>(
+    path: &Path,
+    text: &str,
+    mut visit: impl FnMut(Row<C>),
+) -> Result<(), ReadError> {
     for (i, raw) in text.lines().enumerate() {
         let line = i + 1;
         let trimmed = raw.trim();
@@ -132,9 +154,9 @@ pub fn parse_table<const C: usize>(path: &Path, text: &str) -> Result<Vec<Row<C>
         if found < C {
             return Err(bad(LineProblem::Truncated { expected: C, found }));
         }
-        rows.push(Row { line, values });
+        visit(Row { line, values });
     }
-    Ok(rows)
+    Ok(())
 }
 
 /// An error for line `line` of `path`.

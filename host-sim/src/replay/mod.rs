@@ -1,7 +1,23 @@
-//! The replay loop: events → estimator → estimates. It never parses anything.
+//! The replay loop: a [`Recording`]'s events → the landmark EKF-SLAM → estimates.
+//!
+//! It never parses anything: readers and the simulator hand it events. Each odometry
+//! sample sets the velocity held until the next event; before every event the filter is
+//! predicted up to its stamp. Sightings with (nearly) the same stamp form a batch for
+//! JCBB. In the unknown-id modes the sighting's identity is hidden from the estimator and
+//! kept aside only to score the association afterwards.
 
-use crate::cli::ReplayArgs;
+mod estimator;
+
+pub use estimator::{
+    AssociationCounts, MapLandmark, PoseSample, ReplayRun, dead_reckoning, replay,
+};
+
+use crate::cli::{AssociationMode, Precision, ReplayArgs};
+use crate::config::Settings;
+use crate::readers::Recording;
 use anyhow::Result;
+use std::path::Path;
+use std::time::Instant;
 
 /// `host-sim replay`.
 pub fn run_cli(args: &ReplayArgs, quiet: bool) -> Result<()> {
@@ -11,9 +27,48 @@ pub fn run_cli(args: &ReplayArgs, quiet: bool) -> Result<()> {
     if args.filter == Some(FilterKind::GridSlam) || (args.filter.is_none() && lidar) {
         return crate::grid_replay::replay_cli(args, quiet);
     }
+    let started = Instant::now();
+    let settings = Settings::load_for(
+        args.dataset.family(),
+        args.config.as_deref(),
+        args.association,
+    )?;
     let recording = crate::readers::read(&args.dataset, args.robot)?;
+    let mode = settings.association.mode;
+    run_and_report(
+        &recording,
+        &settings,
+        mode,
+        args.precision,
+        &args.out,
+        !args.no_plots,
+        quiet,
+        started,
+    )
+}
+
+/// Replays `recording`, scores it and writes `metrics.json`, the TUM trajectories and the
+/// pictures into `out`. `started` is when the process began its work (for the wall time).
+#[allow(clippy::too_many_arguments)]
+pub fn run_and_report(
+    recording: &Recording,
+    settings: &Settings,
+    mode: AssociationMode,
+    precision: Precision,
+    out: &Path,
+    plots: bool,
+    quiet: bool,
+    started: Instant,
+) -> Result<()> {
+    let progress = (!quiet).then(|| crate::output::progress_bar(recording.events.len() as u64));
+    let run = replay(recording, settings, mode, precision, progress.as_ref())?;
+    if let Some(p) = &progress {
+        p.finish_and_clear();
+    }
+    let mut metrics = crate::metrics::evaluate(recording, &run);
+    crate::output::write_all(out, recording, &run, &mut metrics, plots, started)?;
     if !quiet {
-        println!("{}: {} events", recording.name, recording.events.len());
+        println!("{}", crate::output::summary(&metrics, out));
     }
     Ok(())
 }

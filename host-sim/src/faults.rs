@@ -1,0 +1,335 @@
+//! Fault injection for event streams, in the spirit of smoltcp's `FaultInjector`: drops,
+//! duplicates, reordering, corrupted readings and time stamps going backwards, each at a
+//! configurable rate, from a seeded generator so that a run can be repeated exactly.
+//!
+//! ```
+//! use host_sim::faults::{inject, FaultRates};
+//! use microslam::event::{Event, EventKind};
+//!
+//! let events: Vec<Event<f64>> =
+//!     (0..1000).map(|i| Event::new(f64::from(i) * 0.1, EventKind::Velocity { v: 0.2, omega: 0.0 })).collect();
+//! let rates: FaultRates = "drop=0.05,nan=0.01".parse()?;
+//! let (faulty, counts) = inject(&events, &rates, 7);
+//! assert_eq!(faulty.len(), 1000 - counts.dropped);
+//! # Ok::<(), anyhow::Error>(())
+//! ```
+
+use anyhow::{Context, Result, bail};
+use microslam::event::{Event, EventKind};
+use rand_core::SeedableRng;
+use rand_distr::{Bernoulli, Distribution};
+use rand_xoshiro::Xoshiro256PlusPlus;
+use serde::Serialize;
+use std::str::FromStr;
+
+/// Probability of each fault per event, in `[0, 1]`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct FaultRates {
+    /// The event is lost.
+    pub drop: f64,
+    /// The event arrives twice.
+    pub duplicate: f64,
+    /// The event swaps places with the next one (its stamp then goes backwards).
+    pub reorder: f64,
+    /// One reading of the event becomes NaN.
+    pub nan: f64,
+    /// A reading becomes an outlier: a sighting's range ×3, a velocity ×10.
+    pub spike: f64,
+    /// The stamp jumps one second back (a clock glitch), the content unchanged.
+    pub backwards: f64,
+}
+
+impl FaultRates {
+    /// Names accepted by [`FromStr`], in order.
+    pub const NAMES: [&'static str; 6] =
+        ["drop", "duplicate", "reorder", "nan", "spike", "backwards"];
+
+    /// Every fault at the same rate.
+    pub fn all(rate: f64) -> Self {
+        Self {
+            drop: rate,
+            duplicate: rate,
+            reorder: rate,
+            nan: rate,
+            spike: rate,
+            backwards: rate,
+        }
+    }
+
+    /// `true` when no fault is enabled.
+    pub fn is_none(&self) -> bool {
+        *self == Self::default()
+    }
+
+    fn slot(&mut self, name: &str) -> Option<&mut f64> {
+        Some(match name {
+            "drop" => &mut self.drop,
+            "duplicate" | "dup" => &mut self.duplicate,
+            "reorder" => &mut self.reorder,
+            "nan" => &mut self.nan,
+            "spike" => &mut self.spike,
+            "backwards" => &mut self.backwards,
+            _ => return None,
+        })
+    }
+}
+
+/// Parses `name=rate` pairs separated by commas, e.g. `drop=0.01,nan=0.005`, or
+/// `all=RATE` for every fault at once.
+impl FromStr for FaultRates {
+    type Err = anyhow::Error;
+
+    fn from_str(s: &str) -> Result<Self> {
+        let mut rates = Self::default();
+        for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+            let (name, value) = part
+                .split_once('=')
+                .with_context(|| format!("fault `{part}`: expected name=rate"))?;
+            let rate: f64 = value
+                .trim()
+                .parse()
+                .with_context(|| format!("fault `{part}`: rate is not a number"))?;
+            if !(0.0..=1.0).contains(&rate) {
+                bail!("fault `{part}`: rate must be within 0..=1");
+            }
+            if name.trim() == "all" {
+                rates = Self::all(rate);
+                continue;
+            }
+            *rates.slot(name.trim()).with_context(|| {
+                format!(
+                    "unknown fault `{name}`: expected one of {} or all",
+                    Self::NAMES.join(", ")
+                )
+            })? = rate;
+        }
+        Ok(rates)
+    }
+}
+
+/// What was injected, by kind.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct FaultCounts {
+    /// Events removed.
+    pub dropped: usize,
+    /// Events delivered twice.
+    pub duplicated: usize,
+    /// Adjacent pairs swapped.
+    pub reordered: usize,
+    /// Events with a NaN reading.
+    pub nan: usize,
+    /// Events with an outlier reading.
+    pub spiked: usize,
+    /// Events whose stamp jumped back.
+    pub backwards: usize,
+}
+
+impl FaultCounts {
+    /// Total number of faults.
+    pub fn total(&self) -> usize {
+        self.dropped + self.duplicated + self.reordered + self.nan + self.spiked + self.backwards
+    }
+}
+
+fn coin(p: f64) -> Bernoulli {
+    // Rates are validated to 0..=1 when parsed; clamp for rates built in code.
+    Bernoulli::new(p.clamp(0.0, 1.0))
+        .unwrap_or_else(|_| Bernoulli::new(0.0).expect("0 is a valid probability"))
+}
+
+/// Corrupts one reading of `kind` with NaN; `false` when the event has no reading.
+fn poison(kind: &mut EventKind<f64>) -> bool {
+    match kind {
+        EventKind::Velocity { v, .. } => *v = f64::NAN,
+        EventKind::Increment(p) => p.theta = f64::NAN,
+        EventKind::YawRate(w) => *w = f64::NAN,
+        EventKind::Sighting(s) => s.z.range = f64::NAN,
+        _ => return false,
+    }
+    true
+}
+
+/// Turns one reading of `kind` into an outlier; `false` when the event has no reading.
+fn spike(kind: &mut EventKind<f64>) -> bool {
+    match kind {
+        EventKind::Velocity { v, omega } => {
+            *v *= 10.0;
+            *omega *= 10.0;
+        }
+        EventKind::Increment(p) => {
+            p.x *= 10.0;
+            p.y *= 10.0;
+        }
+        EventKind::YawRate(w) => *w *= 10.0,
+        EventKind::Sighting(s) => s.z.range *= 3.0,
+        _ => return false,
+    }
+    true
+}
+
+/// Applies the faults to a copy of `events`, drawing from a generator seeded by `seed`.
+/// Each event is considered once for each fault, in the order of [`FaultRates::NAMES`];
+/// a dropped event gets no other fault.
+pub fn inject(
+    events: &[Event<f64>],
+    rates: &FaultRates,
+    seed: u64,
+) -> (Vec<Event<f64>>, FaultCounts) {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let (drop, dup, reorder, nan, spk, back) = (
+        coin(rates.drop),
+        coin(rates.duplicate),
+        coin(rates.reorder),
+        coin(rates.nan),
+        coin(rates.spike),
+        coin(rates.backwards),
+    );
+    let mut counts = FaultCounts::default();
+    let mut out = Vec::with_capacity(events.len() + events.len() / 8);
+    let mut swap_next = false;
+    for event in events {
+        if drop.sample(&mut rng) {
+            counts.dropped += 1;
+            continue;
+        }
+        let mut e = *event;
+        if nan.sample(&mut rng) && poison(&mut e.kind) {
+            counts.nan += 1;
+        }
+        if spk.sample(&mut rng) && spike(&mut e.kind) {
+            counts.spiked += 1;
+        }
+        if back.sample(&mut rng) {
+            e.stamp -= 1.0;
+            counts.backwards += 1;
+        }
+        out.push(e);
+        if swap_next {
+            let n = out.len();
+            out.swap(n - 2, n - 1);
+            counts.reordered += 1;
+            swap_next = false;
+        } else if reorder.sample(&mut rng) {
+            swap_next = true;
+        }
+        if dup.sample(&mut rng) {
+            out.push(e);
+            counts.duplicated += 1;
+        }
+    }
+    (out, counts)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use microslam::event::{Identity, Sighting};
+    use microslam::sensors::range_bearing::RangeBearing;
+
+    fn stream(n: usize) -> Vec<Event<f64>> {
+        (0..n)
+            .map(|i| {
+                let t = i as f64 * 0.01;
+                if i % 4 == 0 {
+                    let s = Sighting {
+                        identity: Identity::Unique(7),
+                        z: RangeBearing::new(2.0, 0.1),
+                        covariance: None,
+                    };
+                    Event::new(t, EventKind::Sighting(s))
+                } else {
+                    Event::new(t, EventKind::Velocity { v: 0.3, omega: 0.1 })
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn parses_rates_and_refuses_nonsense() {
+        let r: FaultRates = "drop=0.1, nan=0.02,dup=0.5".parse().unwrap();
+        assert_eq!((r.drop, r.nan, r.duplicate, r.spike), (0.1, 0.02, 0.5, 0.0));
+        assert_eq!(
+            "all=0.01".parse::<FaultRates>().unwrap(),
+            FaultRates::all(0.01)
+        );
+        assert!("drop=2".parse::<FaultRates>().is_err());
+        assert!(
+            "jitter=0.1"
+                .parse::<FaultRates>()
+                .unwrap_err()
+                .to_string()
+                .contains("unknown fault")
+        );
+        assert!("drop".parse::<FaultRates>().is_err());
+        assert!("".parse::<FaultRates>().unwrap().is_none());
+    }
+
+    /// Each fault alone: the stream shows exactly what the counts say.
+    #[test]
+    fn counts_match_what_is_in_the_stream() {
+        let events = stream(20_000);
+        let n = events.len();
+        let only = |name: &str| inject(&events, &format!("{name}=0.02").parse().unwrap(), 42);
+
+        let (out, c) = only("drop");
+        assert_eq!(out.len(), n - c.dropped);
+        let (out, c) = only("duplicate");
+        assert_eq!(out.len(), n + c.duplicated);
+        assert_eq!(
+            out.windows(2).filter(|w| w[0] == w[1]).count(),
+            c.duplicated
+        );
+        let (out, c) = only("nan");
+        let nans = out.iter().filter(|e| match e.kind {
+            EventKind::Velocity { v, .. } => v.is_nan(),
+            EventKind::Sighting(s) => s.z.range.is_nan(),
+            _ => false,
+        });
+        assert_eq!(nans.count(), c.nan);
+        let (out, c) = only("spike");
+        let spikes = out.iter().filter(|e| match e.kind {
+            EventKind::Velocity { v, .. } => v > 1.0,
+            EventKind::Sighting(s) => s.z.range > 5.0,
+            _ => false,
+        });
+        assert_eq!(spikes.count(), c.spiked);
+        let (out, c) = only("backwards");
+        assert_eq!(
+            out.iter()
+                .zip(&events)
+                .filter(|(a, b)| a.stamp != b.stamp)
+                .count(),
+            c.backwards
+        );
+        let (out, c) = only("reorder");
+        assert_eq!(
+            out.windows(2).filter(|w| w[1].stamp < w[0].stamp).count(),
+            c.reordered
+        );
+
+        // All at once, each near its rate (binomial, n = 20 000, p = 0.02: σ ≈ 20).
+        let (_, c) = inject(&events, &FaultRates::all(0.02), 42);
+        for (name, k) in [
+            ("drop", c.dropped),
+            ("dup", c.duplicated),
+            ("reorder", c.reordered),
+            ("nan", c.nan),
+            ("spike", c.spiked),
+            ("back", c.backwards),
+        ] {
+            assert!((300..=500).contains(&k), "{name}: {k}");
+        }
+    }
+
+    #[test]
+    fn same_seed_same_faults_and_zero_rates_change_nothing() {
+        let events = stream(5_000);
+        let a = inject(&events, &FaultRates::all(0.05), 9);
+        let b = inject(&events, &FaultRates::all(0.05), 9);
+        assert_eq!(a.1, b.1);
+        assert_eq!(format!("{:?}", a.0), format!("{:?}", b.0));
+        let (same, none) = inject(&events, &FaultRates::default(), 9);
+        assert_eq!(none.total(), 0);
+        assert_eq!(same, events);
+    }
+}

@@ -1,0 +1,117 @@
+//! TUM trajectory files: `t x y z qx qy qz qw`, one pose a line.
+
+use anyhow::{Context, Result};
+use microslam::geometry::Pose2;
+use std::io::Write;
+use std::path::Path;
+
+/// One TUM line for a planar pose (z = 0, rotation about z).
+pub fn tum_line(stamp: f64, pose: &Pose2<f64>) -> String {
+    let mut s = Vec::new();
+    push_line(&mut s, stamp, pose);
+    s.pop();
+    String::from_utf8_lossy(&s).into_owned()
+}
+
+/// Writes poses as a TUM file.
+pub fn write_tum(path: &Path, poses: impl Iterator<Item = (f64, Pose2<f64>)>) -> Result<()> {
+    let file =
+        std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+    let mut w = std::io::BufWriter::with_capacity(1 << 16, file);
+    let mut line = Vec::with_capacity(128);
+    line.extend_from_slice(b"# timestamp x y z qx qy qz qw\n");
+    for (t, p) in poses {
+        push_line(&mut line, t, &p);
+        if line.len() > 4096 {
+            w.write_all(&line)?;
+            line.clear();
+        }
+    }
+    w.write_all(&line)?;
+    w.flush()
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
+fn push_line(out: &mut Vec<u8>, stamp: f64, p: &Pose2<f64>) {
+    let (s, c) = (p.theta / 2.0).sin_cos();
+    push_fixed::<6>(out, stamp);
+    out.push(b' ');
+    push_fixed::<6>(out, p.x);
+    out.push(b' ');
+    push_fixed::<6>(out, p.y);
+    out.extend_from_slice(b" 0 0 0 ");
+    push_fixed::<9>(out, s);
+    out.push(b' ');
+    push_fixed::<9>(out, c);
+    out.push(b'\n');
+}
+
+/// Appends `v` with 6 or 9 digits after the point, by integer arithmetic: float
+/// formatting dominated the writing of long trajectories. Values too large for it fall
+/// back to the standard formatter.
+fn push_fixed<const D: u32>(out: &mut Vec<u8>, v: f64) {
+    let unit = 10u64.pow(D);
+    let scaled = v.abs() * unit as f64 + 0.5;
+    if scaled.is_nan() || scaled >= 9.0e18 {
+        let _ = write!(out, "{v:.*}", D as usize);
+        return;
+    }
+    let n = scaled as u64; // truncating x + 0.5 rounds x ≥ 0
+    if v < 0.0 && n != 0 {
+        out.push(b'-');
+    }
+    push_digits(out, n / unit, 1);
+    out.push(b'.');
+    push_digits(out, n % unit, D as usize);
+}
+
+/// "00" … "99": two digits per division.
+const PAIRS: &[u8; 200] = b"0001020304050607080910111213141516171819\
+2021222324252627282930313233343536373839\
+4041424344454647484950515253545556575859\
+6061626364656667686970717273747576777879\
+8081828384858687888990919293949596979899";
+
+/// Appends the decimal digits of `n`, zero-padded to at least `min_digits` (≤ 20).
+fn push_digits(out: &mut Vec<u8>, mut n: u64, min_digits: usize) {
+    let mut buf = [b'0'; 20];
+    let mut i = buf.len();
+    while n >= 100 {
+        let d = (n % 100) as usize * 2;
+        n /= 100;
+        i -= 2;
+        buf[i..i + 2].copy_from_slice(&PAIRS[d..d + 2]);
+    }
+    if n >= 10 {
+        let d = n as usize * 2;
+        i -= 2;
+        buf[i..i + 2].copy_from_slice(&PAIRS[d..d + 2]);
+    } else {
+        i -= 1;
+        buf[i] = b'0' + n as u8;
+    }
+    let start = i.min(buf.len().saturating_sub(min_digits));
+    out.extend_from_slice(&buf[start..]);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quaternion_of_a_yaw() {
+        let l = tum_line(1.5, &Pose2::new(1.0, -2.0, std::f64::consts::FRAC_PI_2));
+        assert_eq!(
+            l,
+            "1.500000 1.000000 -2.000000 0 0 0 0.707106781 0.707106781"
+        );
+        let l = tum_line(
+            1248444187.156,
+            &Pose2::new(-0.0000004, -0.25, -std::f64::consts::PI),
+        );
+        assert_eq!(
+            l,
+            "1248444187.156000 0.000000 -0.250000 0 0 0 -1.000000000 0.000000000"
+        );
+    }
+}

@@ -1,0 +1,410 @@
+//! The estimator side of the replay, generic over the filter's scalar.
+
+use crate::cli::{AssociationMode, Precision};
+use crate::config::Settings;
+use crate::readers::Recording;
+use anyhow::{Result, bail};
+use indicatif::ProgressBar;
+use microslam::EkfError;
+use microslam::association::{Jcbb, KnownIds, Observed, Pairing, icnn, observe_known};
+use microslam::ekf::{EkfSlam, UpdateOutcome, state_dim};
+use microslam::event::{EventKind, Identity};
+use microslam::geometry::Pose2;
+use microslam::motion::integrate_velocity;
+use microslam::scalar::Real;
+use microslam::sensors::range_bearing::RangeBearing;
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+/// Landmark capacity of the host replay's filter.
+pub const MAX_LANDMARKS: usize = 64;
+/// Largest JCBB batch; larger batches are split.
+pub const MAX_BATCH: usize = 8;
+/// Candidate landmarks kept per sighting in JCBB.
+pub const MAX_CANDIDATES: usize = 8;
+
+type Slam<T> = EkfSlam<T, { state_dim(MAX_LANDMARKS) }>;
+
+/// The filter's pose estimate after the prediction to an odometry stamp.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseSample {
+    /// Time, s.
+    pub stamp: f64,
+    /// Estimated pose.
+    pub pose: Pose2<f64>,
+    /// Its covariance (x, y, θ).
+    pub covariance: [[f64; 3]; 3],
+}
+
+/// A landmark of the final map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MapLandmark {
+    /// Estimated position.
+    pub position: [f64; 2],
+    /// Its 2 × 2 covariance.
+    pub covariance: [[f64; 2]; 2],
+    /// The id the estimator bound it to (known-id mode only).
+    pub id: Option<u32>,
+    /// How many of the sightings it absorbed (its creation included) were of each true
+    /// landmark: for scoring the association only, never seen by the estimator.
+    pub true_ids: BTreeMap<u32, usize>,
+}
+
+/// What the association did with the sightings.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct AssociationCounts {
+    /// Sightings that corrected the filter.
+    pub updates: usize,
+    /// Sightings refused by the update's innovation gate.
+    pub gated: usize,
+    /// Sightings that created a landmark.
+    pub added: usize,
+    /// Sightings dropped as ambiguous (near a landmark but not compatible).
+    pub ambiguous: usize,
+    /// Sightings dropped before association (range limits, invalid values, no id).
+    pub dropped: usize,
+    /// Sightings refused by the filter (full map, numerical refusal).
+    pub refused: usize,
+    /// JCBB searches cut at the node bound.
+    pub truncated_searches: usize,
+}
+
+/// Everything a replay produced.
+#[derive(Clone, Debug)]
+pub struct ReplayRun {
+    /// Association mode used.
+    pub mode: AssociationMode,
+    /// Scalar the filter ran on.
+    pub precision: Precision,
+    /// Pose estimates, one per odometry sample.
+    pub trajectory: Vec<PoseSample>,
+    /// Odometry integrated alone (dead reckoning), at the same stamps.
+    pub dead_reckoning: Vec<(f64, Pose2<f64>)>,
+    /// The final map.
+    pub landmarks: Vec<MapLandmark>,
+    /// NIS of each accepted update.
+    pub nis: Vec<f64>,
+    /// Odometry steps.
+    pub steps: usize,
+    /// Landmark sightings offered to the estimator.
+    pub sightings: usize,
+    /// Association counts.
+    pub counts: AssociationCounts,
+    /// Time spent inside the estimator (prediction, association, update).
+    pub filter_time: Duration,
+}
+
+/// Replays the recording's events through the filter in the chosen precision.
+pub fn replay(
+    recording: &Recording,
+    settings: &Settings,
+    mode: AssociationMode,
+    precision: Precision,
+    progress: Option<&ProgressBar>,
+) -> Result<ReplayRun> {
+    // Dead reckoning runs beside the filter (it only needs the events).
+    let max_gap = settings.odometry.max_gap_s;
+    std::thread::scope(|s| {
+        let dr = s.spawn(|| dead_reckoning(recording, max_gap));
+        let mut run =
+            match precision {
+                Precision::F32 => Replayer::<f32>::new(settings, mode, recording)?
+                    .run(recording, progress, precision),
+                Precision::F64 => Replayer::<f64>::new(settings, mode, recording)?
+                    .run(recording, progress, precision),
+            }?;
+        run.dead_reckoning = dr
+            .join()
+            .map_err(|_| anyhow::anyhow!("dead-reckoning thread panicked"))?;
+        Ok(run)
+    })
+}
+
+/// Odometry integrated alone from the recording's initial pose, at each odometry stamp
+/// (after integrating up to it), with the same motion model and gap rule as the filter.
+pub fn dead_reckoning(recording: &Recording, max_gap: f64) -> Vec<(f64, Pose2<f64>)> {
+    let mut out = Vec::with_capacity(recording.events.len());
+    let mut pose = recording.initial_pose.unwrap_or(Pose2::IDENTITY);
+    let mut velocity = (0.0, 0.0);
+    let mut last: Option<f64> = None;
+    for e in &recording.events {
+        if let Some(prev) = last {
+            let dt = (e.stamp - prev).min(max_gap);
+            if dt > 0.0 {
+                pose = integrate_velocity(&pose, velocity.0, velocity.1, dt).pose;
+            }
+        }
+        last = Some(last.map_or(e.stamp, |p: f64| p.max(e.stamp)));
+        if let EventKind::Velocity { v, omega } = e.kind {
+            velocity = (v, omega);
+            out.push((e.stamp, pose));
+        }
+    }
+    out
+}
+
+struct Replayer<T: Real> {
+    slam: Box<Slam<T>>,
+    ids: KnownIds<MAX_LANDMARKS>,
+    jcbb: Jcbb<T, MAX_BATCH, MAX_CANDIDATES>,
+    mode: AssociationMode,
+    settings: Settings,
+    true_ids: Vec<BTreeMap<u32, usize>>,
+    nis: Vec<f64>,
+    counts: AssociationCounts,
+    filter_time: Duration,
+}
+
+fn lit<T: Real>(v: f64) -> T {
+    T::lit(v)
+}
+
+impl<T: Real> Replayer<T> {
+    fn new(settings: &Settings, mode: AssociationMode, recording: &Recording) -> Result<Self> {
+        let config = settings.ekf_config::<T>();
+        let mut slam = Box::new(Slam::<T>::new(config));
+        let start = recording.initial_pose.unwrap_or(Pose2::IDENTITY);
+        let start = Pose2::new(lit(start.x), lit(start.y), lit(start.theta));
+        if let Err(e) = slam.init(config, start) {
+            bail!("filter settings refused: {e}");
+        }
+        Ok(Self {
+            slam,
+            ids: KnownIds::new(),
+            jcbb: Jcbb::new(settings.association_config::<T>()),
+            mode,
+            settings: settings.clone(),
+            true_ids: Vec::new(),
+            nis: Vec::new(),
+            counts: AssociationCounts::default(),
+            filter_time: Duration::ZERO,
+        })
+    }
+
+    fn run(
+        mut self,
+        recording: &Recording,
+        progress: Option<&ProgressBar>,
+        precision: Precision,
+    ) -> Result<ReplayRun> {
+        let events = &recording.events;
+        let max_gap = self.settings.odometry.max_gap_s;
+        let window = self.settings.association.batch_window_s;
+        let mut trajectory = Vec::with_capacity(events.len());
+        let mut velocity = (0.0f64, 0.0f64);
+        let mut last: Option<f64> = None;
+        let mut sightings = 0;
+        let mut steps = 0;
+        let mut batch: Vec<(RangeBearing<T>, Identity)> = Vec::with_capacity(MAX_BATCH);
+        let mut i = 0;
+        while i < events.len() {
+            if let Some(p) = progress
+                && i % 4096 == 0
+            {
+                p.set_position(i as u64);
+            }
+            let Some(event) = events.get(i) else { break };
+            let t = event.stamp;
+            // Predict to the event's stamp with the velocity held since the last one.
+            if let Some(prev) = last {
+                let dt = (t - prev).min(max_gap);
+                if dt > 0.0 {
+                    let clock = Instant::now();
+                    let r = self
+                        .slam
+                        .predict_velocity(lit(velocity.0), lit(velocity.1), lit(dt));
+                    self.filter_time += clock.elapsed();
+                    if let Err(e) = r {
+                        bail!("prediction at t = {t} refused: {e}");
+                    }
+                }
+            }
+            last = Some(last.map_or(t, |p: f64| p.max(t)));
+            match event.kind {
+                EventKind::Velocity { v, omega } => {
+                    velocity = (v, omega);
+                    steps += 1;
+                    trajectory.push(self.sample(t));
+                    i += 1;
+                }
+                EventKind::Sighting(_) => {
+                    // Gather the batch: consecutive sightings within the window.
+                    batch.clear();
+                    let mut j = i;
+                    while let Some(e) = events.get(j) {
+                        let EventKind::Sighting(s) = e.kind else {
+                            break;
+                        };
+                        if e.stamp > t + window {
+                            break;
+                        }
+                        sightings += 1;
+                        let z = RangeBearing::new(lit::<T>(s.z.range), lit::<T>(s.z.bearing));
+                        let range = s.z.range;
+                        let sg = &self.settings.sighting;
+                        if range < sg.min_range || range > sg.max_range || !z.is_valid() {
+                            self.counts.dropped += 1;
+                        } else {
+                            batch.push((z, s.identity));
+                        }
+                        j += 1;
+                    }
+                    let clock = Instant::now();
+                    self.observe_batch(&batch);
+                    self.filter_time += clock.elapsed();
+                    i = j;
+                }
+                _ => i += 1,
+            }
+        }
+        if let Some(p) = progress {
+            p.set_position(events.len() as u64);
+        }
+        let landmarks = (0..self.slam.landmark_count())
+            .map(|j| {
+                let p = self.slam.landmark(j).unwrap_or_default();
+                let c = self.slam.landmark_covariance(j).unwrap_or_default();
+                MapLandmark {
+                    position: [p[0].to_f64(), p[1].to_f64()],
+                    covariance: [
+                        [c[(0, 0)].to_f64(), c[(0, 1)].to_f64()],
+                        [c[(1, 0)].to_f64(), c[(1, 1)].to_f64()],
+                    ],
+                    id: self.ids.id_of(j),
+                    true_ids: self.true_ids.get(j).cloned().unwrap_or_default(),
+                }
+            })
+            .collect();
+        Ok(ReplayRun {
+            mode: self.mode,
+            precision,
+            trajectory,
+            dead_reckoning: Vec::new(),
+            landmarks,
+            nis: self.nis,
+            steps,
+            sightings,
+            counts: self.counts,
+            filter_time: self.filter_time,
+        })
+    }
+
+    fn sample(&self, stamp: f64) -> PoseSample {
+        let p = self.slam.pose();
+        let c = self.slam.pose_covariance();
+        let mut covariance = [[0.0; 3]; 3];
+        for (r, row) in covariance.iter_mut().enumerate() {
+            for (k, v) in row.iter_mut().enumerate() {
+                *v = c[(r, k)].to_f64();
+            }
+        }
+        PoseSample {
+            stamp,
+            pose: Pose2::new(p.x.to_f64(), p.y.to_f64(), p.theta.to_f64()),
+            covariance,
+        }
+    }
+
+    fn credit(&mut self, landmark: usize, identity: Identity) {
+        if let Identity::Unique(id) | Identity::Class(id) = identity {
+            if self.true_ids.len() <= landmark {
+                self.true_ids.resize(landmark + 1, BTreeMap::new());
+            }
+            if let Some(m) = self.true_ids.get_mut(landmark) {
+                *m.entry(id).or_default() += 1;
+            }
+        }
+    }
+
+    fn updated(
+        &mut self,
+        landmark: usize,
+        outcome: Result<UpdateOutcome<T>, EkfError>,
+        truth: Identity,
+    ) {
+        match outcome {
+            Ok(UpdateOutcome::Accepted { nis }) => {
+                self.counts.updates += 1;
+                self.nis.push(nis.to_f64());
+                self.credit(landmark, truth);
+            }
+            Ok(UpdateOutcome::Gated { .. }) => self.counts.gated += 1,
+            Err(_) => self.counts.refused += 1,
+        }
+    }
+
+    fn added(&mut self, outcome: Result<usize, EkfError>, truth: Identity) {
+        match outcome {
+            Ok(j) => {
+                self.counts.added += 1;
+                self.credit(j, truth);
+            }
+            Err(_) => self.counts.refused += 1,
+        }
+    }
+
+    /// Associates and applies one batch. `truth` identities are only used by the known-id
+    /// mode (as the front end's answer) and for scoring.
+    fn observe_batch(&mut self, batch: &[(RangeBearing<T>, Identity)]) {
+        match self.mode {
+            AssociationMode::Known => {
+                for &(z, identity) in batch {
+                    let Identity::Unique(id) = identity else {
+                        self.counts.dropped += 1;
+                        continue;
+                    };
+                    match observe_known(&mut self.slam, &mut self.ids, id, &z) {
+                        Ok(Observed::Updated { index, outcome }) => {
+                            self.updated(index, Ok(outcome), identity)
+                        }
+                        Ok(Observed::Added { index }) => self.added(Ok(index), identity),
+                        Err(_) => self.counts.refused += 1,
+                    }
+                }
+            }
+            AssociationMode::Icnn => {
+                let config = *self.jcbb.config();
+                for &(z, truth) in batch {
+                    let pairing = icnn(&self.slam, &z, &config);
+                    self.apply(pairing, &z, truth);
+                }
+            }
+            AssociationMode::Jcbb => {
+                for chunk in batch.chunks(MAX_BATCH) {
+                    let mut zs = [RangeBearing::new(T::ZERO, T::ZERO); MAX_BATCH];
+                    for (slot, (z, _)) in zs.iter_mut().zip(chunk) {
+                        *slot = *z;
+                    }
+                    let zs = zs.get(..chunk.len()).unwrap_or(&[]);
+                    let mut pairings = [Pairing::Invalid; MAX_BATCH];
+                    match self.jcbb.associate(&self.slam, zs, &mut pairings) {
+                        Ok(outcome) => {
+                            if outcome.truncated {
+                                self.counts.truncated_searches += 1;
+                            }
+                            for (&pairing, &(z, truth)) in pairings.iter().zip(chunk) {
+                                self.apply(pairing, &z, truth);
+                            }
+                        }
+                        Err(_) => self.counts.refused += chunk.len(),
+                    }
+                }
+            }
+        }
+    }
+
+    fn apply(&mut self, pairing: Pairing, z: &RangeBearing<T>, truth: Identity) {
+        match pairing {
+            Pairing::Landmark(j) => {
+                let r = self.slam.update(j, z);
+                self.updated(j, r, truth);
+            }
+            Pairing::New => {
+                let r = self.slam.add_landmark(z);
+                self.added(r, truth);
+            }
+            Pairing::Ambiguous => self.counts.ambiguous += 1,
+            Pairing::Invalid => self.counts.dropped += 1,
+        }
+    }
+}
