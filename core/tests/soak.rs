@@ -147,13 +147,13 @@ fn run(steps: usize, nees_bound: Option<f64>) {
             "too few updates: {}",
             r.updates
         );
-        // The error stays inside the filter's own uncertainty: at the 2-DOF χ² quantile of
-        // 1 − 1e-5 over the ~40–2000 checkpoints (measured maxima 8.1 and 6.3 over 20 000 steps).
-        assert!(
-            r.max_position_nees < 23.0,
-            "position NEES {}",
-            r.max_position_nees
-        );
+        if let Some(bound) = nees_bound {
+            assert!(
+                r.max_position_nees < bound,
+                "position NEES {}",
+                r.max_position_nees
+            );
+        }
     }
 }
 

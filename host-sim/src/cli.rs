@@ -30,6 +30,9 @@ pub enum Command {
     /// Run the built-in deterministic simulator (landmark field, robot driving loops)
     /// through the landmark EKF-SLAM and score it.
     Sim(SimArgs),
+    /// Stream a dataset to the firmware (under QEMU or on a board) and compare its
+    /// estimates with the host's, bit for bit.
+    Hil(HilArgs),
     /// Localize on a saved grid map (`map.yaml` from `replay --filter grid-slam`) with the
     /// grid particle filter.
     Localize(LocalizeArgs),
@@ -178,12 +181,40 @@ impl Default for SimArgs {
     }
 }
 
+/// Options of `host-sim hil`.
+#[derive(Debug, Clone, Args)]
+#[command(group(clap::ArgGroup::new("link").required(true).args(["qemu", "serial"])))]
+pub struct HilArgs {
+    /// Run this firmware ELF under `qemu-system-arm` (mps2-an386).
+    #[arg(long)]
+    pub qemu: Option<PathBuf>,
+    /// Talk to a board on this serial port (e.g. /dev/ttyACM0).
+    #[arg(long)]
+    pub serial: Option<String>,
+    /// Baud rate of the serial port.
+    #[arg(long, default_value_t = 115_200)]
+    pub baud: u32,
+    /// Dataset: `mrclam:<dir>`, as for `replay`.
+    #[arg(long, short)]
+    pub dataset: DatasetSpec,
+    /// Robot whose log is streamed.
+    #[arg(long, default_value_t = 1)]
+    pub robot: u8,
+    /// Output folder: hil.json (the comparison) and firmware.tum (the device's trajectory).
+    #[arg(long, short, default_value = "out/hil")]
+    pub out: PathBuf,
+    /// Give up waiting for replies after this many seconds.
+    #[arg(long, default_value_t = 900)]
+    pub timeout_s: u64,
+}
+
 /// Runs what the command line asks for.
 pub fn run(cli: &Cli) -> Result<()> {
     match &cli.command {
         Some(Command::Replay(args)) => crate::replay::run_cli(args, cli.quiet),
         Some(Command::Sim(args)) => crate::sim::run_cli(args, cli.quiet),
         Some(Command::Localize(args)) => crate::grid_replay::localize_cli(args, cli.quiet),
+        Some(Command::Hil(args)) => crate::hil::run_cli(args, cli.quiet),
         None => crate::sim::run_cli(&SimArgs::default(), cli.quiet),
     }
 }

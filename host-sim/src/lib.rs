@@ -22,6 +22,7 @@ pub mod config;
 pub mod datasets;
 pub mod faults;
 pub mod grid_replay;
+pub mod hil;
 pub mod metrics;
 pub mod output;
 pub mod readers;

@@ -53,6 +53,7 @@ fn sim_writes_every_output() {
         "metrics.json",
         "trajectory.tum",
         "groundtruth.tum",
+        "landmarks.csv",
         "map.png",
         "errors.png",
     ] {

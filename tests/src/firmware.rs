@@ -1,21 +1,11 @@
-//! Hardware-in-the-loop under QEMU: the firmware ELF on `mps2-an386`, its UART0 on the
-//! child's stdin/stdout, semihosting (defmt) on a file so it never mixes with the frames.
+//! Hardware-in-the-loop under QEMU, through `host_sim::hil`: the firmware ELF on
+//! `mps2-an386`, its UART0 on the child's stdin/stdout, semihosting (defmt) on a file so
+//! it never mixes with the frames; plus the synthetic drive of the equality test.
 
-use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
-use std::thread;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use microslam::ekf::{EkfConfig, EkfSlam, state_dim};
-use microslam::wire::{
-    Command as WireCommand, FrameDecoder, MAX_FRAME_LEN, Odometry, Session, ToDevice, ToHost,
-    encode_frame,
-};
-
-/// Landmarks of the firmware's EKF (`firmware_example::config::EKF_LANDMARKS`).
-pub const FIRMWARE_LANDMARKS: usize = 32;
+use microslam::wire::{Command as WireCommand, Odometry, ToDevice};
 
 /// The workspace root.
 pub fn workspace_root() -> PathBuf {
@@ -34,97 +24,12 @@ pub fn firmware_elf() -> PathBuf {
     )
 }
 
-/// Frames of a message stream, back to back.
-pub fn encode_all(messages: &[ToDevice]) -> Vec<u8> {
-    let mut out = Vec::new();
-    let mut buf = [0u8; MAX_FRAME_LEN];
-    for m in messages {
-        out.extend_from_slice(encode_frame(m, &mut buf).expect("every message fits a frame"));
-    }
-    out
-}
-
-/// The replies of the host reference: the firmware's `Session`, with the firmware's EKF
-/// size and configuration, fed the same bytes.
-pub fn host_replies(bytes: &[u8]) -> Vec<ToHost> {
-    let mut ekf = Box::new(EkfSlam::<f32, { state_dim(FIRMWARE_LANDMARKS) }>::new(
-        EkfConfig::DEFAULT_F32,
-    ));
-    let mut session = Session::<_, FIRMWARE_LANDMARKS>::new(&mut ekf, EkfConfig::DEFAULT_F32);
-    bytes.iter().filter_map(|&b| session.receive(b)).collect()
-}
-
-/// What a QEMU run returned.
-pub struct QemuRun {
-    /// Replies in arrival order.
-    pub replies: Vec<ToHost>,
-    /// Frames from the firmware that did not decode.
-    pub bad_frames: u32,
-    /// Wall time from spawn to the last expected reply.
-    pub elapsed: Duration,
-}
+pub use host_sim::hil::{LinkRun as QemuRun, encode_all, host_replies};
 
 /// Runs `elf` under QEMU, writes `bytes` to its UART without waiting, and reads replies
 /// until `expected` have arrived (or `timeout` passes: then fewer are returned).
 pub fn run_in_qemu(elf: &Path, bytes: Vec<u8>, expected: usize, timeout: Duration) -> QemuRun {
-    let semihosting_log = elf.with_extension("semihosting.log");
-    let mut child: Child = Command::new("qemu-system-arm")
-        .args(["-machine", "mps2-an386", "-cpu", "cortex-m4"])
-        .args(["-display", "none", "-monitor", "none", "-serial", "stdio"])
-        .arg("-chardev")
-        .arg(format!("file,id=semi,path={}", semihosting_log.display()))
-        .args([
-            "-semihosting-config",
-            "enable=on,target=native,chardev=semi",
-        ])
-        .arg("-kernel")
-        .arg(elf)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("qemu-system-arm runs (apt-get install qemu-system-arm)");
-    let start = Instant::now();
-    let mut stdin = child.stdin.take().expect("piped stdin");
-    let writer = thread::spawn(move || {
-        // The device keeps up or QEMU's UART holds the line; either way no reply is awaited.
-        let _ = stdin.write_all(&bytes);
-        let _ = stdin.flush();
-        // Keep the pipe open until the reader is done (EOF would not stop the firmware).
-        stdin
-    });
-    let mut stdout = child.stdout.take().expect("piped stdout");
-    let (tx, rx) = mpsc::channel::<Vec<u8>>();
-    thread::spawn(move || {
-        let mut buf = [0u8; 4096];
-        while let Ok(n) = stdout.read(&mut buf) {
-            if n == 0 || tx.send(buf[..n].to_vec()).is_err() {
-                break;
-            }
-        }
-    });
-    let mut decoder = FrameDecoder::<MAX_FRAME_LEN>::new();
-    let mut replies = Vec::with_capacity(expected);
-    while replies.len() < expected {
-        let left = timeout.saturating_sub(start.elapsed());
-        let Ok(chunk) = rx.recv_timeout(left) else {
-            break;
-        };
-        decoder.feed::<ToHost>(&chunk, |r| {
-            if let Ok(m) = r {
-                replies.push(m);
-            }
-        });
-    }
-    let elapsed = start.elapsed();
-    let _ = child.kill();
-    let _ = child.wait();
-    drop(writer.join());
-    QemuRun {
-        replies,
-        bad_frames: decoder.counters().bad(),
-        elapsed,
-    }
+    host_sim::hil::run_qemu(elf, bytes, expected, timeout).expect("qemu-system-arm runs")
 }
 
 /// A deterministic drive: a robot circling twice through a ring of 12 landmarks, velocity

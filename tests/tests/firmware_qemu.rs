@@ -6,7 +6,7 @@
 
 use std::time::Duration;
 
-use microslam::wire::{Command, EventsToWire, StepResult, ToDevice, ToHost};
+use microslam::wire::{StepResult, ToDevice, ToHost};
 use microslam_replay_tests::firmware::{
     encode_all, firmware_elf, host_replies, run_in_qemu, synthetic_drive, with_line_noise,
 };
@@ -94,23 +94,7 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_a_synthetic_drive() {
 fn firmware_in_qemu_equals_host_bit_for_bit_on_mrclam_dataset6() {
     let dir = host_sim::datasets::resolve("mrclam", "dataset6").expect("MRCLAM dataset 6");
     let recording = host_sim::readers::mrclam::read(&dir, 1).expect("robot 1 reads");
-    let mut to_wire = EventsToWire::new();
-    let start = recording.initial_pose.unwrap_or_default();
-    let mut messages = vec![ToDevice::Command {
-        seq: 0,
-        command: Command::Reset {
-            x: start.x as f32,
-            y: start.y as f32,
-            theta: start.theta as f32,
-        },
-    }];
-    for e in &recording.events {
-        messages.extend(to_wire.push(e));
-    }
-    messages.push(ToDevice::Command {
-        seq: to_wire.last_seq() + 1,
-        command: Command::ReportStatus,
-    });
+    let messages = host_sim::hil::messages_for(&recording);
     let bytes = encode_all(&messages);
     let expected = host_replies(&bytes);
     assert_eq!(expected.len(), messages.len());
@@ -137,24 +121,15 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_mrclam_dataset6() {
     );
     assert_eq!(run.bad_frames, 0);
     assert_eq!(run.replies.len(), expected.len(), "every message answered");
-    let mut differing = 0;
-    for (got, want) in run.replies.iter().zip(&expected) {
-        differing += usize::from(bits(got) != bits(want));
-    }
-    assert_eq!(differing, 0, "estimates differing from the host");
-
-    // The firmware's trajectory, for inspection (TUM: t x y z qx qy qz qw).
-    let mut tum = String::new();
-    for r in &run.replies {
-        if let ToHost::Estimate(e) = r {
-            let [x, y, th] = e.pose;
-            let (s, c) = ((th / 2.0).sin(), (th / 2.0).cos());
-            let t = e.stamp_us as f64 * 1e-6;
-            tum.push_str(&format!("{t:.6} {x} {y} 0 0 0 {s} {c}\n"));
-        }
-    }
+    let comparison = host_sim::hil::compare(messages.len(), &run, &expected);
+    assert_eq!(
+        comparison.identical,
+        expected.len(),
+        "estimates differing from the host"
+    );
+    assert_eq!(comparison.max_pose_difference, [0.0; 3]);
     let out = elf.with_extension("mrclam6.tum");
-    std::fs::write(&out, tum).expect("trajectory written");
+    std::fs::write(&out, host_sim::hil::tum(&run.replies)).expect("trajectory written");
     let Some(ToHost::Status {
         status,
         stack_peak_bytes,

@@ -168,6 +168,10 @@ pub struct Metrics {
     pub reader_dropped_sightings: usize,
     /// The SE(2) alignment of the estimate onto ground truth: x, y (m), θ (rad).
     pub se2_alignment: Option<[f64; 3]>,
+    /// What the `se2` landmark error was aligned on: `trajectory` (the robot's ground
+    /// truth) or `landmarks` (no robot ground truth: the estimated landmarks, matched by
+    /// id, least-squares aligned onto the true ones).
+    pub landmark_alignment: Option<String>,
 }
 
 /// Scores a replay against the recording's ground truth.
@@ -227,6 +231,14 @@ pub fn evaluate(recording: &Recording, run: &ReplayRun) -> Metrics {
     m.ate_rmse_m = by_alignment(&|t| position_rmse(t, &est, &gt));
     m.yaw_rmse_deg = by_alignment(&|t| yaw_rmse_deg(t, &est, &gt));
     m.landmark_rmse_m = by_alignment(&|t| landmark_rmse(t, recording, run));
+    m.landmark_alignment = transforms.1.map(|_| "trajectory".to_owned());
+    if transforms.1.is_none()
+        && let Some(t) = landmark_only_alignment(recording, run)
+    {
+        // No robot ground truth (MRCLAM dataset 1): align the maps themselves.
+        m.landmark_rmse_m.se2 = landmark_rmse(&t, recording, run);
+        m.landmark_alignment = Some("landmarks".to_owned());
+    }
     let dr = self::transforms(&dr_est, &dr_gt);
     m.dead_reckoning_ate_rmse_m = Aligned {
         first_pose: dr.0.and_then(|t| position_rmse(&t, &dr_est, &dr_gt)),
@@ -324,6 +336,21 @@ pub fn landmark_pairs(
         })
         .collect();
     min_cost(&cost)
+}
+
+/// SE(2) least-squares alignment of the estimated landmarks onto the true ones, matched
+/// by id (known-id runs only); `None` with fewer than two matches.
+fn landmark_only_alignment(recording: &Recording, run: &ReplayRun) -> Option<Pose2<f64>> {
+    let mut est = Vec::new();
+    let mut truth = Vec::new();
+    for l in &run.landmarks {
+        let id = l.id?;
+        if let Some(g) = recording.landmarks.iter().find(|g| g.id == id) {
+            est.push(l.position);
+            truth.push(g.position);
+        }
+    }
+    se2_least_squares(&est, &truth)
 }
 
 fn landmark_rmse(t: &Pose2<f64>, recording: &Recording, run: &ReplayRun) -> Option<f64> {

@@ -28,7 +28,7 @@ pub fn progress_bar(len: u64) -> ProgressBar {
     bar
 }
 
-/// Writes `trajectory.tum`, `groundtruth.tum`, `map.png` and
+/// Writes `trajectory.tum`, `landmarks.csv`, `map.png` and
 /// `errors.png` (when `plots`), then `metrics.json` with the wall time since `started`.
 pub fn write_all(
     out: &Path,
@@ -49,12 +49,6 @@ pub fn write_all(
                 run.trajectory.iter().map(|p| (p.stamp, p.pose)),
             )
         });
-        let truth = s.spawn(|| -> Result<()> {
-            write_tum(
-                &out.join("groundtruth.tum"),
-                recording.ground_truth.iter().map(|p| (p.stamp, p.pose)),
-            )
-        });
         let map = s.spawn(|| -> Result<()> {
             if plots {
                 draw_map(&out.join("map.png"), recording, run, &alignment)?;
@@ -67,19 +61,45 @@ pub fn write_all(
             h.join()
                 .unwrap_or_else(|_| Err(anyhow::anyhow!("writer thread panicked")))
         };
-        (
-            join(tum).and(join(truth)),
-            join(map),
-            errors.unwrap_or(Ok(())),
-        )
+        (join(tum), join(map), errors.unwrap_or(Ok(())))
     });
     a?;
     b?;
     c?;
+    write_landmarks(&out.join("landmarks.csv"), run)?;
     metrics.wall_time_s = started.elapsed().as_secs_f64();
     let json = serde_json::to_string_pretty(metrics)?;
     let path = out.join("metrics.json");
     std::fs::write(&path, json + "\n").with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// `landmarks.csv`: the final map, one landmark a line: index, bound id (known-id mode,
+/// else empty), x, y (m) and the covariance entries σxx, σxy, σyy (m²).
+pub fn write_landmarks(path: &Path, run: &ReplayRun) -> Result<()> {
+    use std::fmt::Write;
+    let mut text = String::from("index,id,x,y,cov_xx,cov_xy,cov_yy\n");
+    for (i, l) in run.landmarks.iter().enumerate() {
+        let id = l.id.map(|id| id.to_string()).unwrap_or_default();
+        let _ = writeln!(
+            text,
+            "{i},{id},{:.6},{:.6},{:.3e},{:.3e},{:.3e}",
+            l.position[0],
+            l.position[1],
+            l.covariance[0][0],
+            l.covariance[0][1],
+            l.covariance[1][1]
+        );
+    }
+    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Writes `groundtruth.tum` (the recording's ground truth) into `out`, creating it.
+pub fn write_truth(out: &Path, recording: &Recording) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    write_tum(
+        &out.join("groundtruth.tum"),
+        recording.ground_truth.iter().map(|p| (p.stamp, p.pose)),
+    )
 }
 
 /// A short human-readable summary of the metrics.

@@ -61,12 +61,20 @@ pub fn run_and_report(
     started: Instant,
 ) -> Result<()> {
     let progress = (!quiet).then(|| crate::output::progress_bar(recording.events.len() as u64));
-    let run = replay(recording, settings, mode, precision, progress.as_ref())?;
-    if let Some(p) = &progress {
-        p.finish_and_clear();
-    }
-    let mut metrics = crate::metrics::evaluate(recording, &run);
-    crate::output::write_all(out, recording, &run, &mut metrics, plots, started)?;
+    // The ground truth is written while the filter runs.
+    let metrics = std::thread::scope(|s| -> Result<_> {
+        let truth = s.spawn(|| crate::output::write_truth(out, recording));
+        let run = replay(recording, settings, mode, precision, progress.as_ref())?;
+        if let Some(p) = &progress {
+            p.finish_and_clear();
+        }
+        let mut metrics = crate::metrics::evaluate(recording, &run);
+        truth
+            .join()
+            .map_err(|_| anyhow::anyhow!("writer thread panicked"))??;
+        crate::output::write_all(out, recording, &run, &mut metrics, plots, started)?;
+        Ok(metrics)
+    })?;
     if !quiet {
         println!("{}", crate::output::summary(&metrics, out));
     }

@@ -1,0 +1,341 @@
+//! `host-sim hil`: hardware in the loop. A dataset is streamed as `microslam::wire` frames
+//! to the firmware (`firmware-example`) — under QEMU or on a board's serial port — at full
+//! speed, without waiting for replies; the firmware's estimates are collected and compared
+//! with the host running the very code the firmware runs ([`Session`], f32, libm), fed the
+//! same bytes. With libm on both sides they are equal bit for bit.
+//!
+//! The stream: a reset to the dataset's initial pose, the events through
+//! [`EventsToWire`] (velocity odometry becomes motion steps up to each next event), and a
+//! status request whose answer carries the firmware's counters and stack peak.
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::thread;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use microslam::ekf::{EkfConfig, EkfSlam, state_dim};
+use microslam::wire::{
+    Command as WireCommand, EventsToWire, FrameDecoder, MAX_FRAME_LEN, Session, ToDevice, ToHost,
+    encode_frame,
+};
+use serde::Serialize;
+
+use crate::cli::HilArgs;
+use crate::readers::Recording;
+
+/// Landmarks of the firmware's EKF (`firmware_example::config::EKF_LANDMARKS`).
+pub const FIRMWARE_LANDMARKS: usize = 32;
+
+/// The messages for a recording: reset to its initial pose, its events, a status request.
+pub fn messages_for(recording: &Recording) -> Vec<ToDevice> {
+    let start = recording.initial_pose.unwrap_or_default();
+    let mut out = vec![ToDevice::Command {
+        seq: 0,
+        command: WireCommand::Reset {
+            x: start.x as f32,
+            y: start.y as f32,
+            theta: start.theta as f32,
+        },
+    }];
+    let mut to_wire = EventsToWire::new();
+    for e in &recording.events {
+        out.extend(to_wire.push(e));
+    }
+    out.push(ToDevice::Command {
+        seq: to_wire.last_seq().wrapping_add(1),
+        command: WireCommand::ReportStatus,
+    });
+    out
+}
+
+/// Frames of a message stream, back to back.
+pub fn encode_all(messages: &[ToDevice]) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut buf = [0u8; MAX_FRAME_LEN];
+    for m in messages {
+        // Every message type fits a frame (checked by the wire tests).
+        if let Ok(frame) = encode_frame(m, &mut buf) {
+            out.extend_from_slice(frame);
+        }
+    }
+    out
+}
+
+/// The replies of the host reference: the firmware's [`Session`], with the firmware's EKF
+/// size and configuration, fed the same bytes.
+pub fn host_replies(bytes: &[u8]) -> Vec<ToHost> {
+    let mut ekf = Box::new(EkfSlam::<f32, { state_dim(FIRMWARE_LANDMARKS) }>::new(
+        EkfConfig::DEFAULT_F32,
+    ));
+    let mut session = Session::<_, FIRMWARE_LANDMARKS>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+    bytes.iter().filter_map(|&b| session.receive(b)).collect()
+}
+
+/// What came back over a link.
+#[derive(Debug)]
+pub struct LinkRun {
+    /// Replies in arrival order.
+    pub replies: Vec<ToHost>,
+    /// Frames from the device that did not decode.
+    pub bad_frames: u32,
+    /// Wall time from start to the last expected reply.
+    pub elapsed: Duration,
+}
+
+/// Writes `bytes` from one thread and decodes replies from `rx` until `expected` arrived
+/// or `timeout` passed.
+fn collect(
+    rx: &mpsc::Receiver<Vec<u8>>,
+    expected: usize,
+    start: Instant,
+    timeout: Duration,
+) -> LinkRun {
+    let mut decoder = FrameDecoder::<MAX_FRAME_LEN>::new();
+    let mut replies = Vec::with_capacity(expected);
+    while replies.len() < expected {
+        let left = timeout.saturating_sub(start.elapsed());
+        let Ok(chunk) = rx.recv_timeout(left) else {
+            break;
+        };
+        decoder.feed::<ToHost>(&chunk, |r| {
+            if let Ok(m) = r {
+                replies.push(m);
+            }
+        });
+    }
+    LinkRun {
+        replies,
+        bad_frames: decoder.counters().bad(),
+        elapsed: start.elapsed(),
+    }
+}
+
+fn reader_thread(mut source: impl Read + Send + 'static) -> mpsc::Receiver<Vec<u8>> {
+    let (tx, rx) = mpsc::channel::<Vec<u8>>();
+    thread::spawn(move || {
+        let mut buf = [0u8; 4096];
+        loop {
+            match source.read(&mut buf) {
+                Ok(0) => break,
+                Ok(n) => {
+                    if tx.send(buf[..n].to_vec()).is_err() {
+                        break;
+                    }
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(_) => break,
+            }
+        }
+    });
+    rx
+}
+
+/// Runs `elf` under QEMU (`mps2-an386`, UART0 on the child's stdin/stdout, semihosting
+/// on a file next to the ELF), writes `bytes` and collects `expected` replies.
+pub fn run_qemu(elf: &Path, bytes: Vec<u8>, expected: usize, timeout: Duration) -> Result<LinkRun> {
+    let semihosting_log = elf.with_extension("semihosting.log");
+    let mut child: Child = Command::new("qemu-system-arm")
+        .args(["-machine", "mps2-an386", "-cpu", "cortex-m4"])
+        .args(["-display", "none", "-monitor", "none", "-serial", "stdio"])
+        .arg("-chardev")
+        .arg(format!("file,id=semi,path={}", semihosting_log.display()))
+        .args([
+            "-semihosting-config",
+            "enable=on,target=native,chardev=semi",
+        ])
+        .arg("-kernel")
+        .arg(elf)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .context("starting qemu-system-arm (apt-get install qemu-system-arm)")?;
+    let start = Instant::now();
+    let (Some(mut stdin), Some(stdout)) = (child.stdin.take(), child.stdout.take()) else {
+        bail!("qemu-system-arm without piped stdio");
+    };
+    let writer = thread::spawn(move || {
+        let _ = stdin.write_all(&bytes);
+        let _ = stdin.flush();
+        // Kept open until the run ends: the firmware would not notice EOF anyway.
+        stdin
+    });
+    let rx = reader_thread(stdout);
+    let run = collect(&rx, expected, start, timeout);
+    let _ = child.kill();
+    let _ = child.wait();
+    drop(writer.join());
+    Ok(run)
+}
+
+/// Opens a board's serial port (8N1, `baud`), writes `bytes` and collects `expected`
+/// replies.
+pub fn run_serial(
+    port: &str,
+    baud: u32,
+    bytes: Vec<u8>,
+    expected: usize,
+    timeout: Duration,
+) -> Result<LinkRun> {
+    let link = serialport::new(port, baud)
+        .timeout(Duration::from_millis(200))
+        .open()
+        .with_context(|| format!("opening serial port {port}"))?;
+    let reader = link.try_clone().context("cloning the serial port")?;
+    let start = Instant::now();
+    let mut writer_link = link;
+    let writer = thread::spawn(move || {
+        let _ = writer_link.write_all(&bytes);
+        let _ = writer_link.flush();
+        writer_link
+    });
+    let rx = reader_thread(reader);
+    let run = collect(&rx, expected, start, timeout);
+    drop(writer.join());
+    Ok(run)
+}
+
+/// The comparison of the device's replies with the host's.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Comparison {
+    /// Messages sent.
+    pub messages: usize,
+    /// Replies expected (one per message).
+    pub expected: usize,
+    /// Replies received.
+    pub received: usize,
+    /// Received frames that did not decode.
+    pub bad_frames: u32,
+    /// Replies equal to the host's bit for bit (the stack figure aside).
+    pub identical: usize,
+    /// Largest |device − host| over all estimates: x, y, θ (m, m, rad).
+    pub max_pose_difference: [f64; 3],
+    /// Largest |device − host| of the covariance entries `[xx, xy, xθ, yy, yθ, θθ]`.
+    pub max_covariance_difference: [f64; 6],
+    /// Wall time of the run, s.
+    pub seconds: f64,
+    /// The device's stack high-water mark from its final status, bytes.
+    pub stack_peak_bytes: Option<u32>,
+}
+
+fn canonical(reply: &ToHost) -> Vec<u8> {
+    let mut r = *reply;
+    if let ToHost::Status {
+        stack_peak_bytes, ..
+    } = &mut r
+    {
+        *stack_peak_bytes = 0; // measured on the device only
+    }
+    let mut buf = [0u8; 256];
+    postcard::to_slice(&r, &mut buf)
+        .map(|b| b.to_vec())
+        .unwrap_or_default()
+}
+
+/// Compares the device's replies with the host's, in order.
+pub fn compare(messages: usize, device: &LinkRun, host: &[ToHost]) -> Comparison {
+    let mut c = Comparison {
+        messages,
+        expected: host.len(),
+        received: device.replies.len(),
+        bad_frames: device.bad_frames,
+        seconds: device.elapsed.as_secs_f64(),
+        ..Comparison::default()
+    };
+    for (got, want) in device.replies.iter().zip(host) {
+        c.identical += usize::from(canonical(got) == canonical(want));
+        if let (ToHost::Estimate(a), ToHost::Estimate(b)) = (got, want) {
+            for (m, (x, y)) in c
+                .max_pose_difference
+                .iter_mut()
+                .zip(a.pose.iter().zip(b.pose))
+            {
+                *m = m.max(f64::from((x - y).abs()));
+            }
+            let pairs = a.covariance.iter().zip(b.covariance);
+            for (m, (x, y)) in c.max_covariance_difference.iter_mut().zip(pairs) {
+                *m = m.max(f64::from((x - y).abs()));
+            }
+        }
+    }
+    if let Some(ToHost::Status {
+        stack_peak_bytes, ..
+    }) = device.replies.last()
+    {
+        c.stack_peak_bytes = Some(*stack_peak_bytes);
+    }
+    c
+}
+
+/// The device's trajectory in TUM format (`t x y z qx qy qz qw`).
+pub fn tum(replies: &[ToHost]) -> String {
+    let mut out = String::new();
+    for r in replies {
+        if let ToHost::Estimate(e) = r {
+            let [x, y, th] = e.pose.map(f64::from);
+            let (s, c) = (th / 2.0).sin_cos();
+            let t = e.stamp_us as f64 * 1e-6;
+            out.push_str(&format!("{t:.6} {x} {y} 0 0 0 {s} {c}\n"));
+        }
+    }
+    out
+}
+
+/// `host-sim hil`.
+pub fn run_cli(args: &HilArgs, quiet: bool) -> Result<()> {
+    let recording = crate::readers::read(&args.dataset, args.robot)?;
+    let messages = messages_for(&recording);
+    let bytes = encode_all(&messages);
+    let host = host_replies(&bytes);
+    let timeout = Duration::from_secs(args.timeout_s);
+    if !quiet {
+        println!(
+            "{}: {} events → {} frames ({} bytes)",
+            recording.name,
+            recording.events.len(),
+            messages.len(),
+            bytes.len()
+        );
+    }
+    let run = match (&args.qemu, &args.serial) {
+        (Some(elf), None) => run_qemu(elf, bytes, host.len(), timeout)?,
+        (None, Some(port)) => run_serial(port, args.baud, bytes, host.len(), timeout)?,
+        _ => bail!("give exactly one of --qemu <elf> and --serial <port>"),
+    };
+    let comparison = compare(messages.len(), &run, &host);
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let report = args.out.join("hil.json");
+    std::fs::write(&report, serde_json::to_string_pretty(&comparison)?)?;
+    std::fs::write(args.out.join("firmware.tum"), tum(&run.replies))?;
+    if !quiet {
+        println!(
+            "{} of {} replies received, {} identical to the host bit for bit; max pose \
+             difference {:?}; {:.1} s; report in {}",
+            comparison.received,
+            comparison.expected,
+            comparison.identical,
+            comparison.max_pose_difference,
+            comparison.seconds,
+            report.display()
+        );
+    }
+    if comparison.received != comparison.expected || comparison.identical != comparison.expected {
+        bail!(
+            "the device's estimates differ from the host's ({} of {} identical)",
+            comparison.identical,
+            comparison.expected
+        );
+    }
+    Ok(())
+}
+
+/// Where `cargo build -p firmware-example --profile firmware` puts the QEMU ELF.
+pub fn default_firmware_elf() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../target/thumbv7em-none-eabihf/firmware/firmware-example")
+}
