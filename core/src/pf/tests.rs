@@ -330,3 +330,22 @@ fn invalid_settings_are_refused() {
         Some(PfError::EmptyScan)
     );
 }
+
+#[test]
+fn memory_per_capacity_is_as_documented() {
+    use core::mem::size_of;
+    let filter = size_of::<ParticleFilter<32>>();
+    let slam = size_of::<GridSlam<'static, 256, 256, 32, 90>>();
+    let loc = size_of::<GridLocalizer<'static, 32, 90>>();
+    std::println!(
+        "ParticleFilter<32> {filter} B, GridSlam<256,256,32,90> {slam} B, GridLocalizer<32,90> {loc} B"
+    );
+    // Documented: 28·P + 40 bytes plus the config; the SLAM/localizer add 16·B + ~100.
+    let config = size_of::<FilterConfig>();
+    assert!(filter <= 28 * 32 + 40 + config, "{filter}");
+    assert!(
+        slam <= filter + 16 * 90 + 100 + size_of::<GridPfConfig>(),
+        "{slam}"
+    );
+    assert!(slam < 2600 && loc < 2600, "{slam} {loc}");
+}

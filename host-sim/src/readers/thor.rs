@@ -162,15 +162,30 @@ fn draw_trajectory(path: &Path, traj: &[(f64, Pose2<f64>)]) -> Result<()> {
                 grid_style,
             ))
             .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    }
-    for gy in (y0 - pad).ceil() as i64..=(y1 + pad).floor() as i64 {
-        let gy = gy as f64;
+        // No axes: the plotters build here has no font backend (a 1 m grid instead).
+        let grid_style = ShapeStyle::from(&RGBColor(220, 220, 220)).stroke_width(1);
+        for gx in (x0 - pad).ceil() as i64..=(x1 + pad).floor() as i64 {
+            let gx = gx as f64;
+            chart
+                .draw_series(LineSeries::new(
+                    [(gx, y0 - pad), (gx, y1 + pad)],
+                    grid_style,
+                ))
+                .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        }
+        for gy in (y0 - pad).ceil() as i64..=(y1 + pad).floor() as i64 {
+            let gy = gy as f64;
+            chart
+                .draw_series(LineSeries::new(
+                    [(x0 - pad, gy), (x1 + pad, gy)],
+                    grid_style,
+                ))
+                .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        }
         chart
-            .draw_series(LineSeries::new(
-                [(x0 - pad, gy), (x1 + pad, gy)],
-                grid_style,
-            ))
+            .draw_series(LineSeries::new(traj.iter().map(|(_, p)| (p.x, p.y)), &RED))
             .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        root.present().map_err(|e| anyhow::anyhow!("{e:?}"))?;
     }
     chart
         .draw_series(LineSeries::new(traj.iter().map(|(_, p)| (p.x, p.y)), &RED))
