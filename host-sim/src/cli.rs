@@ -214,6 +214,13 @@ pub struct HilArgs {
     /// Give up waiting for replies after this many seconds.
     #[arg(long, default_value_t = 900)]
     pub timeout_s: u64,
+    /// Corrupt this fraction of the frames sent (one byte each): the device must count
+    /// exactly that many bad frames and still answer every other frame like the host.
+    #[arg(long, default_value_t = 0.0)]
+    pub corrupt_frames: f64,
+    /// Seed of the frame corruption.
+    #[arg(long, default_value_t = 1)]
+    pub corrupt_seed: u64,
 }
 
 /// Runs what the command line asks for.
