@@ -143,7 +143,7 @@ pub fn camera_recording(
         bail!("the settings have no [scenario] section");
     };
     let every = (sc.odometry_rate_hz / sc.sighting_rate_hz).round().max(1.0) as usize;
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0xde7e_c7_u64);
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x00de_7ec7_u64);
     let unit = Normal::new(0.0, 1.0)?;
     let share = Uniform::new(0.0, 1.0)?;
     let n = &detector.noise;
