@@ -261,7 +261,12 @@ fn seed_height_band_paints_walls_into_the_floor_map() {
 
 #[test]
 fn association_corrects_wrong_class_ids() {
-    let report = host_sim::camera::run_detections(1, &DetectorSettings::default()).unwrap();
+    let (report, _, _) = host_sim::camera::run_detections(
+        1,
+        &DetectorSettings::default(),
+        host_sim::camera::SignField::default(),
+    )
+    .unwrap();
     let mode = |m| report.modes.iter().find(|r| r.class_use == m).unwrap();
     for m in &report.modes {
         eprintln!(

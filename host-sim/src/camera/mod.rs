@@ -35,6 +35,12 @@ pub struct DetectionsArgs {
     /// Share of detections with a wrong class id.
     #[arg(long, default_value_t = 0.15)]
     pub wrong_class_share: f64,
+    /// Number of signs (default: the `sim.toml` scenario's 24 landmarks).
+    #[arg(long)]
+    pub signs: Option<u32>,
+    /// Smallest distance between two signs, metres (default: the scenario's 0.8 m).
+    #[arg(long)]
+    pub min_spacing: Option<f64>,
     /// Output folder: metrics.json, map.png (geometry with class hints).
     #[arg(long, short, default_value = "out/detections")]
     pub out: PathBuf,
@@ -88,19 +94,36 @@ pub struct DetectionsReport {
     pub modes: Vec<ModeReport>,
 }
 
-/// The simulated drive of `sim.toml` with seed `seed`, the camera, the signs and the
-/// detections converted to sightings; the settings carry the camera's planar mount.
-pub fn camera_scenario(
-    seed: u64,
-    detector: &DetectorSettings,
-) -> Result<(
+/// The sign field: how many signs and how far apart (`None`: the `sim.toml` scenario's).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SignField {
+    /// Number of signs.
+    pub signs: Option<u32>,
+    /// Smallest distance between two signs, metres.
+    pub min_spacing_m: Option<f64>,
+}
+
+/// What [`camera_scenario`] builds.
+pub type CameraScenario = (
     Settings,
     Recording,
     Vec<detections::Detection>,
     Room,
     SimCamera,
-)> {
+);
+
+/// The simulated drive of `sim.toml` with seed `seed`, the camera, the signs and the
+/// detections converted to sightings; the settings carry the camera's planar mount.
+pub fn camera_scenario(
+    seed: u64,
+    detector: &DetectorSettings,
+    field: SignField,
+) -> Result<CameraScenario> {
     let mut settings = Settings::load("sim", None)?;
+    if let Some(sc) = settings.scenario.as_mut() {
+        sc.landmarks = field.signs.unwrap_or(sc.landmarks);
+        sc.min_landmark_spacing_m = field.min_spacing_m.unwrap_or(sc.min_landmark_spacing_m);
+    }
     let camera = SimCamera::default();
     let m = camera.camera.planar_mount();
     settings.sighting.mount = [m.x, m.y, m.theta];
@@ -114,30 +137,40 @@ pub fn camera_scenario(
     Ok((settings, recording, dets, room, camera))
 }
 
-/// Runs the chain in every class-use mode.
-pub fn run_detections(seed: u64, detector: &DetectorSettings) -> Result<DetectionsReport> {
-    let (settings, recording, dets, room, camera) = camera_scenario(seed, detector)?;
+/// Runs the chain in every class-use mode; also returns the recording and the run of
+/// [`ClassUse::GeometryWithHints`] (for pictures).
+pub fn run_detections(
+    seed: u64,
+    detector: &DetectorSettings,
+    field: SignField,
+) -> Result<(DetectionsReport, Recording, ChainRun)> {
+    let (settings, recording, dets, room, camera) = camera_scenario(seed, detector, field)?;
     let mut modes = Vec::new();
+    let mut hinted = None;
     for class_use in [
         ClassUse::Dictionary,
         ClassUse::Geometry,
         ClassUse::GeometryWithHints,
     ] {
-        let ChainRun { run, classes } =
-            detections::run_chain(&recording, &dets, &settings, class_use)?;
+        let chain = detections::run_chain(&recording, &dets, &settings, class_use)?;
         modes.push(ModeReport {
             class_use,
-            classes,
-            ekf: crate::metrics::evaluate(&recording, &run),
+            classes: chain.classes,
+            ekf: crate::metrics::evaluate(&recording, &chain.run),
         });
+        if class_use == ClassUse::GeometryWithHints {
+            hinted = Some(chain);
+        }
     }
-    Ok(DetectionsReport {
+    let report = DetectionsReport {
         seed,
         camera: format!("{:?}", camera),
         detector: format!("{detector:?}"),
         signs: room.signs.len(),
         modes,
-    })
+    };
+    let hinted = hinted.context("the hinted mode did not run")?;
+    Ok((report, recording, hinted))
 }
 
 /// `host-sim detections`.
@@ -146,12 +179,14 @@ pub fn detections_cli(args: &DetectionsArgs, quiet: bool) -> Result<()> {
         wrong_class_share: args.wrong_class_share,
         ..DetectorSettings::default()
     };
-    let report = run_detections(args.seed, &detector)?;
+    let field = SignField {
+        signs: args.signs,
+        min_spacing_m: args.min_spacing,
+    };
+    let (report, recording, chain) = run_detections(args.seed, &detector, field)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     // The picture of the mode the estimator is meant to run in.
-    let (settings, recording, dets, _, _) = camera_scenario(args.seed, &detector)?;
-    let chain = detections::run_chain(&recording, &dets, &settings, ClassUse::GeometryWithHints)?;
     let metrics = crate::metrics::evaluate(&recording, &chain.run);
     let alignment = metrics
         .se2_alignment
@@ -213,7 +248,8 @@ pub fn run_texture(
     settings: &TextureSettings,
 ) -> Result<(TextureReport, texture::TextureMap, texture::TextureMap)> {
     let detector = DetectorSettings::default();
-    let (slam_settings, recording, dets, room, camera) = camera_scenario(seed, &detector)?;
+    let (slam_settings, recording, dets, room, camera) =
+        camera_scenario(seed, &detector, SignField::default())?;
     let truth = &recording.ground_truth;
     let (map, points) = texture::build(&camera, &room, truth, settings, seed, |t| {
         crate::metrics::interpolate_pose(truth, t)
