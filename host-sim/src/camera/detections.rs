@@ -150,13 +150,13 @@ pub fn camera_recording(
     let mut events = Vec::with_capacity(base.events.len());
     let mut detections = Vec::new();
     let mut step = 0usize;
-    let mut truth = base.ground_truth.iter();
+    let mut truth = crate::metrics::TruthCursor::new(&base.ground_truth);
     for e in &base.events {
         let EventKind::Velocity { .. } = e.kind else {
             continue;
         };
         events.push(*e);
-        let pose = truth.next().map(|p| p.pose);
+        let pose = truth.at(e.stamp);
         if step.is_multiple_of(every)
             && let Some(pose) = pose
         {

@@ -258,3 +258,25 @@ pub fn build(
     }
     (map, counts)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cells_and_centres_agree_and_off_map_points_are_skipped() {
+        let mut map = TextureMap::new(1.0, 0.5);
+        assert_eq!(map.size, 4);
+        // Row 0 is the largest y: (−0.75, 0.75) is the top-left cell.
+        assert_eq!(map.cell(-0.9, 0.9), Some(0));
+        assert_eq!(map.centre(0), (-0.75, 0.75));
+        assert_eq!(map.cell(0.9, -0.9), Some(15));
+        assert_eq!(map.cell(1.01, 0.0), None);
+        assert!(!map.add(f64::NAN, 0.0, [1, 2, 3]));
+        assert!(map.add(0.1, 0.1, [10, 20, 30]));
+        assert!(map.add(0.2, 0.2, [20, 40, 60]));
+        let i = map.cell(0.1, 0.1).unwrap();
+        assert_eq!(map.colour(i), Some([15, 30, 45]));
+        assert_eq!(map.colour(0), None);
+    }
+}
