@@ -149,6 +149,14 @@ pub struct ReplayArgs {
     /// THOR run number (`thor:` datasets: 20 or 21).
     #[arg(long, default_value_t = 20)]
     pub run: u32,
+    /// Inject faults into the event stream before the replay, e.g.
+    /// `drop=0.01,duplicate=0.01,reorder=0.01,nan=0.01,spike=0.01,backwards=0.01` or
+    /// `all=0.01` (landmark datasets); what was injected is reported in `metrics.json`.
+    #[arg(long)]
+    pub faults: Option<crate::faults::FaultRates>,
+    /// Seed of the fault generator.
+    #[arg(long, default_value_t = 1)]
+    pub fault_seed: u64,
 }
 
 /// Options of `host-sim sim`.

@@ -156,6 +156,7 @@ pub fn run_cli(args: &SimArgs, quiet: bool) -> Result<()> {
         !args.no_plots,
         quiet,
         started,
+        None,
     )
 }
 
