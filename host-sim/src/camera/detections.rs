@@ -303,7 +303,14 @@ pub fn run_chain(
         last = Some(last.map_or(e.stamp, |p: f64| p.max(e.stamp)));
         match e.kind {
             EventKind::Velocity { v, omega } => {
-                velocity = (v, omega);
+                // As the replay does: an implausible sample is skipped, the last one held.
+                if v.abs() <= settings.odometry.max_speed_mps
+                    && omega.abs() <= settings.odometry.max_turn_rate_radps
+                {
+                    velocity = (v, omega);
+                } else {
+                    counts.odometry_refused += 1;
+                }
                 trajectory.push(sample(&slam, e.stamp));
             }
             EventKind::Sighting(s) => {
@@ -452,7 +459,14 @@ pub fn run_chain(
         precision: Precision::F64,
         steps: trajectory.len(),
         trajectory,
-        dead_reckoning: crate::replay::dead_reckoning(recording, max_gap),
+        dead_reckoning: crate::replay::dead_reckoning(
+            recording,
+            max_gap,
+            (
+                settings.odometry.max_speed_mps,
+                settings.odometry.max_turn_rate_radps,
+            ),
+        ),
         landmarks,
         nis,
         sightings,
