@@ -36,6 +36,12 @@ pub enum Command {
     /// Localize on a saved grid map (`map.yaml` from `replay --filter grid-slam`) with the
     /// grid particle filter.
     Localize(LocalizeArgs),
+    /// Coloured floor map from simulated RGB-D frames (`--dataset sim`), scored against the
+    /// simulator's true floor texture.
+    Texture(crate::camera::TextureArgs),
+    /// Sign detections (box centre + depth, wrong class ids) → range/bearing → EKF-SLAM on
+    /// the simulator; ATE and the share of wrong class ids the association corrected.
+    Detections(crate::camera::DetectionsArgs),
 }
 
 /// Which estimator a replay drives.
@@ -230,6 +236,8 @@ pub fn run(cli: &Cli) -> Result<()> {
         Some(Command::Sim(args)) => crate::sim::run_cli(args, cli.quiet),
         Some(Command::Hil(args)) => crate::hil::run_cli(args, cli.quiet),
         Some(Command::Localize(args)) => crate::grid_replay::localize_cli(args, cli.quiet),
+        Some(Command::Texture(args)) => crate::camera::texture_cli(args, cli.quiet),
+        Some(Command::Detections(args)) => crate::camera::detections_cli(args, cli.quiet),
         None => crate::sim::run_cli(&SimArgs::default(), cli.quiet),
     }
 }
