@@ -148,7 +148,8 @@ impl LidarWorld {
             wall(5.3, -0.5, 5.9, 0.1),
             wall(-5.9, 1.2, -5.4, 1.8),
         ];
-        // Pillars (0.3 m squares) along the outer walls.
+        // Pillars (0.3 m squares) along the outer walls and the central block, so that
+        // no stretch of corridor is a featureless pair of parallel walls.
         for &(cx, cy) in &[
             (-3.0, -3.85),
             (0.5, -3.85),
@@ -157,6 +158,13 @@ impl LidarWorld {
             (2.0, 3.85),
             (5.85, -2.5),
             (-5.85, -1.0),
+            (0.0, -1.65),
+            (2.7, -1.65),
+            (-3.0, -1.65),
+            (2.0, 1.65),
+            (-2.0, 1.65),
+            (3.65, 0.0),
+            (-3.65, 0.5),
         ] {
             let h = 0.15;
             walls.extend([
