@@ -179,11 +179,164 @@ pub fn wire_decoder(data: &[u8]) {
     }
 }
 
+/// Fuzzes the grid SLAM step API on a small map: each op is a selector byte and three
+/// `f32`s (predictions), or a scan whose ranges are the next bytes read as `f32`s and
+/// whose geometry comes from the input too. No panic; refused input changes nothing; the
+/// estimate and every particle stay finite; the weights stay normalised (Σ w = 1).
+pub fn grid_steps(data: &[u8]) {
+    use microslam::grid::{LogOdds, OccupancyGrid};
+    use microslam::pf::{GridPfConfig, GridSlam};
+    use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+    let config = GridPfConfig::MICROCONTROLLER;
+    let mut map = Box::new(OccupancyGrid::<64, 64>::new(
+        config.resolution,
+        -1.6,
+        -1.6,
+        LogOdds::SEED,
+    ));
+    let Ok(mut slam) = GridSlam::<64, 64, 8, 64>::new(&mut map, config, Pose2::new(0.0, 0.0, 0.0))
+    else {
+        panic!("the MICROCONTROLLER preset is valid");
+    };
+    let mut bytes = data;
+    while let Some((&op, rest)) = bytes.split_first() {
+        bytes = rest;
+        let Some([a, b, c]) = take_f32s::<3>(&mut bytes) else {
+            return;
+        };
+        let before = (slam.pose(), *slam.filter().poses());
+        let refused = match op % 4 {
+            0 => slam.predict(a, b).is_err(),
+            1 => slam.predict_velocity(a, b, c).is_err(),
+            _ => {
+                let n = usize::from(op >> 2).min(bytes.len() / 4);
+                let mut ranges = Vec::with_capacity(n);
+                for _ in 0..n {
+                    let Some([r]) = take_f32s::<1>(&mut bytes) else {
+                        break;
+                    };
+                    ranges.push(if op % 4 == 2 { r } else { r.abs() % 4.0 });
+                }
+                let geometry = LidarGeometry {
+                    first_angle: a,
+                    angle_increment: b,
+                    min_range: 0.05,
+                    max_range: c.abs().min(30.0),
+                    no_return_range: 30.0,
+                    mount: Pose2::new(0.0, 0.0, 0.0),
+                };
+                slam.observe(&LidarScan {
+                    ranges: &ranges,
+                    geometry,
+                })
+                .is_err()
+            }
+        };
+        if refused && op % 4 < 2 {
+            assert_eq!(
+                before.0,
+                slam.pose(),
+                "op {op}: a refused prediction moved the estimate"
+            );
+        }
+        let pose = slam.pose();
+        assert!(
+            pose.x.is_finite() && pose.y.is_finite() && pose.theta.is_finite(),
+            "estimate {pose:?}"
+        );
+        assert!(
+            slam.filter()
+                .poses()
+                .iter()
+                .all(|p| p.x.is_finite() && p.y.is_finite() && p.theta.is_finite())
+        );
+        let w = slam.filter().log_weights();
+        assert!(
+            w.iter().all(|v| !v.is_nan() && *v <= 1e-3),
+            "log-weights {w:?}"
+        );
+        let max = w.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v));
+        let log_sum = max + w.iter().map(|&v| (v - max).exp()).sum::<f32>().ln();
+        assert!(
+            log_sum.abs() < 1e-3,
+            "weights not normalised (log Σ w = {log_sum}): {w:?}"
+        );
+    }
+}
+
+/// Fuzzes the CARMEN log parser with arbitrary text: no panic; an error names its line.
+pub fn carmen_reader(data: &[u8]) {
+    match host_sim::readers::carmen::parse(std::io::BufReader::new(data)) {
+        Ok(log) => {
+            for laser in log.lasers() {
+                let _ = laser.ranges.len();
+            }
+        }
+        Err(e) => {
+            let text = e.to_string();
+            assert!(
+                text.contains("line")
+                    || text.contains("UTF-8")
+                    || text.contains("utf-8")
+                    || text.contains("stream"),
+                "error without a line: {text}"
+            );
+        }
+    }
+}
+
+/// Fuzzes the benchmark relations parser: no panic; every relation read is finite or the
+/// file is refused.
+pub fn relations_reader(data: &[u8]) {
+    let _ = host_sim::metrics::relations::parse(std::io::BufReader::new(data));
+}
+
+/// Fuzzes the MRCLAM reader on a folder of four files cut from the input at `0xFF` bytes
+/// (barcodes, odometry, measurements, ground truth): no panic; an error names a file.
+pub fn mrclam_reader(data: &[u8]) {
+    let dir = tempfile::tempdir().expect("temporary folder");
+    let mut parts = data.split(|&b| b == 0xFF);
+    for name in [
+        "Barcodes.dat",
+        "Robot1_Odometry.dat",
+        "Robot1_Measurement.dat",
+        "Robot1_Groundtruth.dat",
+        "Landmark_Groundtruth.dat",
+    ] {
+        let part = parts.next().unwrap_or(&[]);
+        std::fs::write(dir.path().join(name), part).expect("write fuzz file");
+    }
+    if let Err(e) = host_sim::readers::mrclam::read(dir.path(), 1) {
+        let text = format!("{e:#}");
+        assert!(text.contains(".dat"), "error without a file name: {text}");
+    }
+}
+
+/// Fuzzes the npz reader: the input is written as THOR's `Encoders20.npz` and
+/// `Imu20.npz` (cut at the first `0xFF 0xFE` pair) and read as run 20: no panic.
+pub fn npz_reader(data: &[u8]) {
+    let dir = tempfile::tempdir().expect("temporary folder");
+    let cut = data
+        .windows(2)
+        .position(|w| w == [0xFF, 0xFE])
+        .unwrap_or(data.len());
+    let (enc, imu) = data.split_at(cut);
+    std::fs::write(dir.path().join("Encoders20.npz"), enc).expect("write fuzz file");
+    std::fs::write(dir.path().join("Imu20.npz"), imu.get(2..).unwrap_or(&[]))
+        .expect("write fuzz file");
+    let _ = host_sim::readers::thor::dead_reckoning(dir.path(), 20);
+}
+
 /// A fuzz target's check: panics when an invariant breaks.
 pub type FuzzCheck = fn(&[u8]);
 
 /// Every fuzz target by name, for the regression replay.
 pub const TARGETS: &[(&str, FuzzCheck)] = &[
+    ("grid_steps", grid_steps),
+    ("carmen_reader", carmen_reader),
+    ("relations_reader", relations_reader),
+    ("mrclam_reader", mrclam_reader),
+    ("npz_reader", npz_reader),
     ("ekf_steps", ekf_steps),
     ("wire_session", wire_session),
     ("wire_decoder", wire_decoder),
