@@ -205,8 +205,8 @@ pub fn search_window(
     }
 }
 
-/// End points whose window rows are summed together in [`search_fixed`] (128 bytes of
-/// stack for their cell indices and 128 for their weights).
+/// End points whose window rows are summed together in [`search_fixed`] (on a 32-bit
+/// target, 128 bytes of stack for their cell indices and 128 for their weights).
 const POINT_CHUNK: usize = 32;
 
 /// [`search_window`] for a window of `N = 2k+1` cells: each window row is `N` bytes read
