@@ -17,6 +17,8 @@ compile_error!("choose a board: feature `qemu` or `stm32f411`");
 
 pub mod board;
 pub mod config;
+#[cfg(feature = "qemu")]
+pub mod cost;
 pub mod nb_io;
 pub mod stack;
 

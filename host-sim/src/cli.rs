@@ -37,6 +37,12 @@ pub enum Command {
     /// Localize on a saved grid map (`map.yaml` from `replay --filter grid-slam`) with the
     /// grid particle filter.
     Localize(LocalizeArgs),
+    /// Coloured floor map from simulated RGB-D frames (`--dataset sim`), scored against the
+    /// simulator's true floor texture.
+    Texture(crate::camera::TextureArgs),
+    /// Sign detections (box centre + depth, wrong class ids) → range/bearing → EKF-SLAM on
+    /// the simulator; ATE and the share of wrong class ids the association corrected.
+    Detections(crate::camera::DetectionsArgs),
 }
 
 /// Which estimator a replay drives.
@@ -144,6 +150,14 @@ pub struct ReplayArgs {
     /// THOR run number (`thor:` datasets: 20 or 21).
     #[arg(long, default_value_t = 20)]
     pub run: u32,
+    /// Inject faults into the event stream before the replay, e.g.
+    /// `drop=0.01,duplicate=0.01,reorder=0.01,nan=0.01,spike=0.01,backwards=0.01` or
+    /// `all=0.01` (landmark datasets); what was injected is reported in `metrics.json`.
+    #[arg(long)]
+    pub faults: Option<crate::faults::FaultRates>,
+    /// Seed of the fault generator.
+    #[arg(long, default_value_t = 1)]
+    pub fault_seed: u64,
 }
 
 /// Options of `host-sim sim`.
@@ -212,6 +226,13 @@ pub struct HilArgs {
     /// Give up waiting for replies after this many seconds.
     #[arg(long, default_value_t = 900)]
     pub timeout_s: u64,
+    /// Corrupt this fraction of the frames sent (one byte each): the device must count
+    /// exactly that many bad frames and still answer every other frame like the host.
+    #[arg(long, default_value_t = 0.0)]
+    pub corrupt_frames: f64,
+    /// Seed of the frame corruption.
+    #[arg(long, default_value_t = 1)]
+    pub corrupt_seed: u64,
 }
 
 /// Runs what the command line asks for.
@@ -221,6 +242,8 @@ pub fn run(cli: &Cli) -> Result<()> {
         Some(Command::Sim(args)) => crate::sim::run_cli(args, cli.quiet),
         Some(Command::Hil(args)) => crate::hil::run_cli(args, cli.quiet),
         Some(Command::Localize(args)) => crate::grid_replay::localize_cli(args, cli.quiet),
+        Some(Command::Texture(args)) => crate::camera::texture_cli(args, cli.quiet),
+        Some(Command::Detections(args)) => crate::camera::detections_cli(args, cli.quiet),
         None => crate::sim::run_cli(&SimArgs::default(), cli.quiet),
     }
 }

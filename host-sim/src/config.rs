@@ -48,6 +48,16 @@ pub struct OdometrySettings {
     pub angular_std_per_radps: f64,
     pub angular_std_per_mps: f64,
     pub max_gap_s: f64,
+    /// Odometry reporting a faster speed (m/s) is refused as an outlier.
+    #[serde(default = "unlimited")]
+    pub max_speed_mps: f64,
+    /// Odometry reporting a faster turn (rad/s) is refused as an outlier.
+    #[serde(default = "unlimited")]
+    pub max_turn_rate_radps: f64,
+}
+
+fn unlimited() -> f64 {
+    f64::INFINITY
 }
 
 /// See `configs/mrclam.toml` for the meaning of each field.
@@ -175,6 +185,9 @@ impl Settings {
         ];
         if non_negative.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
             bail!("noise figures, ranges and windows must be finite and non-negative");
+        }
+        if !(o.max_speed_mps > 0.0 && o.max_turn_rate_radps > 0.0) {
+            bail!("max_speed_mps and max_turn_rate_radps must be positive");
         }
         if !(o.max_gap_s.is_finite() && o.max_gap_s > 0.0 && s.max_range > s.min_range) {
             bail!("max_gap_s must be positive and max_range > min_range");

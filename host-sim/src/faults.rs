@@ -131,6 +131,17 @@ impl FaultCounts {
     }
 }
 
+/// The faults of a run, as reported in `metrics.json`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct FaultReport {
+    /// Rates asked for.
+    pub rates: FaultRates,
+    /// Seed of the fault generator.
+    pub seed: u64,
+    /// What was injected.
+    pub injected: FaultCounts,
+}
+
 fn coin(p: f64) -> Bernoulli {
     // Rates are validated to 0..=1 when parsed; clamp for rates built in code.
     Bernoulli::new(p.clamp(0.0, 1.0))

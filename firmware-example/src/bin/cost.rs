@@ -13,10 +13,9 @@
 
 use core::fmt::Write;
 
-use cortex_m::peripheral::SYST;
-use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use firmware_example::board::{self, Serial};
+use firmware_example::cost::{Ticks, thousand_nops};
 use microslam::ekf::{CovarianceUpdate, EkfConfig, EkfSlam, UpdateOutcome, state_dim};
 use microslam::sensors::range_bearing::RangeBearing;
 use panic_probe as _;
@@ -31,53 +30,6 @@ static EKF64: ConstStaticCell<Ekf<{ state_dim(64) }>> = ConstStaticCell::new(Ekf
 
 /// Calls per figure: the reported value is the mean.
 const REPEAT: u32 = 8;
-
-/// Counts SysTick ticks of a closure (the counter must not wrap: 2²⁴ ticks ≈ 10 M
-/// instructions, far above any step here).
-struct Ticks {
-    syst: SYST,
-    empty: u32,
-}
-
-impl Ticks {
-    const RELOAD: u32 = 0x00FF_FFFF;
-
-    fn new(mut syst: SYST) -> Self {
-        syst.set_clock_source(SystClkSource::Core);
-        syst.set_reload(Self::RELOAD);
-        syst.clear_current();
-        syst.enable_counter();
-        let mut t = Self { syst, empty: 0 };
-        t.empty = t.raw(|| {});
-        t
-    }
-
-    #[inline(never)]
-    fn raw(&mut self, f: impl FnOnce()) -> u32 {
-        self.syst.clear_current();
-        let _ = self.syst.has_wrapped();
-        let start = SYST::get_current();
-        f();
-        let end = SYST::get_current();
-        if self.syst.has_wrapped() {
-            return u32::MAX;
-        }
-        start.wrapping_sub(end) & Self::RELOAD
-    }
-
-    /// Instructions executed by `f` (ticks · 40 / 64, empty measurement subtracted).
-    fn instructions(&mut self, f: impl FnOnce()) -> u32 {
-        let t = self.raw(f).saturating_sub(self.empty);
-        (u64::from(t) * 40 / 64) as u32
-    }
-}
-
-/// A 1000-instruction block to check the tick/instruction ratio.
-#[inline(never)]
-fn thousand_nops() {
-    // SAFETY: only `nop`s.
-    unsafe { core::arch::asm!(".rept 1000", "nop", ".endr", options(nomem, nostack)) };
-}
 
 /// Range and bearing of landmark `i` as the filter predicts it (so updates pass the gate),
 /// slightly perturbed.

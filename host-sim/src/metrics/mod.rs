@@ -165,6 +165,9 @@ pub struct Metrics {
     pub counts: crate::replay::AssociationCounts,
     /// Sightings dropped by the reader (other robots, unknown barcodes).
     pub reader_dropped_sightings: usize,
+    /// Faults injected into the event stream (`replay --faults`), if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub faults: Option<crate::faults::FaultReport>,
     /// The SE(2) alignment of the estimate onto ground truth: x, y (m), θ (rad).
     pub se2_alignment: Option<[f64; 3]>,
     /// What the `se2` landmark error was aligned on: `trajectory` (the robot's ground
@@ -220,6 +223,7 @@ pub fn evaluate(recording: &Recording, run: &ReplayRun) -> Metrics {
         filter_time_s: run.filter_time.as_secs_f64(),
         counts: run.counts,
         reader_dropped_sightings: recording.dropped_sightings,
+        faults: None,
         se2_alignment,
         ..Metrics::default()
     };

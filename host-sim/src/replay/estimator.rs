@@ -67,6 +67,11 @@ pub struct AssociationCounts {
     pub refused: usize,
     /// JCBB searches cut at the node bound.
     pub truncated_searches: usize,
+    /// Odometry samples with a non-finite or implausible reading (beyond the configured
+    /// speed and turn-rate limits): skipped, the previous velocity held.
+    pub odometry_refused: usize,
+    /// Predictions the filter refused (the filter then stays where it was).
+    pub predictions_refused: usize,
 }
 
 /// Everything a replay produced.
@@ -105,7 +110,11 @@ pub fn replay(
     // Dead reckoning runs beside the filter (it only needs the events).
     let max_gap = settings.odometry.max_gap_s;
     std::thread::scope(|s| {
-        let dr = s.spawn(|| dead_reckoning(recording, max_gap));
+        let limits = (
+            settings.odometry.max_speed_mps,
+            settings.odometry.max_turn_rate_radps,
+        );
+        let dr = s.spawn(move || dead_reckoning(recording, max_gap, limits));
         let mut run =
             match precision {
                 Precision::F32 => Replayer::<f32>::new(settings, mode, recording)?
@@ -122,7 +131,13 @@ pub fn replay(
 
 /// Odometry integrated alone from the recording's initial pose, at each odometry stamp
 /// (after integrating up to it), with the same motion model and gap rule as the filter.
-pub fn dead_reckoning(recording: &Recording, max_gap: f64) -> Vec<(f64, Pose2<f64>)> {
+/// `limits` are the largest plausible speed (m/s) and turn rate (rad/s).
+pub fn dead_reckoning(
+    recording: &Recording,
+    max_gap: f64,
+    limits: (f64, f64),
+) -> Vec<(f64, Pose2<f64>)> {
+    let (max_speed, max_turn) = limits;
     let mut out = Vec::with_capacity(recording.events.len());
     let mut pose = recording.initial_pose.unwrap_or(Pose2::IDENTITY);
     let mut velocity = (0.0, 0.0);
@@ -136,11 +151,20 @@ pub fn dead_reckoning(recording: &Recording, max_gap: f64) -> Vec<(f64, Pose2<f6
         }
         last = Some(last.map_or(e.stamp, |p: f64| p.max(e.stamp)));
         if let EventKind::Velocity { v, omega } = e.kind {
-            velocity = (v, omega);
+            // As the filter does: an implausible sample is skipped, the last velocity held.
+            if v.abs() <= max_speed && omega.abs() <= max_turn {
+                velocity = (v, omega);
+            }
             out.push((e.stamp, pose));
         }
     }
     out
+}
+
+/// `true` when an odometry sample is finite and within the configured limits.
+fn plausible(settings: &Settings, v: f64, omega: f64) -> bool {
+    v.abs() <= settings.odometry.max_speed_mps
+        && omega.abs() <= settings.odometry.max_turn_rate_radps
 }
 
 struct Replayer<T: Real> {
@@ -214,15 +238,19 @@ impl<T: Real> Replayer<T> {
                         .slam
                         .predict_velocity(lit(velocity.0), lit(velocity.1), lit(dt));
                     self.filter_time += clock.elapsed();
-                    if let Err(e) = r {
-                        bail!("prediction at t = {t} refused: {e}");
+                    if r.is_err() {
+                        self.counts.predictions_refused += 1;
                     }
                 }
             }
             last = Some(last.map_or(t, |p: f64| p.max(t)));
             match event.kind {
                 EventKind::Velocity { v, omega } => {
-                    velocity = (v, omega);
+                    if plausible(&self.settings, v, omega) {
+                        velocity = (v, omega);
+                    } else {
+                        self.counts.odometry_refused += 1;
+                    }
                     steps += 1;
                     trajectory.push(self.sample(t));
                     i += 1;

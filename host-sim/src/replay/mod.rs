@@ -33,7 +33,16 @@ pub fn run_cli(args: &ReplayArgs, quiet: bool) -> Result<()> {
         args.config.as_deref(),
         args.association,
     )?;
-    let recording = crate::readers::read(&args.dataset, args.robot)?;
+    let mut recording = crate::readers::read(&args.dataset, args.robot)?;
+    let faults = args.faults.filter(|f| !f.is_none()).map(|rates| {
+        let (events, counts) = crate::faults::inject(&recording.events, &rates, args.fault_seed);
+        recording.events = events;
+        crate::faults::FaultReport {
+            rates,
+            seed: args.fault_seed,
+            injected: counts,
+        }
+    });
     let mode = settings.association.mode;
     run_and_report(
         &recording,
@@ -44,6 +53,7 @@ pub fn run_cli(args: &ReplayArgs, quiet: bool) -> Result<()> {
         !args.no_plots,
         quiet,
         started,
+        faults,
     )
 }
 
@@ -59,6 +69,7 @@ pub fn run_and_report(
     plots: bool,
     quiet: bool,
     started: Instant,
+    faults: Option<crate::faults::FaultReport>,
 ) -> Result<()> {
     let progress = (!quiet).then(|| crate::output::progress_bar(recording.events.len() as u64));
     // The ground truth is written while the filter runs.
@@ -69,6 +80,7 @@ pub fn run_and_report(
             p.finish_and_clear();
         }
         let mut metrics = crate::metrics::evaluate(recording, &run);
+        metrics.faults = faults;
         truth
             .join()
             .map_err(|_| anyhow::anyhow!("writer thread panicked"))??;

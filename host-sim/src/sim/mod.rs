@@ -163,6 +163,7 @@ pub fn run_cli(args: &SimArgs, quiet: bool) -> Result<()> {
         !args.no_plots,
         quiet,
         started,
+        None,
     )?;
     if args.grid_particles == 0 {
         return Ok(());

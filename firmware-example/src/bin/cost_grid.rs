@@ -1,0 +1,161 @@
+//! Instructions per grid particle-filter step under QEMU `-icount shift=6` (see
+//! `firmware_example::cost`): P = 16, 32, 64 particles, 90 beams, 9 × 9 shift window, a
+//! 256 × 256 grid of 5 cm cells, in a synthetic 6 m × 6 m room with a pillar.
+//!
+//! Prints one line per P on UART0 and exits through semihosting.
+#![no_std]
+#![no_main]
+
+use core::fmt::Write;
+
+use cortex_m_rt::{ExceptionFrame, entry, exception};
+use firmware_example::board::{self, Serial};
+use firmware_example::cost::{Ticks, thousand_nops};
+use microslam::geometry::Pose2;
+use microslam::grid::OccupancyGrid;
+use microslam::pf::{GridPfConfig, GridSlam};
+use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+use panic_probe as _;
+use static_cell::ConstStaticCell;
+
+const BEAMS: usize = 90;
+const CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
+type Grid = OccupancyGrid<256, 256>;
+
+static GRID: ConstStaticCell<Grid> =
+    ConstStaticCell::new(Grid::centred(CONFIG.resolution, CONFIG.log_odds));
+
+/// Steps measured per P (after the first scan, which only builds the map).
+const STEPS: u32 = 8;
+
+const LIDAR: LidarGeometry = LidarGeometry {
+    first_angle: -core::f32::consts::PI,
+    angle_increment: 2.0 * core::f32::consts::PI / BEAMS as f32,
+    min_range: 0.1,
+    max_range: 10.0,
+    no_return_range: 10.0,
+    mount: Pose2::new(0.0, 0.0, 0.0),
+};
+
+/// Distance along a ray to the walls of the room `[-3, 3]²` or to the pillar
+/// `[1, 1.6] × [-0.5, 0.5]` (slab method).
+fn ray(x: f32, y: f32, c: f32, s: f32) -> f32 {
+    let slab = |lo: f32, hi: f32, p: f32, d: f32| -> (f32, f32) {
+        if d.abs() < 1e-9 {
+            if p >= lo && p <= hi {
+                (f32::NEG_INFINITY, f32::INFINITY)
+            } else {
+                (f32::INFINITY, f32::NEG_INFINITY)
+            }
+        } else {
+            let (a, b) = ((lo - p) / d, (hi - p) / d);
+            if a < b { (a, b) } else { (b, a) }
+        }
+    };
+    // Inside the room: the exit distance of the room box.
+    let (_, tx) = slab(-3.0, 3.0, x, c);
+    let (_, ty) = slab(-3.0, 3.0, y, s);
+    let mut t = tx.min(ty);
+    // The pillar: the entry distance when the ray hits it.
+    let (ax, bx) = slab(1.0, 1.6, x, c);
+    let (ay, by) = slab(-0.5, 0.5, y, s);
+    let (enter, exit) = (ax.max(ay), bx.min(by));
+    if enter <= exit && enter > 0.0 {
+        t = t.min(enter);
+    }
+    t
+}
+
+fn scan_at(pose: &Pose2<f32>, ranges: &mut [f32; BEAMS]) {
+    for (i, r) in ranges.iter_mut().enumerate() {
+        let a = pose.theta + LIDAR.beam_angle(i);
+        *r = ray(pose.x, pose.y, libm::cosf(a), libm::sinf(a));
+    }
+}
+
+fn measure<const P: usize>(
+    out: &mut Serial,
+    ticks: &mut Ticks,
+    grid: &mut Grid,
+) -> core::fmt::Result {
+    let mut truth = Pose2::new(-1.0, -1.0, 0.3);
+    let Ok(mut slam) = GridSlam::<256, 256, P, BEAMS>::new(grid, CONFIG, truth) else {
+        return writeln!(out, "error grid p={P} new");
+    };
+    let mut ranges = [0.0f32; BEAMS];
+    scan_at(&truth, &mut ranges);
+    if slam.observe(&LidarScan::new(&ranges, LIDAR)).is_err() {
+        return writeln!(out, "error grid p={P} first scan");
+    }
+    let (v, omega, dt) = (0.4f32, 0.3f32, 0.1f32);
+    let (mut predict, mut observe, mut resamples) = (0u32, 0u32, 0u32);
+    for _ in 0..STEPS {
+        truth = Pose2::new(
+            truth.x + v * dt * libm::cosf(truth.theta),
+            truth.y + v * dt * libm::sinf(truth.theta),
+            truth.theta + omega * dt,
+        );
+        let mut r = Ok(());
+        predict += ticks.instructions(|| r = slam.predict_velocity(v, omega, dt));
+        scan_at(&truth, &mut ranges);
+        let scan = LidarScan::new(&ranges, LIDAR);
+        let mut report = None;
+        observe += ticks.instructions(|| report = Some(slam.observe(&scan)));
+        match (r, report) {
+            (Ok(()), Some(Ok(rep))) => resamples += u32::from(rep.resampled),
+            _ => return writeln!(out, "error grid p={P} step"),
+        }
+    }
+    let est = slam.pose();
+    writeln!(
+        out,
+        "grid p={} beams={} step={} predict={} observe={} resamples={} error_mm={}",
+        P,
+        BEAMS,
+        (predict + observe) / STEPS,
+        predict / STEPS,
+        observe / STEPS,
+        resamples,
+        (libm::hypotf(est.x - truth.x, est.y - truth.y) * 1000.0) as u32
+    )
+}
+
+fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
+    writeln!(
+        out,
+        "calibration nops=1000 instructions={}",
+        ticks.instructions(thousand_nops)
+    )?;
+    let grid = GRID.take();
+    measure::<16>(out, ticks, grid)?;
+    measure::<32>(out, ticks, grid)?;
+    measure::<64>(out, ticks, grid)?;
+    writeln!(
+        out,
+        "stack_peak_bytes={}",
+        firmware_example::stack::peak_bytes()
+    )?;
+    writeln!(out, "done")
+}
+
+#[entry]
+fn main() -> ! {
+    let Some(cp) = cortex_m::Peripherals::take() else {
+        board::halt(2)
+    };
+    let (mut out, _led) = board::init();
+    let mut ticks = Ticks::new(cp.SYST);
+    let code = if run(&mut out, &mut ticks).is_ok() {
+        0
+    } else {
+        1
+    };
+    let _ = embedded_io::Write::flush(&mut out);
+    board::halt(code)
+}
+
+#[exception]
+unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
+    defmt::error!("HardFault at pc = {:#010x}", frame.pc());
+    board::halt(3)
+}

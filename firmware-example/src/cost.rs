@@ -1,0 +1,55 @@
+//! Instruction counting under QEMU `-icount shift=6` (the `cost` binaries).
+//!
+//! QEMU's virtual clock advances 64 ns per executed instruction; SysTick, clocked from
+//! the 25 MHz core clock of mps2-an386, ticks every 40 ns: `instructions = ticks · 40 / 64`.
+
+use cortex_m::peripheral::SYST;
+use cortex_m::peripheral::syst::SystClkSource;
+
+/// Counts SysTick ticks of a closure (the counter must not wrap: 2²⁴ ticks ≈ 10 M
+/// instructions; a wrap is reported as `u32::MAX` ticks).
+pub struct Ticks {
+    syst: SYST,
+    empty: u32,
+}
+
+impl Ticks {
+    const RELOAD: u32 = 0x00FF_FFFF;
+
+    /// Starts SysTick from the core clock and measures an empty closure.
+    pub fn new(mut syst: SYST) -> Self {
+        syst.set_clock_source(SystClkSource::Core);
+        syst.set_reload(Self::RELOAD);
+        syst.clear_current();
+        syst.enable_counter();
+        let mut t = Self { syst, empty: 0 };
+        t.empty = t.raw(|| {});
+        t
+    }
+
+    #[inline(never)]
+    pub fn raw(&mut self, f: impl FnOnce()) -> u32 {
+        self.syst.clear_current();
+        let _ = self.syst.has_wrapped();
+        let start = SYST::get_current();
+        f();
+        let end = SYST::get_current();
+        if self.syst.has_wrapped() {
+            return u32::MAX;
+        }
+        start.wrapping_sub(end) & Self::RELOAD
+    }
+
+    /// Instructions executed by `f` (ticks · 40 / 64, empty measurement subtracted).
+    pub fn instructions(&mut self, f: impl FnOnce()) -> u32 {
+        let t = self.raw(f).saturating_sub(self.empty);
+        (u64::from(t) * 40 / 64) as u32
+    }
+}
+
+/// A 1000-instruction block to check the tick/instruction ratio.
+#[inline(never)]
+pub fn thousand_nops() {
+    // SAFETY: only `nop`s.
+    unsafe { core::arch::asm!(".rept 1000", "nop", ".endr", options(nomem, nostack)) };
+}
