@@ -27,8 +27,9 @@ pub enum Command {
     /// Replay a recorded dataset through the landmark EKF-SLAM and score it against
     /// ground truth.
     Replay(ReplayArgs),
-    /// Run the built-in deterministic simulator (landmark field, robot driving loops)
-    /// through the landmark EKF-SLAM and score it.
+    /// Run the built-in deterministic simulator: a landmark field through the landmark
+    /// EKF-SLAM, and a world of walls with a lidar through grid SLAM and the grid
+    /// localizer; score both against ground truth.
     Sim(SimArgs),
     /// Stream a dataset to the firmware (under QEMU or on a board) and compare its
     /// estimates with the host's, bit for bit.
@@ -180,6 +181,10 @@ pub struct SimArgs {
     /// Skip the PNG pictures.
     #[arg(long)]
     pub no_plots: bool,
+    /// Particles of the grid filters in the lidar world (16, 32, 64 or 200; 0 skips the
+    /// grid scenario).
+    #[arg(long, default_value_t = 200)]
+    pub grid_particles: usize,
 }
 
 impl Default for SimArgs {
@@ -191,6 +196,7 @@ impl Default for SimArgs {
             config: None,
             precision: Precision::F64,
             no_plots: false,
+            grid_particles: 200,
         }
     }
 }
