@@ -14,7 +14,7 @@ pub enum EkfError {
     /// A velocity step with a negative duration (time stamps out of order).
     NegativeTimeStep,
     /// A measurement with a range outside `MIN_RANGE..=MAX_RANGE` of
-    /// `sensors::range_bearing` (1 mm to 1 km).
+    /// `sensors::range_bearing` (5 cm to 1 km).
     InvalidRange,
     /// A noise setting or covariance that is negative or not finite.
     InvalidNoise,
@@ -35,7 +35,7 @@ impl fmt::Display for EkfError {
         f.write_str(match self {
             Self::NonFiniteInput => "input contains NaN or infinity",
             Self::NegativeTimeStep => "negative time step (time stamps out of order)",
-            Self::InvalidRange => "measured range is outside 1 mm ..= 1 km",
+            Self::InvalidRange => "measured range is outside 5 cm ..= 1 km",
             Self::InvalidNoise => "noise parameter is negative or not finite",
             Self::UnknownLandmark => "no active landmark has this index",
             Self::LandmarkOnSensor => "landmark coincides with the sensor",

@@ -93,8 +93,8 @@ pub fn ekf_steps(data: &[u8]) {
             ekf.active_covariance().clone_owned(),
         );
         let index = usize::from(op >> 3);
-        // What the EKF accepts as a sighting: finite, range within 1 mm ..= 1 km.
-        let valid_z = a.is_finite() && b.is_finite() && (1e-3..=1e3).contains(&a);
+        // What the EKF accepts as a sighting: finite, range within 5 cm ..= 1 km.
+        let valid_z = a.is_finite() && b.is_finite() && (0.05..=1e3).contains(&a);
         let (refused, must_refuse) = match op % 6 {
             0 => (ekf.predict_velocity(a, b, c).is_err(), !finite || c < 0.0),
             1 => (
