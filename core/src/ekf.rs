@@ -99,7 +99,11 @@ pub enum CovarianceUpdate {
     #[default]
     Joseph,
     /// The optimal-gain form `P − K S Kᵀ` on the upper triangle, mirrored (exactly
-    /// symmetric): one pass over half the block, the cheapest choice.
+    /// symmetric): one pass over half the block, the cheapest choice. It keeps variances
+    /// non-negative (such updates are refused) but, unlike the Joseph form, not `P`
+    /// positive semi-definite when an `f32` update shrinks variances by many orders of
+    /// magnitude (found by the fuzzer after the variance caps): prefer Joseph unless the
+    /// instruction budget forbids it.
     Symmetric,
 }
 
