@@ -240,9 +240,11 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
                 };
                 match setup.wheels.motion(&ticks) {
                     Ok(m) => grid.predict_arc(m.distance, m.heading_change),
-                    Err(_) => return StepResult::Rejected {
-                        reason: TICKS_REFUSED,
-                    },
+                    Err(_) => {
+                        return StepResult::Rejected {
+                            reason: TICKS_REFUSED,
+                        };
+                    }
                 }
             }
         };
@@ -556,5 +558,166 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+    }
+
+    #[test]
+    fn grid_session_matches_direct_calls_on_the_grid_slam() {
+        use crate::grid::OccupancyGrid;
+        use crate::pf::GridPfConfig;
+        use crate::wire::ScanChunk;
+        type Slam<'g> = GridSlam<'g, 64, 64, 8, 40>;
+        let config = GridPfConfig::MICROCONTROLLER;
+        let setup = GridSetup {
+            lidar: LidarGeometry {
+                first_angle: 0.0,
+                angle_increment: 0.0,
+                min_range: 0.1,
+                max_range: 30.0,
+                no_return_range: f32::INFINITY,
+                mount: Pose2::new(0.0, 0.0, 0.0),
+            },
+            wheels: DiffDriveGeometry {
+                metres_per_tick: 0.002,
+                track_width: 0.4,
+            },
+        };
+        // A square room 2.4 m wide seen from the centre: 40 beams, 0 mm = no return.
+        let inc = core::f32::consts::TAU / 40.0;
+        let ranges_mm: std::vec::Vec<u16> = (0..40)
+            .map(|i| {
+                let a = -core::f32::consts::PI + inc * i as f32;
+                let r = 1.2 / libm::fabsf(libm::cosf(a)).max(libm::fabsf(libm::sinf(a)));
+                if i == 5 { 0 } else { (r * 1000.0) as u16 }
+            })
+            .collect();
+        let chunk = |seq: u32, scan_id: u16, offset: usize| {
+            let end = (offset + 32).min(40);
+            ToDevice::Scan(ScanChunk {
+                seq,
+                stamp_us: 0,
+                scan_id,
+                beam_offset: offset as u16,
+                beam_total: 40,
+                angle_min: -core::f32::consts::PI,
+                angle_increment: inc,
+                ranges_mm: heapless::Vec::from_slice(&ranges_mm[offset..end]).unwrap(),
+            })
+        };
+        let ticks = ToDevice::Odometry {
+            seq: 9,
+            stamp_us: 0,
+            odometry: Odometry::EncoderTicks {
+                front_left: 10,
+                front_right: 14,
+                rear_left: 10,
+                rear_right: 14,
+                dt: 0.1,
+            },
+        };
+        let msgs = [
+            chunk(1, 0, 0), // EKF active: ignored
+            ToDevice::Command {
+                seq: 2,
+                command: Command::SelectEstimator(EstimatorKind::Grid),
+            },
+            chunk(3, 1, 0),
+            chunk(4, 1, 32),
+            velocity(5, 0.2, 0.1),
+            chunk(6, 2, 32), // first chunk lost: dropped
+            chunk(7, 3, 0),
+            chunk(8, 3, 32),
+            ticks,
+            chunk(10, 4, 0),
+            chunk(11, 4, 32),
+        ];
+        let mut ekf = EkfSlam::<f32, { state_dim(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut grid = std::boxed::Box::new(OccupancyGrid::<64, 64>::centred(
+            config.resolution,
+            config.log_odds,
+        ));
+        let mut slam = Slam::new(&mut grid, config, Pose2::new(0.0, 0.0, 0.0)).unwrap();
+        let mut session =
+            Session::<_, 4>::with_grid(&mut ekf, EkfConfig::DEFAULT_F32, &mut slam, setup);
+        let replies: std::vec::Vec<_> = frames(&msgs)
+            .iter()
+            .filter_map(|&b| session.receive(b))
+            .collect();
+        drop(session);
+
+        let mut grid2 = std::boxed::Box::new(OccupancyGrid::<64, 64>::zeroed());
+        grid2
+            .init_centred(config.resolution, config.log_odds)
+            .unwrap();
+        let mut direct = Slam::new(&mut grid2, config, Pose2::new(0.0, 0.0, 0.0)).unwrap();
+        let ranges: std::vec::Vec<f32> = ranges_mm
+            .iter()
+            .map(|&mm| {
+                if mm == 0 {
+                    f32::NAN
+                } else {
+                    f32::from(mm) * 0.001
+                }
+            })
+            .collect();
+        let lidar = LidarGeometry {
+            first_angle: -core::f32::consts::PI,
+            angle_increment: inc,
+            ..setup.lidar
+        };
+        direct.observe(&LidarScan::new(&ranges, lidar)).unwrap();
+        direct.predict_velocity(0.2, 0.1, 0.1).unwrap();
+        direct.observe(&LidarScan::new(&ranges, lidar)).unwrap();
+        // Left 10 ticks, right 14 ticks (front and rear averaged) of 2 mm on a 0.4 m track.
+        let m = setup
+            .wheels
+            .motion(&WheelTicks {
+                front_right: 14,
+                front_left: 10,
+                rear_right: 14,
+                rear_left: 10,
+            })
+            .unwrap();
+        assert!((m.distance - 0.024).abs() < 1e-6 && (m.heading_change - 0.02).abs() < 1e-6);
+        direct.predict(m.distance, m.heading_change).unwrap();
+        direct.observe(&LidarScan::new(&ranges, lidar)).unwrap();
+
+        let results: std::vec::Vec<_> = replies
+            .iter()
+            .map(|r| match r {
+                ToHost::Estimate(e) => (e.seq, e.estimator, e.result),
+                ToHost::Status { seq, estimator, .. } => (*seq, *estimator, StepResult::Ignored),
+            })
+            .collect();
+        use EstimatorKind::{Ekf, Grid};
+        use StepResult::{Applied, Ignored};
+        assert_eq!(
+            results,
+            [
+                (1, Ekf, Ignored),
+                (2, Grid, Ignored),
+                (3, Grid, Ignored),
+                (4, Grid, Applied),
+                (5, Grid, Applied),
+                (
+                    6,
+                    Grid,
+                    StepResult::Rejected {
+                        reason: SCAN_DROPPED
+                    }
+                ),
+                (7, Grid, Ignored),
+                (8, Grid, Applied),
+                (9, Grid, Applied),
+                (10, Grid, Ignored),
+                (11, Grid, Applied),
+            ]
+        );
+        let ToHost::Estimate(last) = replies[10] else {
+            unreachable!()
+        };
+        let pose = direct.pose();
+        assert_eq!(last.pose, [pose.x, pose.y, pose.theta]);
+        assert_eq!(last.status.resamples, direct.filter().resample_count());
+        assert_eq!(last.covariance, [0.0; 6]);
     }
 }
