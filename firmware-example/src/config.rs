@@ -2,14 +2,14 @@
 
 use microslam::ekf::{CovarianceUpdate, EkfConfig, EkfSlam, state_dim};
 use microslam::gate::ChiSquareGate;
+use microslam::geometry::Pose2;
 use microslam::grid::OccupancyGrid;
+use microslam::motion::{IncrementNoise, VelocityNoise};
 use microslam::pf::{GridPfConfig, GridSlam};
 use microslam::sensors::lidar::LidarGeometry;
+use microslam::sensors::range_bearing::RangeBearingSensor;
 use microslam::sensors::wheel_odometry::DiffDriveGeometry;
 use microslam::wire::GridSetup;
-use microslam::geometry::Pose2;
-use microslam::motion::{IncrementNoise, VelocityNoise};
-use microslam::sensors::range_bearing::RangeBearingSensor;
 
 /// Landmarks the EKF holds.
 pub const EKF_LANDMARKS: usize = 32;

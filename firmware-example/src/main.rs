@@ -8,8 +8,8 @@ use firmware_example::config::{
     EKF_CONFIG, EKF_LANDMARKS, Ekf, GRID_CONFIG, GRID_PARTICLES, GRID_SETUP, Grid, GridEstimator,
     ZEROED_EKF_CONFIG,
 };
-use microslam::geometry::Pose2;
 use firmware_example::{board, serve, stack};
+use microslam::geometry::Pose2;
 use microslam::wire::Session;
 use panic_probe as _;
 use static_cell::{ConstStaticCell, StaticCell};
