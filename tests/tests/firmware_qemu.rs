@@ -165,7 +165,10 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_a_lidar_drive() {
                 && matches!(r, ToHost::Estimate(e) if e.estimator == EstimatorKind::Grid && e.result == StepResult::Applied)
         })
         .count();
-    assert_eq!(grid_scans, scans, "every scan is observed by the grid estimator");
+    assert_eq!(
+        grid_scans, scans,
+        "every scan is observed by the grid estimator"
+    );
     let Some(ToHost::Status { status, .. }) = expected.last() else {
         panic!("last reply is not a status");
     };
