@@ -2,8 +2,19 @@
 //!
 //! Readers (dataset files on the host, the wire decoder on the firmware) turn their input
 //! into a time-ordered stream of [`Event`]s; estimators consume events and never read
-//! files or ports. The set of sensor kinds is open ([`EventKind`] is `#[non_exhaustive]`):
-//! wheel-tick odometry and lidar scans join the landmark-related kinds here.
+//! files or ports. The set of sensor kinds is open ([`EventKind`] is `#[non_exhaustive]`).
+//!
+//! **Lidar scans are not events.** They travel beside this stream as a
+//! [`LidarScan`](crate::sensors::lidar::LidarScan) that borrows its ranges, handed straight
+//! to the grid filters (`GridSlam::observe`, `GridLocalizer::observe`) between the
+//! odometry steps. An `EventKind` variant would have to either borrow the ranges — a
+//! lifetime parameter on `Event` and on every estimator API that takes events, for one
+//! sensor — or own them in a fixed-capacity `heapless::Vec<f32, N>`: then every `Event`
+//! (odometry at 20–100 Hz, sightings, copied by value through queues and the wire
+//! decoder) would be as large as the largest scan (720 bytes for 180 beams), `N` would be
+//! one capacity for every user, and `Copy` would copy whole scans. On the serial line a
+//! scan already arrives as several chunks reassembled into a buffer the device owns
+//! (`wire::scan`), which is then lent to the filter: no copy, no oversized events.
 //!
 //! Time stamps are `f64` seconds on the sensor's clock (Unix time in the datasets): an
 //! `f32` cannot hold a Unix time to better than two minutes. Estimators only use

@@ -27,8 +27,9 @@ pub enum Command {
     /// Replay a recorded dataset through the landmark EKF-SLAM and score it against
     /// ground truth.
     Replay(ReplayArgs),
-    /// Run the built-in deterministic simulator (landmark field, robot driving loops)
-    /// through the landmark EKF-SLAM and score it.
+    /// Run the built-in deterministic simulator: a landmark field through the landmark
+    /// EKF-SLAM, and a world of walls with a lidar through grid SLAM and the grid
+    /// localizer; score both against ground truth.
     Sim(SimArgs),
     /// Stream a dataset to the firmware (under QEMU or on a board) and compare its
     /// estimates with the host's, bit for bit.
@@ -36,6 +37,12 @@ pub enum Command {
     /// Localize on a saved grid map (`map.yaml` from `replay --filter grid-slam`) with the
     /// grid particle filter.
     Localize(LocalizeArgs),
+    /// Coloured floor map from simulated RGB-D frames (`--dataset sim`), scored against the
+    /// simulator's true floor texture.
+    Texture(crate::camera::TextureArgs),
+    /// Sign detections (box centre + depth, wrong class ids) → range/bearing → EKF-SLAM on
+    /// the simulator; ATE and the share of wrong class ids the association corrected.
+    Detections(crate::camera::DetectionsArgs),
 }
 
 /// Which estimator a replay drives.
@@ -174,6 +181,10 @@ pub struct SimArgs {
     /// Skip the PNG pictures.
     #[arg(long)]
     pub no_plots: bool,
+    /// Particles of the grid filters in the lidar world (16, 32, 64 or 200; 0 skips the
+    /// grid scenario).
+    #[arg(long, default_value_t = 200)]
+    pub grid_particles: usize,
 }
 
 impl Default for SimArgs {
@@ -185,6 +196,7 @@ impl Default for SimArgs {
             config: None,
             precision: Precision::F64,
             no_plots: false,
+            grid_particles: 200,
         }
     }
 }
@@ -214,6 +226,13 @@ pub struct HilArgs {
     /// Give up waiting for replies after this many seconds.
     #[arg(long, default_value_t = 900)]
     pub timeout_s: u64,
+    /// Corrupt this fraction of the frames sent (one byte each): the device must count
+    /// exactly that many bad frames and still answer every other frame like the host.
+    #[arg(long, default_value_t = 0.0)]
+    pub corrupt_frames: f64,
+    /// Seed of the frame corruption.
+    #[arg(long, default_value_t = 1)]
+    pub corrupt_seed: u64,
 }
 
 /// Runs what the command line asks for.
@@ -223,6 +242,8 @@ pub fn run(cli: &Cli) -> Result<()> {
         Some(Command::Sim(args)) => crate::sim::run_cli(args, cli.quiet),
         Some(Command::Hil(args)) => crate::hil::run_cli(args, cli.quiet),
         Some(Command::Localize(args)) => crate::grid_replay::localize_cli(args, cli.quiet),
+        Some(Command::Texture(args)) => crate::camera::texture_cli(args, cli.quiet),
+        Some(Command::Detections(args)) => crate::camera::detections_cli(args, cli.quiet),
         None => crate::sim::run_cli(&SimArgs::default(), cli.quiet),
     }
 }

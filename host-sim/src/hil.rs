@@ -89,6 +89,44 @@ pub fn encode_all(messages: &[ToDevice]) -> Vec<u8> {
     out
 }
 
+/// Frames of a message stream with a fraction `rate` of them corrupted (one byte of the
+/// frame, never its `0x00` delimiter, XORed with a non-zero value that keeps it non-zero;
+/// commands are left intact),
+/// from a generator seeded by `seed`. Returns the bytes and how many frames were
+/// corrupted: the receiver must count exactly that many bad frames.
+pub fn encode_all_corrupted(messages: &[ToDevice], rate: f64, seed: u64) -> (Vec<u8>, usize) {
+    use rand_core::{RngCore, SeedableRng};
+    use rand_distr::{Bernoulli, Distribution};
+    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed);
+    let coin = Bernoulli::new(rate.clamp(0.0, 1.0))
+        .unwrap_or_else(|_| Bernoulli::new(0.0).expect("0 is a probability"));
+    let mut out = Vec::new();
+    let mut corrupted = 0;
+    let mut buf = [0u8; MAX_FRAME_LEN];
+    for m in messages {
+        let Ok(frame) = encode_frame(m, &mut buf) else {
+            continue;
+        };
+        let start = out.len();
+        out.extend_from_slice(frame);
+        // Commands (the first reset, the final status request) are left intact.
+        let body = frame.len().saturating_sub(1);
+        if body > 0 && !matches!(m, ToDevice::Command { .. }) && coin.sample(&mut rng) {
+            let at = start + (rng.next_u32() as usize) % body;
+            let byte = out[at];
+            let mask = loop {
+                let m = (rng.next_u32() & 0xFF) as u8;
+                if m != 0 && byte ^ m != 0 {
+                    break m;
+                }
+            };
+            out[at] = byte ^ mask;
+            corrupted += 1;
+        }
+    }
+    (out, corrupted)
+}
+
 /// The replies of the host reference: the firmware's [`Session`], with the firmware's EKF
 /// and grid estimator (sizes and configurations), fed the same bytes.
 pub fn host_replies(bytes: &[u8]) -> Vec<ToHost> {
@@ -258,6 +296,10 @@ pub struct Comparison {
     pub seconds: f64,
     /// The device's stack high-water mark from its final status, bytes.
     pub stack_peak_bytes: Option<u32>,
+    /// Frames corrupted on purpose (`--corrupt-frames`).
+    pub corrupted_frames: usize,
+    /// Bad frames the device counted, from its final status.
+    pub device_frames_bad: Option<u32>,
 }
 
 fn canonical(reply: &ToHost) -> Vec<u8> {
@@ -301,10 +343,13 @@ pub fn compare(messages: usize, device: &LinkRun, host: &[ToHost]) -> Comparison
         }
     }
     if let Some(ToHost::Status {
-        stack_peak_bytes, ..
+        stack_peak_bytes,
+        status,
+        ..
     }) = device.replies.last()
     {
         c.stack_peak_bytes = Some(*stack_peak_bytes);
+        c.device_frames_bad = Some(status.frames_bad);
     }
     c
 }
@@ -327,7 +372,8 @@ pub fn tum(replies: &[ToHost]) -> String {
 pub fn run_cli(args: &HilArgs, quiet: bool) -> Result<()> {
     let recording = crate::readers::read(&args.dataset, args.robot)?;
     let messages = messages_for(&recording);
-    let bytes = encode_all(&messages);
+    let (bytes, corrupted) =
+        encode_all_corrupted(&messages, args.corrupt_frames, args.corrupt_seed);
     let host = host_replies(&bytes);
     let timeout = Duration::from_secs(args.timeout_s);
     if !quiet {
@@ -344,7 +390,8 @@ pub fn run_cli(args: &HilArgs, quiet: bool) -> Result<()> {
         (None, Some(port)) => run_serial(port, args.baud, bytes, host.len(), timeout)?,
         _ => bail!("give exactly one of --qemu <elf> and --serial <port>"),
     };
-    let comparison = compare(messages.len(), &run, &host);
+    let mut comparison = compare(messages.len(), &run, &host);
+    comparison.corrupted_frames = corrupted;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let report = args.out.join("hil.json");
@@ -360,6 +407,15 @@ pub fn run_cli(args: &HilArgs, quiet: bool) -> Result<()> {
             comparison.max_pose_difference,
             comparison.seconds,
             report.display()
+        );
+    }
+    if comparison
+        .device_frames_bad
+        .is_some_and(|bad| bad as usize != corrupted)
+    {
+        bail!(
+            "the device counted {:?} bad frames for {corrupted} corrupted",
+            comparison.device_frames_bad
         );
     }
     if comparison.received != comparison.expected || comparison.identical != comparison.expected {

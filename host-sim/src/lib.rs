@@ -14,9 +14,12 @@
 //! - [`config`]: estimator settings from TOML files.
 //! - [`faults`]: fault injection into event streams (drops, duplicates, reordering,
 //!   corrupted readings, clock jumps).
+//! - [`camera`]: camera front ends on the simulator: rendered RGB-D frames, the floor
+//!   texture map, sign detections through the EKF-SLAM.
 //! - [`grid_replay`]: the grid particle filter (SLAM, localization) on CARMEN lidar logs.
 #![deny(missing_docs)]
 
+pub mod camera;
 pub mod cli;
 pub mod config;
 pub mod datasets;

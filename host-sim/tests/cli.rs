@@ -60,6 +60,34 @@ fn sim_writes_every_output() {
         let p = dir.path().join(f);
         assert!(p.metadata().map(|m| m.len() > 100).unwrap_or(false), "{f}");
     }
+    // The grid filters in the lidar world.
+    for run in ["slam", "localize"] {
+        for f in [
+            "map.pgm",
+            "map.yaml",
+            "map.png",
+            "trajectory.tum",
+            "groundtruth.tum",
+            "metrics.json",
+        ] {
+            let p = dir.path().join("grid").join(run).join(f);
+            assert!(
+                p.metadata().map(|m| m.len() > 50).unwrap_or(false),
+                "grid/{run}/{f}"
+            );
+        }
+        let m: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.path().join("grid").join(run).join("metrics.json"))
+                .unwrap(),
+        )
+        .unwrap();
+        let ate = m["ate_rmse_m"].as_f64().unwrap();
+        let odo = m["odometry_ate_rmse_m"].as_f64().unwrap();
+        assert!(
+            ate < odo / 4.0,
+            "grid/{run}: ATE {ate} vs dead reckoning {odo}"
+        );
+    }
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
             .unwrap();

@@ -205,9 +205,18 @@ pub fn search_window(
     }
 }
 
+/// End points whose window rows are summed together in [`search_fixed`] (on a 32-bit
+/// target, 128 bytes of stack for their cell indices and 128 for their weights).
+const POINT_CHUNK: usize = 32;
+
 /// [`search_window`] for a window of `N = 2k+1` cells: each window row is `N` bytes read
 /// once, and every shift's score grows by the beam's weight masked by the occupancy
 /// test — no branches on the map's content, so the compiler vectorises the row.
+///
+/// The end points are taken in chunks of [`POINT_CHUNK`]: their cells are computed first,
+/// then each of the `N` accumulator rows is loaded once per chunk and kept in registers
+/// while the chunk's points add into it (instead of loading and storing it once per point).
+/// The sums are the same integers added in another order, so the scores are identical.
 fn search_fixed<const N: usize>(
     map: &GridView<'_>,
     pose: &Pose2<f32>,
@@ -221,30 +230,51 @@ fn search_fixed<const N: usize>(
     let (w, h) = (g.width, g.height);
     let cells = map.cells();
     let t = map.occupied_above();
-    for p in points {
-        let (cx, cy) = end_cell(map, pose, sin, cos, p);
-        let (x0, y0) = (cx.saturating_sub(k), cy.saturating_sub(k));
-        let inside = x0 >= 0 && y0 >= 0 && (x0 as usize) + N <= w && (y0 as usize) + N <= h;
-        let weight = p.weight;
-        if inside {
-            let base = y0 as usize * w + x0 as usize;
-            for (r, row_acc) in acc.iter_mut().enumerate() {
-                let start = base + r * w;
-                let Some(Ok(row)) = cells.get(start..start + N).map(<&[i8; N]>::try_from) else {
-                    continue;
-                };
-                for (s, c) in row_acc.iter_mut().zip(row) {
-                    *s = s.wrapping_add(weight & 0u32.wrapping_sub(u32::from(*c > t)));
+    let mut bases = [0usize; POINT_CHUNK];
+    let mut weights = [0u32; POINT_CHUNK];
+    for chunk in points.chunks(POINT_CHUNK) {
+        // Pass 1: window origins of the points whose window lies inside the grid; the
+        // others take the checked path now.
+        let mut n = 0;
+        for p in chunk {
+            let (cx, cy) = end_cell(map, pose, sin, cos, p);
+            let (x0, y0) = (cx.saturating_sub(k), cy.saturating_sub(k));
+            let inside = x0 >= 0 && y0 >= 0 && (x0 as usize) + N <= w && (y0 as usize) + N <= h;
+            if inside {
+                if let (Some(b), Some(wt)) = (bases.get_mut(n), weights.get_mut(n)) {
+                    *b = y0 as usize * w + x0 as usize;
+                    *wt = p.weight;
+                    n += 1;
                 }
-            }
-        } else {
-            for (r, row_acc) in acc.iter_mut().enumerate() {
-                for (b, s) in row_acc.iter_mut().enumerate() {
-                    if map.is_occupied(x0.saturating_add(b as i32), y0.saturating_add(r as i32)) {
-                        *s = s.wrapping_add(weight);
+            } else {
+                for (r, row_acc) in acc.iter_mut().enumerate() {
+                    for (b, s) in row_acc.iter_mut().enumerate() {
+                        if map.is_occupied(x0.saturating_add(b as i32), y0.saturating_add(r as i32))
+                        {
+                            *s = s.wrapping_add(p.weight);
+                        }
                     }
                 }
             }
+        }
+        // Pass 2: row by row, all inside points of the chunk.
+        let (chunk_bases, chunk_weights) = (
+            bases.get(..n).unwrap_or(&[]),
+            weights.get(..n).unwrap_or(&[]),
+        );
+        for (r, row_acc) in acc.iter_mut().enumerate() {
+            let mut local = *row_acc;
+            let offset = r * w;
+            for (base, weight) in chunk_bases.iter().zip(chunk_weights) {
+                let start = base + offset;
+                let Some(Ok(row)) = cells.get(start..start + N).map(<&[i8; N]>::try_from) else {
+                    continue;
+                };
+                for (s, c) in local.iter_mut().zip(row) {
+                    *s = s.wrapping_add(weight & 0u32.wrapping_sub(u32::from(*c > t)));
+                }
+            }
+            *row_acc = local;
         }
     }
     for (dst, src) in scores.iter_mut().zip(acc.as_flattened()) {

@@ -171,13 +171,18 @@ impl<const P: usize> ParticleFilter<P> {
         Ok(())
     }
 
-    /// Velocity form: `(v, ω)` held for `dt` seconds (`dt ≥ 0`).
+    /// Velocity form: `(v, ω)` held for `dt` seconds (`dt ≥ 0`). A zero-length step is a
+    /// no-op (the per-step noise floor is not applied), so that repeated stamps do not
+    /// spread the particles.
     pub fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError> {
         if !(v.is_finite() && omega.is_finite() && dt.is_finite()) {
             return Err(PfError::NonFiniteInput);
         }
         if dt < 0.0 {
             return Err(PfError::NegativeTimeStep);
+        }
+        if dt == 0.0 {
+            return Ok(());
         }
         self.predict(v * dt, omega * dt)
     }

@@ -86,6 +86,9 @@ impl std::fmt::Display for CarmenError {
 
 impl std::error::Error for CarmenError {}
 
+/// Most beams a laser message may declare.
+pub const MAX_BEAMS: u32 = 1 << 16;
+
 fn num(tok: Option<&str>, line: usize, what: &str) -> Result<f64, CarmenError> {
     tok.and_then(|t| t.parse::<f64>().ok())
         .ok_or_else(|| CarmenError {
@@ -119,7 +122,17 @@ pub fn parse<R: BufRead>(
         let mut tok = line.split_ascii_whitespace();
         match tok.next() {
             Some(kind @ ("FLASER" | "RLASER")) => {
-                let count = num(tok.next(), n, "beam count")? as usize;
+                let count = num(tok.next(), n, "beam count")?;
+                // A whole number of beams no lidar exceeds; anything else is corruption
+                // (and must not size an allocation).
+                if !(count.fract() == 0.0 && (0.0..=f64::from(MAX_BEAMS)).contains(&count)) {
+                    return Err(CarmenError {
+                        line: n,
+                        reason: format!("invalid beam count {count} (0..={MAX_BEAMS})"),
+                    }
+                    .into());
+                }
+                let count = count as usize;
                 let mut ranges = Vec::with_capacity(count);
                 for _ in 0..count {
                     ranges.push(num(tok.next(), n, "range")? as f32);
