@@ -249,3 +249,90 @@ pub fn synthetic_lidar_drive(steps: usize) -> (Vec<ToDevice>, usize) {
     });
     (out, scans)
 }
+
+/// The simulator's lidar world (`host_sim::sim::lidar_world`, seed `seed`) as wire frames
+/// for the grid estimator: select the grid, reset to the start pose, then for every sweep
+/// the odometry increment since the previous sweep (in the previous odometry frame) and the
+/// sweep in chunks (readings at or beyond the maximum range as 0 mm: no return); a status
+/// request at the end. The lidar is moved to the robot's centre (the wire carries no mount
+/// pose) and `laps` set. Returns the messages and the sweeps' true poses.
+pub fn lidar_world_messages(laps: u32, seed: u64) -> (Vec<ToDevice>, Vec<[f64; 3]>) {
+    use host_sim::sim::lidar_world::{LidarWorld, simulate};
+    let mut world = LidarWorld::office();
+    world.lidar.mount = [0.0; 3];
+    world.laps = laps;
+    let rec = simulate(&world, seed).expect("the office world simulates");
+    let start = world.start_pose();
+    let mut seq = 0u32;
+    let mut next = || {
+        seq += 1;
+        seq
+    };
+    let mut out = vec![
+        ToDevice::Command {
+            seq: next(),
+            command: WireCommand::SelectEstimator(EstimatorKind::Grid),
+        },
+        ToDevice::Command {
+            seq: next(),
+            command: WireCommand::Reset {
+                x: start.x as f32,
+                y: start.y as f32,
+                theta: start.theta as f32,
+            },
+        },
+    ];
+    let max_mm = world.lidar.max_range_m * 1000.0;
+    let mut last = rec.scans.first().map(|s| s.odometry);
+    let mut truth = Vec::new();
+    for (k, scan) in rec.scans.iter().enumerate() {
+        let stamp_us = (scan.stamp * 1e6) as u64;
+        if let Some(prev) = last {
+            let (c, s) = (prev.theta.cos(), prev.theta.sin());
+            let (dx, dy) = (scan.odometry.x - prev.x, scan.odometry.y - prev.y);
+            let dth = scan.odometry.theta - prev.theta;
+            if k > 0 {
+                out.push(ToDevice::Odometry {
+                    seq: next(),
+                    stamp_us,
+                    odometry: Odometry::Increment {
+                        dx: (c * dx + s * dy) as f32,
+                        dy: (-s * dx + c * dy) as f32,
+                        dtheta: dth.sin().atan2(dth.cos()) as f32,
+                    },
+                });
+            }
+        }
+        last = Some(scan.odometry);
+        let ranges: Vec<u16> = scan
+            .ranges
+            .iter()
+            .map(|&r| {
+                let mm = f64::from(r) * 1000.0;
+                if mm >= max_mm || mm <= 0.0 {
+                    0
+                } else {
+                    mm.round() as u16
+                }
+            })
+            .collect();
+        for (c, chunk) in ranges.chunks(SCAN_CHUNK_BEAMS).enumerate() {
+            out.push(ToDevice::Scan(ScanChunk {
+                seq: next(),
+                stamp_us,
+                scan_id: k as u16,
+                beam_offset: (c * SCAN_CHUNK_BEAMS) as u16,
+                beam_total: ranges.len() as u16,
+                angle_min: rec.lidar.first_angle,
+                angle_increment: rec.lidar.angle_increment,
+                ranges_mm: heapless::Vec::from_slice(chunk).unwrap_or_default(),
+            }));
+        }
+        truth.push([scan.truth.x, scan.truth.y, scan.truth.theta]);
+    }
+    out.push(ToDevice::Command {
+        seq: next(),
+        command: WireCommand::ReportStatus,
+    });
+    (out, truth)
+}
