@@ -274,15 +274,10 @@ fn firmware_in_qemu_equals_host_bit_for_bit_in_the_lidar_world() {
         );
     }
     // How far the last sweep's estimate is from the truth (reported, not a bound).
-    let last_scan = run
-        .replies
-        .iter()
-        .zip(&messages)
-        .filter(|(r, m)| {
-            matches!(m, ToDevice::Scan(_))
-                && matches!(r, ToHost::Estimate(e) if e.result == StepResult::Applied)
-        })
-        .last();
+    let last_scan = run.replies.iter().zip(&messages).rfind(|(r, m)| {
+        matches!(m, ToDevice::Scan(_))
+            && matches!(r, ToHost::Estimate(e) if e.result == StepResult::Applied)
+    });
     if let (Some((ToHost::Estimate(e), _)), Some(t)) = (last_scan, truth.last()) {
         println!(
             "last sweep: estimate ({:.3}, {:.3}), truth ({:.3}, {:.3})",
