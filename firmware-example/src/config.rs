@@ -3,8 +3,13 @@
 use microslam::ekf::{CovarianceUpdate, EkfConfig, EkfSlam, state_dim};
 use microslam::gate::ChiSquareGate;
 use microslam::geometry::Pose2;
+use microslam::grid::OccupancyGrid;
 use microslam::motion::{IncrementNoise, VelocityNoise};
+use microslam::pf::{GridPfConfig, GridSlam};
+use microslam::sensors::lidar::LidarGeometry;
 use microslam::sensors::range_bearing::RangeBearingSensor;
+use microslam::sensors::wheel_odometry::DiffDriveGeometry;
+use microslam::wire::GridSetup;
 
 /// Landmarks the EKF holds.
 pub const EKF_LANDMARKS: usize = 32;
@@ -38,4 +43,37 @@ pub const ZEROED_EKF_CONFIG: EkfConfig<f32> = EkfConfig {
     sensor: RangeBearingSensor::new(Pose2::new(0.0, 0.0, 0.0)),
     gate: ChiSquareGate::from_threshold(0.0),
     covariance_update: CovarianceUpdate::Joseph,
+};
+
+/// Particles of the grid estimator.
+pub const GRID_PARTICLES: usize = 32;
+/// Most beams per scan the grid estimator scores (more are decimated).
+pub const GRID_BEAMS: usize = 90;
+/// Grid edge, cells (256 × 256 `i8` = 64 KB, 12.8 m square at 5 cm).
+pub const GRID_CELLS: usize = 256;
+
+/// The occupancy grid, built with [`Grid::zeroed`] in a `static` (`.bss`) and given its
+/// geometry in place with [`Grid::init_centred`].
+pub type Grid = OccupancyGrid<GRID_CELLS, GRID_CELLS>;
+
+/// The grid estimator on [`Grid`].
+pub type GridEstimator = GridSlam<'static, GRID_CELLS, GRID_CELLS, GRID_PARTICLES, GRID_BEAMS>;
+
+/// Settings of the grid estimator.
+pub const GRID_CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
+
+/// Lidar and wheels as the session hands them to the grid estimator.
+pub const GRID_SETUP: GridSetup = GridSetup {
+    lidar: LidarGeometry {
+        first_angle: 0.0,
+        angle_increment: 0.0,
+        min_range: 0.1,
+        max_range: 30.0,
+        no_return_range: f32::INFINITY,
+        mount: Pose2::new(0.0, 0.0, 0.0),
+    },
+    wheels: DiffDriveGeometry {
+        metres_per_tick: 0.0022,
+        track_width: 0.3937,
+    },
 };

@@ -17,9 +17,14 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use microslam::ekf::{EkfConfig, EkfSlam, state_dim};
+use microslam::geometry::Pose2;
+use microslam::grid::OccupancyGrid;
+use microslam::pf::{GridPfConfig, GridSlam};
+use microslam::sensors::lidar::LidarGeometry;
+use microslam::sensors::wheel_odometry::DiffDriveGeometry;
 use microslam::wire::{
-    Command as WireCommand, EventsToWire, FrameDecoder, MAX_FRAME_LEN, Session, ToDevice, ToHost,
-    encode_frame,
+    Command as WireCommand, EventsToWire, FrameDecoder, GridSetup, MAX_FRAME_LEN, Session,
+    ToDevice, ToHost, encode_frame,
 };
 use serde::Serialize;
 
@@ -28,6 +33,26 @@ use crate::readers::Recording;
 
 /// Landmarks of the firmware's EKF (`firmware_example::config::EKF_LANDMARKS`).
 pub const FIRMWARE_LANDMARKS: usize = 32;
+
+/// The firmware's grid estimator (`firmware_example::config::GridEstimator`): 256 × 256
+/// cells, 32 particles, 90 beams, [`GridPfConfig::MICROCONTROLLER`].
+pub type FirmwareGridSlam<'g> = GridSlam<'g, 256, 256, 32, 90>;
+
+/// The firmware's lidar and wheels (`firmware_example::config::GRID_SETUP`).
+pub const FIRMWARE_GRID_SETUP: GridSetup = GridSetup {
+    lidar: LidarGeometry {
+        first_angle: 0.0,
+        angle_increment: 0.0,
+        min_range: 0.1,
+        max_range: 30.0,
+        no_return_range: f32::INFINITY,
+        mount: Pose2::new(0.0, 0.0, 0.0),
+    },
+    wheels: DiffDriveGeometry {
+        metres_per_tick: 0.0022,
+        track_width: 0.3937,
+    },
+};
 
 /// The messages for a recording: reset to its initial pose, its events, a status request.
 pub fn messages_for(recording: &Recording) -> Vec<ToDevice> {
@@ -103,12 +128,25 @@ pub fn encode_all_corrupted(messages: &[ToDevice], rate: f64, seed: u64) -> (Vec
 }
 
 /// The replies of the host reference: the firmware's [`Session`], with the firmware's EKF
-/// size and configuration, fed the same bytes.
+/// and grid estimator (sizes and configurations), fed the same bytes.
 pub fn host_replies(bytes: &[u8]) -> Vec<ToHost> {
     let mut ekf = Box::new(EkfSlam::<f32, { state_dim(FIRMWARE_LANDMARKS) }>::new(
         EkfConfig::DEFAULT_F32,
     ));
-    let mut session = Session::<_, FIRMWARE_LANDMARKS>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+    let config = GridPfConfig::MICROCONTROLLER;
+    let mut grid = Box::new(OccupancyGrid::<256, 256>::centred(
+        config.resolution,
+        config.log_odds,
+    ));
+    let Ok(mut slam) = FirmwareGridSlam::new(&mut grid, config, Pose2::new(0.0, 0.0, 0.0)) else {
+        unreachable!("the firmware's grid configuration is valid")
+    };
+    let mut session = Session::<_, FIRMWARE_LANDMARKS>::with_grid(
+        &mut ekf,
+        EkfConfig::DEFAULT_F32,
+        &mut slam,
+        FIRMWARE_GRID_SETUP,
+    );
     bytes.iter().filter_map(|&b| session.receive(b)).collect()
 }
 

@@ -5,7 +5,9 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use microslam::wire::{Command as WireCommand, Odometry, ToDevice};
+use microslam::wire::{
+    Command as WireCommand, EstimatorKind, Odometry, SCAN_CHUNK_BEAMS, ScanChunk, ToDevice,
+};
 
 /// The workspace root.
 pub fn workspace_root() -> PathBuf {
@@ -116,4 +118,221 @@ pub fn with_line_noise(frames: &[u8], every: usize) -> (Vec<u8>, u32) {
         }
     }
     (out, injected)
+}
+
+/// Walls of the grid drive's room (segments, metres): an 8 m × 6 m box with a pillar and
+/// a wall stub, so that scans constrain both position and heading.
+const ROOM: [((f32, f32), (f32, f32)); 9] = [
+    ((-4.0, -3.0), (4.0, -3.0)),
+    ((4.0, -3.0), (4.0, 3.0)),
+    ((4.0, 3.0), (-4.0, 3.0)),
+    ((-4.0, 3.0), (-4.0, -3.0)),
+    ((-0.4, -0.4), (0.4, -0.4)),
+    ((0.4, -0.4), (0.4, 0.4)),
+    ((0.4, 0.4), (-0.4, 0.4)),
+    ((-0.4, 0.4), (-0.4, -0.4)),
+    ((2.5, 3.0), (2.5, 1.8)),
+];
+
+/// Range from `(x, y)` along angle `a` to the nearest wall of [`ROOM`], metres.
+fn cast(x: f32, y: f32, a: f32) -> Option<f32> {
+    let (dx, dy) = (a.cos(), a.sin());
+    ROOM.iter()
+        .filter_map(|&((x1, y1), (x2, y2))| {
+            let (ex, ey) = (x2 - x1, y2 - y1);
+            let den = dx * ey - dy * ex;
+            if den.abs() < 1e-9 {
+                return None;
+            }
+            let (wx, wy) = (x1 - x, y1 - y);
+            let t = (wx * ey - wy * ex) / den;
+            let u = (wx * dy - wy * dx) / den;
+            (t > 0.0 && (0.0..=1.0).contains(&u)).then_some(t)
+        })
+        .min_by(f32::total_cmp)
+}
+
+/// Beams of the grid drive's lidar: 90 over the full circle.
+pub const GRID_DRIVE_BEAMS: usize = 90;
+
+/// A deterministic lidar drive for the grid estimator: select the grid, reset to the
+/// start pose, then a robot circling a pillar in a walled room ([`ROOM`]) with biased
+/// velocity odometry at 10 Hz (a few steps as pose increments and encoder ticks, to
+/// exercise every odometry form) and a 90-beam scan every 5th step, ray-cast in the room
+/// with deterministic noise and sent in chunks of [`SCAN_CHUNK_BEAMS`]; a status request
+/// at the end. Returns the messages and the number of scans.
+pub fn synthetic_lidar_drive(steps: usize) -> (Vec<ToDevice>, usize) {
+    let (v, omega, dt) = (0.3f32, 0.2f32, 0.1f32);
+    let (mut x, mut y, mut th) = (1.5f32, 0.0f32, core::f32::consts::FRAC_PI_2);
+    let mut seq = 0u32;
+    let mut next = || {
+        seq += 1;
+        seq
+    };
+    let mut out = vec![
+        ToDevice::Command {
+            seq: next(),
+            command: WireCommand::SelectEstimator(EstimatorKind::Grid),
+        },
+        ToDevice::Command {
+            seq: next(),
+            command: WireCommand::Reset { x, y, theta: th },
+        },
+    ];
+    let mut scans = 0;
+    let increment = core::f32::consts::TAU / GRID_DRIVE_BEAMS as f32;
+    for k in 0..steps {
+        let stamp_us = 2_000_000_000 + u64::from(k as u32) * 100_000;
+        if k % 5 == 0 {
+            let ranges: Vec<u16> = (0..GRID_DRIVE_BEAMS)
+                .map(|i| {
+                    let a = -core::f32::consts::PI + increment * i as f32;
+                    let noise = 0.01 * (0.91 * (k * 7 + i) as f32).sin();
+                    match cast(x, y, th + a) {
+                        Some(r) if r < 29.0 => ((r + noise) * 1000.0).round() as u16,
+                        _ => 0,
+                    }
+                })
+                .collect();
+            for (c, chunk) in ranges.chunks(SCAN_CHUNK_BEAMS).enumerate() {
+                out.push(ToDevice::Scan(ScanChunk {
+                    seq: next(),
+                    stamp_us,
+                    scan_id: scans as u16,
+                    beam_offset: (c * SCAN_CHUNK_BEAMS) as u16,
+                    beam_total: GRID_DRIVE_BEAMS as u16,
+                    angle_min: -core::f32::consts::PI,
+                    angle_increment: increment,
+                    ranges_mm: heapless::Vec::from_slice(chunk).unwrap_or_default(),
+                }));
+            }
+            scans += 1;
+        }
+        x += v * dt * (th + omega * dt / 2.0).cos();
+        y += v * dt * (th + omega * dt / 2.0).sin();
+        th += omega * dt;
+        let kf = k as f32;
+        let odometry = match k % 10 {
+            3 => Odometry::Increment {
+                dx: v * dt * 1.02,
+                dy: 0.0,
+                dtheta: omega * dt,
+            },
+            7 => {
+                // Arc of v·dt with turn ω·dt on a 0.3937 m track, 0.0022 m per tick.
+                let (d, t) = (v * dt, omega * dt);
+                let right = ((d + t * 0.3937 / 2.0) / 0.0022).round() as i32;
+                let left = ((d - t * 0.3937 / 2.0) / 0.0022).round() as i32;
+                Odometry::EncoderTicks {
+                    front_left: left,
+                    front_right: right,
+                    rear_left: left,
+                    rear_right: right,
+                    dt,
+                }
+            }
+            _ => Odometry::Velocity {
+                v: v * (1.0 + 0.03 * (0.07 * kf).sin()),
+                omega: omega + 0.01 * (0.11 * kf).cos(),
+                dt,
+            },
+        };
+        out.push(ToDevice::Odometry {
+            seq: next(),
+            stamp_us: stamp_us + 50_000,
+            odometry,
+        });
+    }
+    out.push(ToDevice::Command {
+        seq: next(),
+        command: WireCommand::ReportStatus,
+    });
+    (out, scans)
+}
+
+/// The simulator's lidar world (`host_sim::sim::lidar_world`, seed `seed`) as wire frames
+/// for the grid estimator: select the grid, reset to the start pose, then for every sweep
+/// the odometry increment since the previous sweep (in the previous odometry frame) and the
+/// sweep in chunks (readings at or beyond the maximum range as 0 mm: no return); a status
+/// request at the end. The lidar is moved to the robot's centre (the wire carries no mount
+/// pose) and `laps` set. Returns the messages and the sweeps' true poses.
+pub fn lidar_world_messages(laps: u32, seed: u64) -> (Vec<ToDevice>, Vec<[f64; 3]>) {
+    use host_sim::sim::lidar_world::{LidarWorld, simulate};
+    let mut world = LidarWorld::office();
+    world.lidar.mount = [0.0; 3];
+    world.laps = laps;
+    let rec = simulate(&world, seed).expect("the office world simulates");
+    let start = world.start_pose();
+    let mut seq = 0u32;
+    let mut next = || {
+        seq += 1;
+        seq
+    };
+    let mut out = vec![
+        ToDevice::Command {
+            seq: next(),
+            command: WireCommand::SelectEstimator(EstimatorKind::Grid),
+        },
+        ToDevice::Command {
+            seq: next(),
+            command: WireCommand::Reset {
+                x: start.x as f32,
+                y: start.y as f32,
+                theta: start.theta as f32,
+            },
+        },
+    ];
+    let max_mm = world.lidar.max_range_m * 1000.0;
+    let mut last = rec.scans.first().map(|s| s.odometry);
+    let mut truth = Vec::new();
+    for (k, scan) in rec.scans.iter().enumerate() {
+        let stamp_us = (scan.stamp * 1e6) as u64;
+        if let Some(prev) = last {
+            let (c, s) = (prev.theta.cos(), prev.theta.sin());
+            let (dx, dy) = (scan.odometry.x - prev.x, scan.odometry.y - prev.y);
+            let dth = scan.odometry.theta - prev.theta;
+            if k > 0 {
+                out.push(ToDevice::Odometry {
+                    seq: next(),
+                    stamp_us,
+                    odometry: Odometry::Increment {
+                        dx: (c * dx + s * dy) as f32,
+                        dy: (-s * dx + c * dy) as f32,
+                        dtheta: dth.sin().atan2(dth.cos()) as f32,
+                    },
+                });
+            }
+        }
+        last = Some(scan.odometry);
+        let ranges: Vec<u16> = scan
+            .ranges
+            .iter()
+            .map(|&r| {
+                let mm = f64::from(r) * 1000.0;
+                if mm >= max_mm || mm <= 0.0 {
+                    0
+                } else {
+                    mm.round() as u16
+                }
+            })
+            .collect();
+        for (c, chunk) in ranges.chunks(SCAN_CHUNK_BEAMS).enumerate() {
+            out.push(ToDevice::Scan(ScanChunk {
+                seq: next(),
+                stamp_us,
+                scan_id: k as u16,
+                beam_offset: (c * SCAN_CHUNK_BEAMS) as u16,
+                beam_total: ranges.len() as u16,
+                angle_min: rec.lidar.first_angle,
+                angle_increment: rec.lidar.angle_increment,
+                ranges_mm: heapless::Vec::from_slice(chunk).unwrap_or_default(),
+            }));
+        }
+        truth.push([scan.truth.x, scan.truth.y, scan.truth.theta]);
+    }
+    out.push(ToDevice::Command {
+        seq: next(),
+        command: WireCommand::ReportStatus,
+    });
+    (out, truth)
 }

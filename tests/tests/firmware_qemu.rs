@@ -6,9 +6,10 @@
 
 use std::time::Duration;
 
-use microslam::wire::{StepResult, ToDevice, ToHost};
+use microslam::wire::{EstimatorKind, StepResult, ToDevice, ToHost};
 use microslam_replay_tests::firmware::{
-    encode_all, firmware_elf, host_replies, run_in_qemu, synthetic_drive, with_line_noise,
+    encode_all, firmware_elf, host_replies, lidar_world_messages, run_in_qemu, synthetic_drive,
+    synthetic_lidar_drive, with_line_noise,
 };
 
 /// Bits of every f32, so that equality means bit for bit (and NaN = NaN).
@@ -153,4 +154,143 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_mrclam_dataset6() {
         status.frames_bad as usize, corrupted,
         "every corrupted frame counted once"
     );
+}
+
+/// The grid estimator: a lidar drive in a walled room (scans in chunks, three odometry
+/// forms) after `SelectEstimator(Grid)`; every firmware reply equals the host's bit for
+/// bit, and the host's replies show the grid really ran (scans applied, resampling).
+#[test]
+#[ignore = "needs qemu-system-arm and the firmware ELF: run by .ci/firmware.sh"]
+fn firmware_in_qemu_equals_host_bit_for_bit_on_a_lidar_drive() {
+    let (messages, scans) = synthetic_lidar_drive(300);
+    let bytes = encode_all(&messages);
+    let expected = host_replies(&bytes);
+    assert_eq!(expected.len(), messages.len(), "one reply per message");
+    let grid_scans = expected
+        .iter()
+        .zip(&messages)
+        .filter(|(r, m)| {
+            matches!(m, ToDevice::Scan(c) if usize::from(c.beam_offset) + c.ranges_mm.len() == usize::from(c.beam_total))
+                && matches!(r, ToHost::Estimate(e) if e.estimator == EstimatorKind::Grid && e.result == StepResult::Applied)
+        })
+        .count();
+    assert_eq!(
+        grid_scans, scans,
+        "every scan is observed by the grid estimator"
+    );
+    let Some(ToHost::Status { status, .. }) = expected.last() else {
+        panic!("last reply is not a status");
+    };
+    assert!(status.resamples > 0, "the particles were resampled");
+
+    let elf = firmware_elf();
+    assert!(
+        elf.exists(),
+        "{} missing: run .ci/firmware.sh",
+        elf.display()
+    );
+    let run = run_in_qemu(
+        &elf,
+        bytes.clone(),
+        expected.len(),
+        Duration::from_secs(600),
+    );
+    println!(
+        "grid: {} frames ({} scans, {} bytes) → {} replies in {:.2} s",
+        messages.len(),
+        scans,
+        bytes.len(),
+        run.replies.len(),
+        run.elapsed.as_secs_f64()
+    );
+    assert_eq!(run.bad_frames, 0);
+    assert_eq!(run.replies.len(), expected.len(), "every message answered");
+    for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
+        assert_eq!(
+            bits(got),
+            bits(want),
+            "reply {i} differs:\n{got:?}\n{want:?}"
+        );
+    }
+    let Some(ToHost::Status {
+        status,
+        stack_peak_bytes,
+        ..
+    }) = run.replies.last()
+    else {
+        panic!("last reply is not a status");
+    };
+    println!("grid status: {status:?}");
+    println!("firmware stack peak with grid: {stack_peak_bytes} bytes");
+}
+
+/// The simulator's lidar world (office floor, one lap, 180-beam 270° sweeps at 5 Hz,
+/// decimated to 90 by the firmware's filter) through the grid estimator: every firmware
+/// reply equals the host's bit for bit.
+#[test]
+#[ignore = "needs qemu-system-arm and the firmware ELF: run by .ci/firmware.sh"]
+fn firmware_in_qemu_equals_host_bit_for_bit_in_the_lidar_world() {
+    let (messages, truth) = lidar_world_messages(1, 7);
+    let bytes = encode_all(&messages);
+    let expected = host_replies(&bytes);
+    assert_eq!(expected.len(), messages.len(), "one reply per message");
+    let applied_scans = expected
+        .iter()
+        .zip(&messages)
+        .filter(|(r, m)| {
+            matches!(m, ToDevice::Scan(_))
+                && matches!(r, ToHost::Estimate(e) if e.result == StepResult::Applied)
+        })
+        .count();
+    assert_eq!(applied_scans, truth.len(), "every sweep observed");
+
+    let elf = firmware_elf();
+    assert!(
+        elf.exists(),
+        "{} missing: run .ci/firmware.sh",
+        elf.display()
+    );
+    let run = run_in_qemu(
+        &elf,
+        bytes.clone(),
+        expected.len(),
+        Duration::from_secs(900),
+    );
+    println!(
+        "lidar world: {} frames ({} sweeps, {} bytes) → {} replies in {:.1} s",
+        messages.len(),
+        truth.len(),
+        bytes.len(),
+        run.replies.len(),
+        run.elapsed.as_secs_f64()
+    );
+    assert_eq!(run.bad_frames, 0);
+    assert_eq!(run.replies.len(), expected.len(), "every message answered");
+    for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
+        assert_eq!(
+            bits(got),
+            bits(want),
+            "reply {i} differs:\n{got:?}\n{want:?}"
+        );
+    }
+    // How far the last sweep's estimate is from the truth (reported, not a bound).
+    let last_scan = run.replies.iter().zip(&messages).rfind(|(r, m)| {
+        matches!(m, ToDevice::Scan(_))
+            && matches!(r, ToHost::Estimate(e) if e.result == StepResult::Applied)
+    });
+    if let (Some((ToHost::Estimate(e), _)), Some(t)) = (last_scan, truth.last()) {
+        println!(
+            "last sweep: estimate ({:.3}, {:.3}), truth ({:.3}, {:.3})",
+            e.pose[0], e.pose[1], t[0], t[1]
+        );
+    }
+    if let Some(ToHost::Status {
+        status,
+        stack_peak_bytes,
+        ..
+    }) = run.replies.last()
+    {
+        println!("lidar world status: {status:?}");
+        println!("firmware stack peak with grid: {stack_peak_bytes} bytes");
+    }
 }

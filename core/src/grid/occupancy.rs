@@ -7,8 +7,10 @@ use crate::sensors::lidar::{LidarScan, robot_to_world, sensor_pose};
 /// A `W × H` grid of `i8` log-odds cells (see [`LogOdds`]).
 ///
 /// RAM: `W · H` bytes plus 40 bytes (256 × 256: 65,576 bytes). Build it in place in a
-/// `static` with the `const fn` [`OccupancyGrid::new`]; no method moves the cells
-/// through the stack.
+/// `static` with the `const fn` [`OccupancyGrid::new`], or, so that the static is all
+/// zero bytes and lands in `.bss` (no flash for initial values), with
+/// [`OccupancyGrid::zeroed`] followed by [`OccupancyGrid::init`] at start-up. No method
+/// moves the cells through the stack.
 #[derive(Clone, Debug)]
 pub struct OccupancyGrid<const W: usize, const H: usize> {
     cells: [[i8; W]; H],
@@ -46,6 +48,66 @@ impl<const W: usize, const H: usize> OccupancyGrid<W, H> {
             log_odds,
             off_grid: 0,
         }
+    }
+
+    /// A grid of zero bytes only, for a `static` in `.bss`: geometry `0 × 0` (every cell
+    /// reads as off the grid and nothing is written) until [`OccupancyGrid::init`] sets
+    /// the real geometry in place.
+    pub const fn zeroed() -> Self {
+        Self {
+            cells: [[0; W]; H],
+            geometry: GridGeometry {
+                width: 0,
+                height: 0,
+                resolution: 0.0,
+                origin_x: 0.0,
+                origin_y: 0.0,
+            },
+            log_odds: LogOdds {
+                hit: 0,
+                miss: 0,
+                occupied_above: 0,
+                free_below: 0,
+                min: 0,
+                max: 0,
+            },
+            off_grid: 0,
+        }
+    }
+
+    /// Sets the geometry (`W × H` cells of `resolution` metres, lower-left corner at
+    /// `(origin_x, origin_y)`) and the log-odds model in place, and clears the grid: the
+    /// in-place equivalent of [`OccupancyGrid::new`]. Refused (nothing changed) when a
+    /// number is not finite, the resolution is not positive or the model is invalid.
+    pub fn init(
+        &mut self,
+        resolution: f32,
+        origin_x: f32,
+        origin_y: f32,
+        log_odds: LogOdds,
+    ) -> Result<(), GridError> {
+        if !(resolution.is_finite() && origin_x.is_finite() && origin_y.is_finite()) {
+            return Err(GridError::NonFinite);
+        }
+        if resolution <= 0.0 || !log_odds.is_valid() {
+            return Err(GridError::InvalidGeometry);
+        }
+        self.geometry = GridGeometry {
+            width: W,
+            height: H,
+            resolution,
+            origin_x,
+            origin_y,
+        };
+        self.log_odds = log_odds;
+        self.reset();
+        Ok(())
+    }
+
+    /// [`OccupancyGrid::init`] with the grid centred on the world origin.
+    pub fn init_centred(&mut self, resolution: f32, log_odds: LogOdds) -> Result<(), GridError> {
+        let g = GridGeometry::centred(W, H, resolution);
+        self.init(resolution, g.origin_x, g.origin_y, log_odds)
     }
 
     /// An unknown grid centred on the world origin.
@@ -286,5 +348,24 @@ mod tests {
         assert_eq!(GRID.cells().len(), 32);
         assert_eq!(GRID.geometry().origin_x, -0.2);
         assert!(core::mem::size_of::<OccupancyGrid<256, 256>>() <= 256 * 256 + 48);
+    }
+
+    #[test]
+    fn zeroed_then_init_equals_new() {
+        let mut grid = OccupancyGrid::<8, 4>::zeroed();
+        assert_eq!(grid.geometry().width, 0);
+        assert_eq!(grid.cell(0, 0), None, "nothing is on a zeroed grid");
+        assert!(!grid.set_cell(0, 0, 5));
+        assert_eq!(
+            grid.init(f32::NAN, 0.0, 0.0, LogOdds::SEED),
+            Err(GridError::NonFinite)
+        );
+        assert_eq!(grid.geometry().width, 0, "a refused init changes nothing");
+        grid.init_centred(0.05, LogOdds::SEED).unwrap();
+        let made = OccupancyGrid::<8, 4>::centred(0.05, LogOdds::SEED);
+        assert_eq!(grid.geometry(), made.geometry());
+        assert_eq!(grid.log_odds_model(), made.log_odds_model());
+        assert!(grid.set_cell(7, 3, 5));
+        assert_eq!(grid.cell(7, 3), Some(5));
     }
 }

@@ -69,6 +69,17 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize> GridSla
         })
     }
 
+    /// Starts over at `start` in place: the map is cleared, the particles are drawn anew
+    /// from the configured seed, the scan count is zero. A non-finite `start` is refused
+    /// and nothing changes.
+    pub fn reset(&mut self, start: Pose2<f32>) -> Result<(), PfError> {
+        self.filter = ParticleFilter::new(self.config.filter, start)?;
+        self.map.reset();
+        self.scans = 0;
+        self.pose = start;
+        Ok(())
+    }
+
     /// The estimate: the heaviest particle's pose after the last scan (or the prediction
     /// of the last estimate's particle set before any scan).
     pub fn pose(&self) -> Pose2<f32> {

@@ -53,7 +53,7 @@ pub use messages::{
     ToDevice, ToHost,
 };
 pub use scan::{Scan, ScanAssembler, ScanError};
-pub use session::Session;
+pub use session::{GridEstimator, GridSetup, MAX_SCAN_BEAMS, Session};
 
 #[cfg(test)]
 mod tests;

@@ -78,6 +78,11 @@ impl<const BEAMS: usize> ScanAssembler<BEAMS> {
         }
     }
 
+    /// Abandons a partial scan without counting it as dropped (e.g. after a reset).
+    pub fn clear(&mut self) {
+        self.filled = 0;
+    }
+
     /// Scans dropped because of missing, inconsistent or oversize chunks.
     pub fn dropped(&self) -> u32 {
         self.dropped

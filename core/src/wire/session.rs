@@ -12,12 +12,81 @@ use crate::association::KnownIds;
 use crate::association::{Observed, observe_known};
 use crate::ekf::{EkfConfig, EkfSlam, UpdateOutcome};
 use crate::geometry::Pose2;
+use crate::pf::{GridSlam, PfError, StepReport};
+use crate::sensors::lidar::{LidarGeometry, LidarScan};
 use crate::sensors::range_bearing::RangeBearing;
+use crate::sensors::wheel_odometry::{DiffDriveGeometry, WheelTicks};
 
 use super::frame::{FrameDecoder, FrameError, MAX_FRAME_LEN};
 use super::messages::{
-    Command, Estimate, EstimatorKind, Odometry, Status, StepResult, ToDevice, ToHost,
+    Command, Estimate, EstimatorKind, Odometry, ScanChunk, Status, StepResult, ToDevice, ToHost,
 };
+use super::scan::ScanAssembler;
+
+/// The most beams of one scan a [`Session`] reassembles (a 1° scanner); longer scans are
+/// dropped and answered with [`StepResult::Rejected`].
+pub const MAX_SCAN_BEAMS: usize = 360;
+
+/// A grid estimator as a [`Session`] drives it: object-safe, so that the session's type
+/// does not depend on the grid's size or particle count. Implemented by [`GridSlam`].
+pub trait GridEstimator {
+    /// Starts over at `start` (map cleared, particles re-drawn from the seed).
+    fn reset(&mut self, start: Pose2<f32>) -> Result<(), PfError>;
+    /// Prediction with a pose increment in the previous robot frame.
+    fn predict_increment(&mut self, increment: &Pose2<f32>) -> Result<(), PfError>;
+    /// Prediction with the arc `(distance, heading_change)`.
+    fn predict_arc(&mut self, distance: f32, heading_change: f32) -> Result<(), PfError>;
+    /// Prediction with `(v, ω)` held for `dt` seconds.
+    fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError>;
+    /// One scan.
+    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError>;
+    /// The estimate.
+    fn pose(&self) -> Pose2<f32>;
+    /// How often the particles were resampled.
+    fn resamples(&self) -> u32;
+}
+
+impl<const W: usize, const H: usize, const P: usize, const B: usize> GridEstimator
+    for GridSlam<'_, W, H, P, B>
+{
+    fn reset(&mut self, start: Pose2<f32>) -> Result<(), PfError> {
+        GridSlam::reset(self, start)
+    }
+    fn predict_increment(&mut self, increment: &Pose2<f32>) -> Result<(), PfError> {
+        self.predict_odometry(&Pose2::new(0.0, 0.0, 0.0), increment)
+    }
+    fn predict_arc(&mut self, distance: f32, heading_change: f32) -> Result<(), PfError> {
+        self.predict(distance, heading_change)
+    }
+    fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError> {
+        GridSlam::predict_velocity(self, v, omega, dt)
+    }
+    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
+        GridSlam::observe(self, scan)
+    }
+    fn pose(&self) -> Pose2<f32> {
+        GridSlam::pose(self)
+    }
+    fn resamples(&self) -> u32 {
+        self.filter().resample_count()
+    }
+}
+
+/// What the grid estimator needs besides the wire messages.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GridSetup {
+    /// Range limits and mount pose of the lidar; `first_angle` and `angle_increment` are
+    /// taken from each scan. A range of 0 mm on the wire means "no return".
+    pub lidar: LidarGeometry,
+    /// Wheel geometry, for [`Odometry::EncoderTicks`] (the rear and front wheels of a
+    /// side are averaged).
+    pub wheels: DiffDriveGeometry<f32>,
+}
+
+/// Error code in [`StepResult::Rejected`] for a scan the assembler dropped.
+const SCAN_DROPPED: u8 = 0x80;
+/// Error code in [`StepResult::Rejected`] for encoder ticks the wheel model refused.
+const TICKS_REFUSED: u8 = 0x81;
 
 /// The device side of the protocol for an `f32` EKF of state dimension `N` with a
 /// known-id table of `L` ids.
@@ -40,11 +109,21 @@ use super::messages::{
 /// assert_eq!(replies, 1);
 /// # Ok::<(), microslam::wire::EncodeError>(())
 /// ```
+///
+/// With [`Session::with_grid`] it also drives a grid estimator: after
+/// [`Command::SelectEstimator`]`(Grid)` odometry predicts the grid filter, scan chunks are
+/// reassembled and observed (each chunk is answered; the one completing a scan with the
+/// grid step's result), and estimates carry the grid pose (covariance zero) and its
+/// resample count.
 pub struct Session<'a, const N: usize, const L: usize> {
     decoder: FrameDecoder<MAX_FRAME_LEN>,
     ekf: &'a mut EkfSlam<f32, N>,
     ekf_config: EkfConfig<f32>,
     ids: KnownIds<L>,
+    grid: Option<&'a mut dyn GridEstimator>,
+    grid_setup: Option<GridSetup>,
+    assembler: ScanAssembler<MAX_SCAN_BEAMS>,
+    ranges: [f32; MAX_SCAN_BEAMS],
     active: EstimatorKind,
     status: Status,
 }
@@ -58,10 +137,28 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
             ekf,
             ekf_config,
             ids: KnownIds::new(),
+            grid: None,
+            grid_setup: None,
+            assembler: ScanAssembler::new(),
+            ranges: [0.0; MAX_SCAN_BEAMS],
             active: EstimatorKind::Ekf,
             status: Status::default(),
         };
         session.reset(Pose2::new(0.0, 0.0, 0.0));
+        session
+    }
+
+    /// A session over `ekf` and a grid estimator `grid` (e.g. a [`GridSlam`] on a grid in
+    /// a `static`); it starts on the EKF, and [`Command::SelectEstimator`] switches.
+    pub fn with_grid(
+        ekf: &'a mut EkfSlam<f32, N>,
+        ekf_config: EkfConfig<f32>,
+        grid: &'a mut dyn GridEstimator,
+        setup: GridSetup,
+    ) -> Self {
+        let mut session = Self::new(ekf, ekf_config);
+        session.grid = Some(grid);
+        session.grid_setup = Some(setup);
         session
     }
 
@@ -110,7 +207,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
                 bearing,
             } => (*seq, *stamp_us, self.sighting(*id, *range, *bearing)),
             ToDevice::YawRate { seq, stamp_us, .. } => (*seq, *stamp_us, StepResult::Ignored),
-            ToDevice::Scan(chunk) => (chunk.seq, chunk.stamp_us, StepResult::Ignored),
+            ToDevice::Scan(chunk) => (chunk.seq, chunk.stamp_us, self.scan(chunk)),
         };
         self.status.events = self.status.events.saturating_add(1);
         if let StepResult::Rejected { .. } = result {
@@ -119,9 +216,85 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
         ToHost::Estimate(self.estimate(seq, stamp_us, result))
     }
 
-    fn odometry(&mut self, odometry: &Odometry) -> StepResult {
-        if self.active != EstimatorKind::Ekf {
+    fn grid_odometry(&mut self, odometry: &Odometry) -> StepResult {
+        let (Some(grid), Some(setup)) = (self.grid.as_deref_mut(), self.grid_setup) else {
             return StepResult::Ignored;
+        };
+        let r = match *odometry {
+            Odometry::Increment { dx, dy, dtheta } => {
+                grid.predict_increment(&Pose2::new(dx, dy, dtheta))
+            }
+            Odometry::Velocity { v, omega, dt } => grid.predict_velocity(v, omega, dt),
+            Odometry::EncoderTicks {
+                front_left,
+                front_right,
+                rear_left,
+                rear_right,
+                ..
+            } => {
+                let ticks = WheelTicks {
+                    front_right,
+                    front_left,
+                    rear_right,
+                    rear_left,
+                };
+                match setup.wheels.motion(&ticks) {
+                    Ok(m) => grid.predict_arc(m.distance, m.heading_change),
+                    Err(_) => {
+                        return StepResult::Rejected {
+                            reason: TICKS_REFUSED,
+                        };
+                    }
+                }
+            }
+        };
+        match r {
+            Ok(()) => StepResult::Applied,
+            Err(e) => StepResult::Rejected { reason: e as u8 },
+        }
+    }
+
+    fn scan(&mut self, chunk: &ScanChunk) -> StepResult {
+        if self.active != EstimatorKind::Grid {
+            return StepResult::Ignored;
+        }
+        let (Some(grid), Some(setup)) = (self.grid.as_deref_mut(), self.grid_setup) else {
+            return StepResult::Ignored;
+        };
+        let scan = match self.assembler.push(chunk) {
+            Ok(Some(scan)) => scan,
+            // More chunks to come: answered, nothing estimated yet.
+            Ok(None) => return StepResult::Ignored,
+            Err(_) => {
+                return StepResult::Rejected {
+                    reason: SCAN_DROPPED,
+                };
+            }
+        };
+        let n = scan.ranges_mm.len().min(MAX_SCAN_BEAMS);
+        for (r, &mm) in self.ranges.iter_mut().zip(scan.ranges_mm) {
+            // 0 mm = no return: not finite, so the filter skips the beam.
+            *r = if mm == 0 {
+                f32::NAN
+            } else {
+                f32::from(mm) * 0.001
+            };
+        }
+        let geometry = LidarGeometry {
+            first_angle: scan.angle_min,
+            angle_increment: scan.angle_increment,
+            ..setup.lidar
+        };
+        let ranges = self.ranges.get(..n).unwrap_or(&[]);
+        match grid.observe(&LidarScan::new(ranges, geometry)) {
+            Ok(_) => StepResult::Applied,
+            Err(e) => StepResult::Rejected { reason: e as u8 },
+        }
+    }
+
+    fn odometry(&mut self, odometry: &Odometry) -> StepResult {
+        if self.active == EstimatorKind::Grid {
+            return self.grid_odometry(odometry);
         }
         let r = match *odometry {
             Odometry::Increment { dx, dy, dtheta } => {
@@ -159,8 +332,15 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
     fn command(&mut self, seq: u32, command: &Command) -> ToHost {
         match *command {
             Command::Reset { x, y, theta } => self.reset(Pose2::new(x, y, theta)),
-            // Only the EKF is built into this session.
-            Command::SelectEstimator(_) => self.reset(Pose2::new(0.0, 0.0, 0.0)),
+            Command::SelectEstimator(kind) => {
+                // Without a grid estimator the session stays on the EKF.
+                self.active = if self.grid.is_some() {
+                    kind
+                } else {
+                    EstimatorKind::Ekf
+                };
+                self.reset(Pose2::new(0.0, 0.0, 0.0));
+            }
             Command::ReportStatus => {}
         }
         ToHost::Status {
@@ -182,6 +362,12 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
             let _ = self.ekf.init(config, Pose2::new(0.0, 0.0, 0.0));
         }
         self.ids.clear();
+        self.assembler.clear();
+        if let Some(grid) = self.grid.as_deref_mut()
+            && grid.reset(pose).is_err()
+        {
+            let _ = grid.reset(Pose2::new(0.0, 0.0, 0.0));
+        }
         let (ok, bad) = (self.status.frames_ok, self.status.frames_bad);
         self.status = Status {
             frames_ok: ok,
@@ -191,6 +377,21 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
     }
 
     fn estimate(&mut self, seq: u32, stamp_us: u64, result: StepResult) -> Estimate {
+        if self.active == EstimatorKind::Grid
+            && let Some(grid) = self.grid.as_deref()
+        {
+            let pose = grid.pose();
+            self.status.resamples = grid.resamples();
+            return Estimate {
+                seq,
+                stamp_us,
+                estimator: self.active,
+                result,
+                pose: [pose.x, pose.y, pose.theta],
+                covariance: [0.0; 6],
+                status: self.status,
+            };
+        }
         let pose = self.ekf.pose();
         let p = self.ekf.pose_covariance();
         self.status.landmarks = u16::try_from(self.ekf.landmark_count()).unwrap_or(u16::MAX);
@@ -357,5 +558,166 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+    }
+
+    #[test]
+    fn grid_session_matches_direct_calls_on_the_grid_slam() {
+        use crate::grid::OccupancyGrid;
+        use crate::pf::GridPfConfig;
+        use crate::wire::ScanChunk;
+        type Slam<'g> = GridSlam<'g, 64, 64, 8, 40>;
+        let config = GridPfConfig::MICROCONTROLLER;
+        let setup = GridSetup {
+            lidar: LidarGeometry {
+                first_angle: 0.0,
+                angle_increment: 0.0,
+                min_range: 0.1,
+                max_range: 30.0,
+                no_return_range: f32::INFINITY,
+                mount: Pose2::new(0.0, 0.0, 0.0),
+            },
+            wheels: DiffDriveGeometry {
+                metres_per_tick: 0.002,
+                track_width: 0.4,
+            },
+        };
+        // A square room 2.4 m wide seen from the centre: 40 beams, 0 mm = no return.
+        let inc = core::f32::consts::TAU / 40.0;
+        let ranges_mm: std::vec::Vec<u16> = (0..40)
+            .map(|i| {
+                let a = -core::f32::consts::PI + inc * i as f32;
+                let r = 1.2 / libm::fabsf(libm::cosf(a)).max(libm::fabsf(libm::sinf(a)));
+                if i == 5 { 0 } else { (r * 1000.0) as u16 }
+            })
+            .collect();
+        let chunk = |seq: u32, scan_id: u16, offset: usize| {
+            let end = (offset + 32).min(40);
+            ToDevice::Scan(ScanChunk {
+                seq,
+                stamp_us: 0,
+                scan_id,
+                beam_offset: offset as u16,
+                beam_total: 40,
+                angle_min: -core::f32::consts::PI,
+                angle_increment: inc,
+                ranges_mm: heapless::Vec::from_slice(&ranges_mm[offset..end]).unwrap(),
+            })
+        };
+        let ticks = ToDevice::Odometry {
+            seq: 9,
+            stamp_us: 0,
+            odometry: Odometry::EncoderTicks {
+                front_left: 10,
+                front_right: 14,
+                rear_left: 10,
+                rear_right: 14,
+                dt: 0.1,
+            },
+        };
+        let msgs = [
+            chunk(1, 0, 0), // EKF active: ignored
+            ToDevice::Command {
+                seq: 2,
+                command: Command::SelectEstimator(EstimatorKind::Grid),
+            },
+            chunk(3, 1, 0),
+            chunk(4, 1, 32),
+            velocity(5, 0.2, 0.1),
+            chunk(6, 2, 32), // first chunk lost: dropped
+            chunk(7, 3, 0),
+            chunk(8, 3, 32),
+            ticks,
+            chunk(10, 4, 0),
+            chunk(11, 4, 32),
+        ];
+        let mut ekf = EkfSlam::<f32, { state_dim(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut grid = std::boxed::Box::new(OccupancyGrid::<64, 64>::centred(
+            config.resolution,
+            config.log_odds,
+        ));
+        let mut slam = Slam::new(&mut grid, config, Pose2::new(0.0, 0.0, 0.0)).unwrap();
+        let mut session =
+            Session::<_, 4>::with_grid(&mut ekf, EkfConfig::DEFAULT_F32, &mut slam, setup);
+        let replies: std::vec::Vec<_> = frames(&msgs)
+            .iter()
+            .filter_map(|&b| session.receive(b))
+            .collect();
+        drop(session);
+
+        let mut grid2 = std::boxed::Box::new(OccupancyGrid::<64, 64>::zeroed());
+        grid2
+            .init_centred(config.resolution, config.log_odds)
+            .unwrap();
+        let mut direct = Slam::new(&mut grid2, config, Pose2::new(0.0, 0.0, 0.0)).unwrap();
+        let ranges: std::vec::Vec<f32> = ranges_mm
+            .iter()
+            .map(|&mm| {
+                if mm == 0 {
+                    f32::NAN
+                } else {
+                    f32::from(mm) * 0.001
+                }
+            })
+            .collect();
+        let lidar = LidarGeometry {
+            first_angle: -core::f32::consts::PI,
+            angle_increment: inc,
+            ..setup.lidar
+        };
+        direct.observe(&LidarScan::new(&ranges, lidar)).unwrap();
+        direct.predict_velocity(0.2, 0.1, 0.1).unwrap();
+        direct.observe(&LidarScan::new(&ranges, lidar)).unwrap();
+        // Left 10 ticks, right 14 ticks (front and rear averaged) of 2 mm on a 0.4 m track.
+        let m = setup
+            .wheels
+            .motion(&WheelTicks {
+                front_right: 14,
+                front_left: 10,
+                rear_right: 14,
+                rear_left: 10,
+            })
+            .unwrap();
+        assert!((m.distance - 0.024).abs() < 1e-6 && (m.heading_change - 0.02).abs() < 1e-6);
+        direct.predict(m.distance, m.heading_change).unwrap();
+        direct.observe(&LidarScan::new(&ranges, lidar)).unwrap();
+
+        let results: std::vec::Vec<_> = replies
+            .iter()
+            .map(|r| match r {
+                ToHost::Estimate(e) => (e.seq, e.estimator, e.result),
+                ToHost::Status { seq, estimator, .. } => (*seq, *estimator, StepResult::Ignored),
+            })
+            .collect();
+        use EstimatorKind::{Ekf, Grid};
+        use StepResult::{Applied, Ignored};
+        assert_eq!(
+            results,
+            [
+                (1, Ekf, Ignored),
+                (2, Grid, Ignored),
+                (3, Grid, Ignored),
+                (4, Grid, Applied),
+                (5, Grid, Applied),
+                (
+                    6,
+                    Grid,
+                    StepResult::Rejected {
+                        reason: SCAN_DROPPED
+                    }
+                ),
+                (7, Grid, Ignored),
+                (8, Grid, Applied),
+                (9, Grid, Applied),
+                (10, Grid, Ignored),
+                (11, Grid, Applied),
+            ]
+        );
+        let ToHost::Estimate(last) = replies[10] else {
+            unreachable!()
+        };
+        let pose = direct.pose();
+        assert_eq!(last.pose, [pose.x, pose.y, pose.theta]);
+        assert_eq!(last.status.resamples, direct.filter().resample_count());
+        assert_eq!(last.covariance, [0.0; 6]);
     }
 }

@@ -22,8 +22,7 @@ const BEAMS: usize = 90;
 const CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
 type Grid = OccupancyGrid<256, 256>;
 
-static GRID: ConstStaticCell<Grid> =
-    ConstStaticCell::new(Grid::centred(CONFIG.resolution, CONFIG.log_odds));
+static GRID: ConstStaticCell<Grid> = ConstStaticCell::new(Grid::zeroed());
 
 /// Steps measured per P (after the first scan, which only builds the map).
 const STEPS: u32 = 8;
@@ -127,6 +126,12 @@ fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
         ticks.instructions(thousand_nops)
     )?;
     let grid = GRID.take();
+    if grid
+        .init_centred(CONFIG.resolution, CONFIG.log_odds)
+        .is_err()
+    {
+        return writeln!(out, "error grid init");
+    }
     measure::<16>(out, ticks, grid)?;
     measure::<32>(out, ticks, grid)?;
     measure::<64>(out, ticks, grid)?;
