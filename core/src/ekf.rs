@@ -24,6 +24,8 @@
 //!   writing; an update that would leave a negative variance is refused
 //!   ([`EkfError::NumericalFailure`]) — the state is then exactly what it was;
 //! - the covariance is kept exactly symmetric (only the upper triangle is computed);
+//! - the robot and landmarks stay within [`MAX_COORDINATE`] of the origin, where `f32`
+//!   coordinates are still finer than a centimetre;
 //! - as a last resort, a prediction caps the robot's variances at
 //!   [`MAX_POSITION_VARIANCE`] and [`MAX_HEADING_VARIANCE`], and a new landmark's at
 //!   [`MAX_POSITION_VARIANCE`], by scaling their rows and columns (a congruence, which
@@ -85,6 +87,12 @@ pub const MAX_HEADING_VARIANCE: f64 = core::f64::consts::PI * core::f64::consts:
 /// 10⁴ · 6·10⁻⁸ = 6·10⁻⁴ m² to rounding in an update, well below the sighting noise;
 /// at 10⁶ m² the fuzzer found updates that left `P` clearly indefinite.
 pub const MAX_POSITION_VARIANCE: f64 = 1.0e4;
+
+/// Largest |x| or |y| of the robot and of landmarks, metres. Beyond it an `f32`
+/// coordinate is coarser than 8 mm, so landmark − robot differences lose the precision
+/// the observation model needs; predictions and new landmarks that would go further are
+/// refused ([`EkfError::NumericalFailure`]). Keep the map origin near the work area.
+pub const MAX_COORDINATE: f64 = 1.0e5;
 
 /// Bytes an `f32` filter uses beyond its mean and covariance (configuration, counters).
 pub const EKF_OVERHEAD_BYTES_F32: usize = 88;
@@ -488,7 +496,13 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let new_rr = a * p_rr * a.transpose() + q;
         // |P_RM| ≤ max variance (P is PSD), so A P_RM is bounded by 3 · max|A| · max variance.
         let cross_bound = T::lit(3.0) * max_abs(a.iter().copied()) * self.max_variance();
-        if !step.pose.is_finite() || !new_rr.iter().all(|v| v.finite()) || !cross_bound.finite() {
+        let far = T::lit(MAX_COORDINATE);
+        let inside = step.pose.x.abs() <= far && step.pose.y.abs() <= far;
+        if !inside
+            || !step.pose.is_finite()
+            || !new_rr.iter().all(|v| v.finite())
+            || !cross_bound.finite()
+        {
             return self.reject(EkfError::NumericalFailure);
         }
         // Last-resort variance caps (see the module docs): scale the robot's rows and
@@ -882,7 +896,12 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         p_pp[(1, 0)] = off;
         let g_robot = d * g.wrt_robot;
         let cross_bound = T::lit(3.0) * max_abs(g_robot.iter().copied()) * self.max_variance();
-        if !g.landmark.iter().chain(p_pp.iter()).all(|v| v.finite()) || !cross_bound.finite() {
+        let far = T::lit(MAX_COORDINATE);
+        let inside = g.landmark.iter().all(|c| c.abs() <= far);
+        if !inside
+            || !g.landmark.iter().chain(p_pp.iter()).all(|v| v.finite())
+            || !cross_bound.finite()
+        {
             return self.reject(EkfError::NumericalFailure);
         }
         // P_pX = G_R P[0..3, 0..k], one column at a time.
