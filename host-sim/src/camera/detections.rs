@@ -1,6 +1,6 @@
 //! Seed 1's whole chain on the simulator: a sign detector's bounding-box centre pixel and
 //! the depth sampled there (with pixel and depth noise, and a share of wrong class ids, as
-//! the seed's detector made) → [`Camera::sighting`] → landmark EKF-SLAM with the class ids.
+//! the seed's detector made) → [`Camera::sighting`](microslam::sensors::camera::Camera::sighting) → landmark EKF-SLAM with the class ids.
 //!
 //! Three ways to use the class id are compared:
 //! - [`ClassUse::Dictionary`]: the seed's class-id dictionary — the class names the
