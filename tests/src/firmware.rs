@@ -156,7 +156,7 @@ fn cast(x: f32, y: f32, a: f32) -> Option<f32> {
 pub const GRID_DRIVE_BEAMS: usize = 90;
 
 /// A deterministic lidar drive for the grid estimator: select the grid, reset to the
-/// start pose, then a robot circling a pillar in a walled room ([`ROOM`]) with biased
+/// start pose, then a robot circling a pillar in a walled room with biased
 /// velocity odometry at 10 Hz (a few steps as pose increments and encoder ticks, to
 /// exercise every odometry form) and a 90-beam scan every 5th step, ray-cast in the room
 /// with deterministic noise and sent in chunks of [`SCAN_CHUNK_BEAMS`]; a status request
