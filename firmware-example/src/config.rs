@@ -6,9 +6,7 @@ use microslam::geometry::Pose2;
 use microslam::grid::OccupancyGrid;
 use microslam::motion::{IncrementNoise, VelocityNoise};
 use microslam::pf::{GridPfConfig, GridSlam};
-use microslam::sensors::lidar::LidarGeometry;
 use microslam::sensors::range_bearing::RangeBearingSensor;
-use microslam::sensors::wheel_odometry::DiffDriveGeometry;
 use microslam::wire::GridSetup;
 
 /// Landmarks the EKF holds.
@@ -63,17 +61,4 @@ pub type GridEstimator = GridSlam<'static, GRID_CELLS, GRID_CELLS, GRID_PARTICLE
 pub const GRID_CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
 
 /// Lidar and wheels as the session hands them to the grid estimator.
-pub const GRID_SETUP: GridSetup = GridSetup {
-    lidar: LidarGeometry {
-        first_angle: 0.0,
-        angle_increment: 0.0,
-        min_range: 0.1,
-        max_range: 30.0,
-        no_return_range: f32::INFINITY,
-        mount: Pose2::new(0.0, 0.0, 0.0),
-    },
-    wheels: DiffDriveGeometry {
-        metres_per_tick: 0.0022,
-        track_width: 0.3937,
-    },
-};
+pub const GRID_SETUP: GridSetup = GridSetup::EXAMPLE;

@@ -20,8 +20,6 @@ use microslam::ekf::{EkfConfig, EkfSlam, state_dim};
 use microslam::geometry::Pose2;
 use microslam::grid::OccupancyGrid;
 use microslam::pf::{GridPfConfig, GridSlam};
-use microslam::sensors::lidar::LidarGeometry;
-use microslam::sensors::wheel_odometry::DiffDriveGeometry;
 use microslam::wire::{
     Command as WireCommand, EventsToWire, FrameDecoder, GridSetup, MAX_FRAME_LEN, Session,
     ToDevice, ToHost, encode_frame,
@@ -39,20 +37,7 @@ pub const FIRMWARE_LANDMARKS: usize = 32;
 pub type FirmwareGridSlam<'g> = GridSlam<'g, 256, 256, 32, 90>;
 
 /// The firmware's lidar and wheels (`firmware_example::config::GRID_SETUP`).
-pub const FIRMWARE_GRID_SETUP: GridSetup = GridSetup {
-    lidar: LidarGeometry {
-        first_angle: 0.0,
-        angle_increment: 0.0,
-        min_range: 0.1,
-        max_range: 30.0,
-        no_return_range: f32::INFINITY,
-        mount: Pose2::new(0.0, 0.0, 0.0),
-    },
-    wheels: DiffDriveGeometry {
-        metres_per_tick: 0.0022,
-        track_width: 0.3937,
-    },
-};
+pub const FIRMWARE_GRID_SETUP: GridSetup = GridSetup::EXAMPLE;
 
 /// The messages for a recording: reset to its initial pose, its events, a status request.
 pub fn messages_for(recording: &Recording) -> Vec<ToDevice> {

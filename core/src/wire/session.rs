@@ -83,6 +83,26 @@ pub struct GridSetup {
     pub wheels: DiffDriveGeometry<f32>,
 }
 
+impl GridSetup {
+    /// The example firmware's setup, shared by the firmware and the host reference so
+    /// that they cannot drift apart: a lidar at the robot centre keeping ranges in
+    /// 0.1–30 m, THOR's wheels (0.0022 m per tick, 0.3937 m track).
+    pub const EXAMPLE: Self = Self {
+        lidar: LidarGeometry {
+            first_angle: 0.0,
+            angle_increment: 0.0,
+            min_range: 0.1,
+            max_range: 30.0,
+            no_return_range: f32::INFINITY,
+            mount: Pose2::new(0.0, 0.0, 0.0),
+        },
+        wheels: DiffDriveGeometry {
+            metres_per_tick: 0.0022,
+            track_width: 0.3937,
+        },
+    };
+}
+
 /// Error code in [`StepResult::Rejected`] for a scan the assembler dropped.
 const SCAN_DROPPED: u8 = 0x80;
 /// Error code in [`StepResult::Rejected`] for encoder ticks the wheel model refused.
