@@ -16,12 +16,12 @@
 //! allocated). Memory is fixed by the type: `B` sightings per batch, `K` candidates each.
 
 use super::compatibility::{AssociationConfig, Candidates, Pairing};
-use crate::ekf::EkfSlam;
+use crate::ekf::{CovarianceView, EkfSlam};
 use crate::gate::chi_square_quantile;
 use crate::scalar::Real;
 use crate::sensors::range_bearing::RangeBearing;
 use core::fmt;
-use nalgebra::{Matrix2, SMatrix, Vector2};
+use nalgebra::{Matrix2, Vector2};
 
 /// A batch holds more sightings than the association was built for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -116,7 +116,7 @@ impl<T: Real, const B: usize, const K: usize> Jcbb<T, B, K> {
         }
         let candidates = candidates.get(..m).unwrap_or(&[]);
         let mut search = Search::<T, N, B, K> {
-            covariance: slam.full_covariance(),
+            covariance: slam.active_covariance(),
             candidates,
             thresholds: &self.joint_thresholds,
             pairs: [(0, 0); B],
@@ -168,7 +168,7 @@ impl<T: Real, const B: usize, const K: usize> Jcbb<T, B, K> {
 
 /// State of one branch-and-bound search.
 struct Search<'a, T: Real, const N: usize, const B: usize, const K: usize> {
-    covariance: &'a SMatrix<T, N, N>,
+    covariance: CovarianceView<'a, T, N>,
     candidates: &'a [Candidates<T, K>],
     thresholds: &'a [T; B],
     /// The current hypothesis: (sighting, candidate index) for each of `depth` pairings.
@@ -277,8 +277,8 @@ impl<T: Real, const N: usize, const B: usize, const K: usize> Search<'_, T, N, B
         );
         let jk = 3 + 2 * new.landmark;
         let p = self.covariance;
-        let p_rr = p.fixed_view::<3, 3>(0, 0);
-        let p_r_jk = p.fixed_view::<3, 2>(0, jk);
+        let p_rr = p.block::<3, 3>(0, 0)?;
+        let p_r_jk = p.block::<3, 2>(0, jk)?;
         // Row k of the factor: L[k][a] for a < k.
         for a in 0..k {
             let (ia, ca) = *self.pairs.get(a)?;
@@ -288,8 +288,8 @@ impl<T: Real, const N: usize, const B: usize, const K: usize> Search<'_, T, N, B
                 old.innovation.jacobian_landmark,
             );
             let ja = 3 + 2 * old.landmark;
-            let p_ja_r = p.fixed_view::<2, 3>(ja, 0);
-            let p_ja_jk = p.fixed_view::<2, 2>(ja, jk);
+            let p_ja_r = p.block::<2, 3>(ja, 0)?;
+            let p_ja_jk = p.block::<2, 2>(ja, jk)?;
             // C[a][k] = H_a P H_kᵀ, H nonzero on the robot and the landmark columns.
             let c_ak = hr_a * p_rr * hr_k.transpose()
                 + hr_a * p_r_jk * hl_k.transpose()
@@ -432,7 +432,8 @@ mod tests {
         let r = jcbb.associate(&slam, &z, &mut out).unwrap();
         // Dense C = H P Hᵀ + R over the active state, and ν, with nalgebra's inverse.
         let k = slam.active_dim();
-        let p = slam.active_covariance().into_owned();
+        let cov = slam.active_covariance();
+        let p = nalgebra::DMatrix::from_fn(k, k, |i, j| cov.get(i, j).unwrap());
         let mut h = nalgebra::DMatrix::<f64>::zeros(4, k);
         let mut nu = nalgebra::DVector::<f64>::zeros(4);
         for (s, lm) in [(0usize, 0usize), (1, 1)] {

@@ -23,7 +23,8 @@
 //! - every step checks its inputs and the finiteness of what it would write *before*
 //!   writing; an update that would leave a negative variance is refused
 //!   ([`EkfError::NumericalFailure`]) — the state is then exactly what it was;
-//! - the covariance is kept exactly symmetric (only the upper triangle is computed);
+//! - the covariance is symmetric by construction: only its upper triangle is stored and
+//!   computed ([`covariance`] module; read it through [`EkfSlam::active_covariance`]);
 //! - the robot and landmarks stay within [`MAX_COORDINATE`] of the origin, where `f32`
 //!   coordinates are still finer than a centimetre;
 //! - as a last resort, a prediction caps the robot's variances at
@@ -66,6 +67,11 @@ use crate::motion::{
 use crate::scalar::Real;
 use crate::sensors::range_bearing::{RangeBearing, RangeBearingSensor};
 use nalgebra::{ArrayStorage, Matrix2, Matrix2x3, Matrix3, SMatrix, SVector, Vector2};
+
+pub mod covariance;
+
+pub use covariance::CovarianceView;
+use covariance::{block, entry, joseph_pass, set_diagonal_block, subtract_rank2};
 
 /// State dimension for a maximum of `max_landmarks` point landmarks: `3 + 2 · max_landmarks`.
 ///
@@ -303,6 +309,7 @@ pub struct Innovation<T: Real> {
 #[derive(Clone, Debug)]
 pub struct EkfSlam<T: Real, const N: usize> {
     mean: SVector<T, N>,
+    /// Upper triangle only (see [`covariance`]); the strict lower triangle stays zero.
     covariance: SMatrix<T, N, N>,
     /// Number of active landmarks (`u32` keeps the layout the same on 32- and 64-bit).
     landmarks: u32,
@@ -397,7 +404,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
 
     /// Covariance of the robot pose, `P_RR`.
     pub fn pose_covariance(&self) -> Matrix3<T> {
-        self.covariance.fixed_view::<3, 3>(0, 0).into_owned()
+        block(&self.covariance, 0, 0)
     }
 
     /// Position of landmark `index`, or `None` when there is no such landmark.
@@ -409,8 +416,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
     /// 2 × 2 covariance of landmark `index`, or `None` when there is no such landmark.
     pub fn landmark_covariance(&self, index: usize) -> Option<Matrix2<T>> {
         let i = 3 + 2 * index;
-        (index < self.landmark_count())
-            .then(|| self.covariance.fixed_view::<2, 2>(i, i).into_owned())
+        (index < self.landmark_count()).then(|| block(&self.covariance, i, i))
     }
 
     /// The active part of the mean, `[x, y, θ, x₁, y₁, …]`.
@@ -419,13 +425,9 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         self.mean.as_slice().get(..k).unwrap_or(&[])
     }
 
-    /// The active block of the covariance, as a view (no copy).
-    pub fn active_covariance(
-        &self,
-    ) -> nalgebra::MatrixView<'_, T, nalgebra::Dyn, nalgebra::Dyn, nalgebra::U1, nalgebra::Const<N>>
-    {
-        let k = self.active_dim();
-        self.covariance.view((0, 0), (k, k))
+    /// The active block of the covariance, as a symmetric view (no copy).
+    pub fn active_covariance(&self) -> CovarianceView<'_, T, N> {
+        CovarianceView::new(&self.covariance, self.active_dim())
     }
 
     /// The whole mean, active or not (for tests and diagnostics).
@@ -433,8 +435,10 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         &self.mean
     }
 
-    /// The whole covariance storage, active or not (for tests and diagnostics).
-    pub fn full_covariance(&self) -> &SMatrix<T, N, N> {
+    /// The raw covariance storage, active or not (for tests and diagnostics): the upper
+    /// triangle of the active block holds the covariance, everything else is zero. Read
+    /// the covariance through [`EkfSlam::active_covariance`].
+    pub fn covariance_storage(&self) -> &SMatrix<T, N, N> {
         &self.covariance
     }
 
@@ -492,7 +496,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         q: &Matrix3<T>,
     ) -> Result<(), EkfError> {
         let a = &step.wrt_pose;
-        let p_rr = self.covariance.fixed_view::<3, 3>(0, 0).into_owned();
+        let p_rr: Matrix3<T> = block(&self.covariance, 0, 0);
         let new_rr = a * p_rr * a.transpose() + q;
         // |P_RM| ≤ max variance (P is PSD), so A P_RM is bounded by 3 · max|A| · max variance.
         let cross_bound = T::lit(3.0) * max_abs(a.iter().copied()) * self.max_variance();
@@ -522,17 +526,13 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let mut new_rr = d * new_rr * d;
         symmetrise3(&mut new_rr);
         let a = d * a;
-        self.covariance
-            .fixed_view_mut::<3, 3>(0, 0)
-            .copy_from(&new_rr);
+        set_diagonal_block(&mut self.covariance, 0, &new_rr);
+        // P_RM ← A P_RM: rows 0..3 of every landmark column (all above the diagonal).
         let k = self.active_dim();
         for j in 3..k {
             let col = self.covariance.fixed_view::<3, 1>(0, j).into_owned();
             let new = a * col;
             self.covariance.fixed_view_mut::<3, 1>(0, j).copy_from(&new);
-            self.covariance
-                .fixed_view_mut::<1, 3>(j, 0)
-                .copy_from(&new.transpose());
         }
         self.mean[0] = step.pose.x;
         self.mean[1] = step.pose.y;
@@ -563,9 +563,9 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let (hr, hl) = (pred.wrt_robot, pred.wrt_landmark);
         let k = self.active_dim();
         // S = H P Hᵀ + R, from the robot and landmark blocks only.
-        let p_rr = self.covariance.fixed_view::<3, 3>(0, 0);
-        let p_rl = self.covariance.fixed_view::<3, 2>(0, li);
-        let p_ll = self.covariance.fixed_view::<2, 2>(li, li);
+        let p_rr: Matrix3<T> = block(&self.covariance, 0, 0);
+        let p_rl = self.covariance.fixed_view::<3, 2>(0, li); // above the diagonal: li ≥ 3
+        let p_ll: Matrix2<T> = block(&self.covariance, li, li);
         let hphr = hr * p_rl * hl.transpose();
         let mut s =
             hr * p_rr * hr.transpose() + hphr + hphr.transpose() + hl * p_ll * hl.transpose() + r;
@@ -591,12 +591,12 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
                 let mut acc0 = T::ZERO;
                 let mut acc1 = T::ZERO;
                 for c in 0..3 {
-                    let p = self.covariance[(i, c)];
+                    let p = entry(&self.covariance, i, c);
                     acc0 += p * hr[(0, c)];
                     acc1 += p * hr[(1, c)];
                 }
                 for c in 0..2 {
-                    let p = self.covariance[(i, li + c)];
+                    let p = entry(&self.covariance, i, li + c);
                     acc0 += p * hl[(0, c)];
                     acc1 += p * hl[(1, c)];
                 }
@@ -744,32 +744,16 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         }
         self.mean[2] = wrap_angle(self.mean[2]);
         match form {
-            CovarianceUpdate::Joseph => self.joseph_update(k, &gain, &m, &aux),
-            CovarianceUpdate::Symmetric => self.symmetric_update(k, &gain, &aux),
+            CovarianceUpdate::Joseph => {
+                let (m0, m1) = split_columns(&m, k);
+                joseph_pass(&mut self.covariance, k, (g0, g1), (m0, m1), (a0, a1));
+            }
+            CovarianceUpdate::Symmetric => {
+                subtract_rank2(&mut self.covariance, k, (a0, a1), (g0, g1));
+            }
         }
         self.counters.updates = self.counters.updates.saturating_add(1);
         Ok(UpdateOutcome::Accepted { nis })
-    }
-
-    /// `P ← P − K S Kᵀ` on the upper triangle, mirrored; `ks = K S` from [`symmetric_terms`].
-    fn symmetric_update(&mut self, k: usize, gain: &SMatrix<T, N, 2>, ks: &SMatrix<T, N, 2>) {
-        let (g0, g1) = split_columns(gain, k);
-        let (ks0, ks1) = split_columns(ks, k);
-        let data = self.covariance.as_mut_slice();
-        for (j, (&gj0, &gj1)) in g0.iter().zip(g1).enumerate() {
-            let Some((upper, diagonal, mirror)) = column_and_mirror(data, N, j) else {
-                break;
-            };
-            let rows = ks0.iter().zip(ks1);
-            for ((p, m), (&a0, &a1)) in upper.iter_mut().zip(mirror).zip(rows) {
-                let v = *p - (a0 * gj0 + a1 * gj1);
-                *p = v;
-                *m = v;
-            }
-            if let (Some(&a0), Some(&a1)) = (ks0.get(j), ks1.get(j)) {
-                *diagonal -= a0 * gj0 + a1 * gj1;
-            }
-        }
     }
 
     /// `D = K R − A Hᵀ` of the Joseph form (see [`EkfSlam::joseph_update`]).
@@ -799,7 +783,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             let (ki0, ki1) = (g0[i], g1[i]);
             let (mut b0, mut b1) = (T::ZERO, T::ZERO);
             for (c, &col) in cols.iter().enumerate() {
-                let a = self.covariance[(i, col)] - (ki0 * m0[col] + ki1 * m1[col]);
+                let a = entry(&self.covariance, i, col) - (ki0 * m0[col] + ki1 * m1[col]);
                 b0 += a * h[0][c];
                 b1 += a * h[1][c];
             }
@@ -807,34 +791,6 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             d[(i, 1)] = ki0 * r[(0, 1)] + ki1 * r[(1, 1)] - b1;
         }
         d
-    }
-
-    /// Joseph form `(I − KH) P (I − KH)ᵀ + K R Kᵀ = P − K Mᵀ + D Kᵀ` in one pass over the
-    /// upper triangle, mirrored; `d` from [`EkfSlam::joseph_terms`].
-    fn joseph_update(
-        &mut self,
-        k: usize,
-        gain: &SMatrix<T, N, 2>,
-        m: &SMatrix<T, N, 2>,
-        d: &SMatrix<T, N, 2>,
-    ) {
-        let (g0, g1) = split_columns(gain, k);
-        let (m0, m1) = split_columns(m, k);
-        let (d0, d1) = split_columns(d, k);
-        let data = self.covariance.as_mut_slice();
-        for j in 0..k {
-            let (kj0, kj1, mj0, mj1) = (g0[j], g1[j], m0[j], m1[j]);
-            let Some((upper, diagonal, mirror)) = column_and_mirror(data, N, j) else {
-                break;
-            };
-            let rows = g0.iter().zip(g1).zip(d0.iter().zip(d1));
-            for ((p, m), ((&ki0, &ki1), (&di0, &di1))) in upper.iter_mut().zip(mirror).zip(rows) {
-                let v = *p + ((di0 * kj0 + di1 * kj1) - (ki0 * mj0 + ki1 * mj1));
-                *p = v;
-                *m = v;
-            }
-            *diagonal += (d0[j] * kj0 + d1[j] * kj1) - (kj0 * mj0 + kj1 * mj1);
-        }
     }
 
     /// Adds a landmark seen at `z`, with the configured measurement noise. See
@@ -872,7 +828,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         }
         let g = self.config.sensor.landmark_from(&self.pose(), z);
         let k = self.active_dim();
-        let p_rr = self.covariance.fixed_view::<3, 3>(0, 0).into_owned();
+        let p_rr: Matrix3<T> = block(&self.covariance, 0, 0);
         let p_pp = g.wrt_robot * p_rr * g.wrt_robot.transpose()
             + g.wrt_measurement * r * g.wrt_measurement.transpose();
         // Last-resort cap, as for the robot: scale the new rows and columns (a congruence).
@@ -904,18 +860,15 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         {
             return self.reject(EkfError::NumericalFailure);
         }
-        // P_pX = G_R P[0..3, 0..k], one column at a time.
+        // P_Xp = (G_R P[0..3, 0..k])ᵀ: rows 0..k of the two new columns (above the diagonal).
         for j in 0..k {
-            let col = self.covariance.fixed_view::<3, 1>(0, j).into_owned();
+            let col: nalgebra::Vector3<T> = block(&self.covariance, 0, j);
             let v = g_robot * col;
-            self.covariance.fixed_view_mut::<2, 1>(k, j).copy_from(&v);
             self.covariance
                 .fixed_view_mut::<1, 2>(j, k)
                 .copy_from(&v.transpose());
         }
-        self.covariance
-            .fixed_view_mut::<2, 2>(k, k)
-            .copy_from(&p_pp);
+        set_diagonal_block(&mut self.covariance, k, &p_pp);
         self.mean.fixed_rows_mut::<2>(k).copy_from(&g.landmark);
         let index = self.landmark_count();
         self.landmarks += 1;
@@ -942,25 +895,6 @@ fn symmetric_terms<T: Real, const N: usize>(
 fn split_columns<T: Real, const N: usize>(m: &SMatrix<T, N, 2>, k: usize) -> (&[T], &[T]) {
     let (a, b) = m.as_slice().split_at(N);
     (a.get(..k).unwrap_or(&[]), b.get(..k).unwrap_or(&[]))
-}
-
-/// Column `j` of a column-major `n × n` matrix split for an in-place symmetric update:
-/// its rows `0..j` (upper triangle), its diagonal element, and an iterator over the mirror
-/// positions `(j, i)`, `i < j` (row `j` of the columns before). Writing each upper value
-/// to its mirror in the same pass replaces a separate, strided mirroring pass.
-fn column_and_mirror<T>(
-    data: &mut [T],
-    n: usize,
-    j: usize,
-) -> Option<(&mut [T], &mut T, impl Iterator<Item = &mut T>)> {
-    if j >= n {
-        return None;
-    }
-    let (left, rest) = data.split_at_mut_checked(j * n)?;
-    let (diagonal, upper) = rest.get_mut(..=j)?.split_last_mut()?;
-    // Each chunk is one column of length n > j, so `get_mut(j)` never fails.
-    let mirror = left.chunks_exact_mut(n).filter_map(move |c| c.get_mut(j));
-    Some((upper, diagonal, mirror))
 }
 
 /// The largest absolute value (NaN propagates as NaN, an empty sequence gives 0).
