@@ -16,6 +16,41 @@ pub fn wrap_angle<T: Real>(angle: T) -> T {
     s.atan2(c)
 }
 
+/// Wraps an angle to (−π, π] without trigonometry when it is at most one turn outside:
+/// an angle already in range comes back unchanged, one within (−3π, 3π] gains or loses
+/// one turn (`2π`, one rounding); anything else goes through [`wrap_angle`].
+///
+/// For differences and small increments of wrapped angles (bearing innovations, a
+/// heading after a correction) on a microcontroller, where `sin`, `cos` and `atan2` cost
+/// thousands of instructions. A non-finite input gives NaN.
+///
+/// ```
+/// use microslam::geometry::wrap_near;
+/// use core::f64::consts::PI;
+/// assert_eq!(wrap_near(0.5_f64), 0.5);
+/// assert!((wrap_near(1.5 * PI) + 0.5 * PI).abs() < 1e-15);
+/// assert!((wrap_near(-1.5 * PI) - 0.5 * PI).abs() < 1e-15);
+/// assert_eq!(wrap_near(PI), PI);
+/// assert!((wrap_near(-PI) - PI).abs() < 1e-15);
+/// assert!((wrap_near(101.0 * PI) - PI).abs() < 1e-12);
+/// ```
+#[inline]
+pub fn wrap_near<T: Real>(angle: T) -> T {
+    let pi = T::lit(core::f64::consts::PI);
+    let tau = T::lit(core::f64::consts::TAU);
+    if angle > -pi && angle <= pi {
+        angle
+    } else if angle > pi && angle <= T::lit(3.0) * pi {
+        let a = angle - tau;
+        if a > -pi { a } else { pi }
+    } else if angle <= -pi && angle > T::lit(-3.0) * pi {
+        let a = angle + tau;
+        if a <= pi { a } else { pi }
+    } else {
+        wrap_angle(angle)
+    }
+}
+
 /// A pose in the plane: position `(x, y)` and heading `theta` (radians, CCW positive).
 ///
 /// Read `a.compose(&b)` as "`b` expressed in frame `a`, taken to the frame `a` lives in":

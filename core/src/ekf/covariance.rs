@@ -47,124 +47,93 @@ pub(crate) fn set_diagonal_block<T: Real, const N: usize, const R: usize>(
     }
 }
 
-/// The first `rows` rows of columns `j` and `j + 1` of the storage, for writing.
-fn column_pair_mut<T: Real, const N: usize>(
-    data: &mut [T],
-    j: usize,
-    rows: usize,
-) -> Option<(&mut [T], &mut [T])> {
-    let pair = data.get_mut(j * N..(j + 2) * N)?;
-    let (first, second) = pair.split_at_mut(N);
-    Some((first.get_mut(..rows)?, second.get_mut(..rows)?))
+/// Per-row terms of one EKF update, for row (and column) `i` of the active block.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct UpdateRow<T> {
+    /// Row `i` of `M = P Hᵀ`.
+    pub m: [T; 2],
+    /// Row `i` of the gain `K = M S⁻¹`.
+    pub k: [T; 2],
+    /// Row `i` of `K S` (optimal-gain form) or of the Joseph form's `D`.
+    pub a: [T; 2],
 }
 
-/// `P ← P − A Gᵀ` on the upper triangle of the active `k × k` block, for a symmetric
-/// `A Gᵀ` of rank 2 (`A = K S`, `G = K` in the optimal-gain form): entry `(i, j)`,
-/// `i ≤ j < k`, becomes `p_ij − (a0_i · g0_j + a1_i · g1_j)`.
+/// New value of entry `(i, j)` in the optimal-gain form `P − (K S) Kᵀ`.
 ///
-/// The hot loop of the EKF update. Two columns share each row's loads of `a0_i`, `a1_i`;
-/// every entry is computed by the same expression in any case, so the result does not
-/// depend on the blocking.
-pub(crate) fn subtract_rank2<T: Real, const N: usize>(
-    p: &mut SMatrix<T, N, N>,
-    k: usize,
-    a: (&[T], &[T]),
-    g: (&[T], &[T]),
-) {
-    let data = p.as_mut_slice();
-    let (a0, a1) = a;
-    let (g0, g1) = g;
-    let update = |p: &mut T, x0: T, x1: T, y0: T, y1: T| *p -= x0 * y0 + x1 * y1;
-    let mut j = 0;
-    while j + 1 < k {
-        let (Some(&gj0), Some(&gj1), Some(&gk0), Some(&gk1)) =
-            (g0.get(j), g1.get(j), g0.get(j + 1), g1.get(j + 1))
-        else {
-            return;
-        };
-        // Rows 0..=j of columns j and j + 1, then the last row (j + 1) of column j + 1.
-        let Some((left, right)) = column_pair_mut::<T, N>(data, j, j + 2) else {
-            return;
-        };
-        let (left, _) = left.split_at_mut(j + 1);
-        let (right, corner) = right.split_at_mut(j + 1);
-        let rows = left.iter_mut().zip(right.iter_mut()).zip(a0.iter().zip(a1));
-        for ((pl, pr), (&x0, &x1)) in rows {
-            update(pl, x0, x1, gj0, gj1);
-            update(pr, x0, x1, gk0, gk1);
-        }
-        if let (Some(pc), Some(&x0), Some(&x1)) = (corner.first_mut(), a0.get(j + 1), a1.get(j + 1))
-        {
-            update(pc, x0, x1, gk0, gk1);
-        }
-        j += 2;
-    }
-    if j < k {
-        let (Some(&gj0), Some(&gj1)) = (g0.get(j), g1.get(j)) else {
-            return;
-        };
-        if let Some(col) = data.get_mut(j * N..=j * N + j) {
-            for ((pl, &x0), &x1) in col.iter_mut().zip(a0).zip(a1) {
-                update(pl, x0, x1, gj0, gj1);
-            }
-        }
-    }
+/// Two chained multiply-subtracts (`VMLS` on a Cortex-M4F, the same rounding as a
+/// separate multiply and subtract on every target).
+#[inline(always)]
+pub(crate) fn symmetric_entry<T: Real>(p: T, row: &UpdateRow<T>, col: &UpdateRow<T>) -> T {
+    (p - row.a[0] * col.k[0]) - row.a[1] * col.k[1]
 }
 
-/// The Joseph form's `P ← P + D Kᵀ − K Mᵀ` on the upper triangle of the active `k × k`
-/// block (see `EkfSlam::joseph_terms`): entry `(i, j)`, `i ≤ j < k`, becomes
-/// `p_ij + ((d0_i k0_j + d1_i k1_j) − (k0_i m0_j + k1_i m1_j))`.
-pub(crate) fn joseph_pass<T: Real, const N: usize>(
+/// New value of entry `(i, j)` in the Joseph form `P + D Kᵀ − K Mᵀ`.
+#[inline(always)]
+pub(crate) fn joseph_entry<T: Real>(p: T, row: &UpdateRow<T>, col: &UpdateRow<T>) -> T {
+    (((p + row.a[0] * col.k[0]) + row.a[1] * col.k[1]) - row.k[0] * col.m[0]) - row.k[1] * col.m[1]
+}
+
+/// Sets entry `(i, j)`, `i ≤ j < k`, of the upper triangle of the active `k × k` block
+/// to `f(p_ij, rows[i], rows[j])`, with `k = rows.len()`.
+///
+/// The hot loop of the EKF update. Columns go four at a time, so each row's terms are
+/// loaded once for four entries (the last `k mod 4` columns one at a time). The entries
+/// are computed by the same `f` in any order, so the result does not depend on the
+/// blocking. Not inlined: as a function of its own its arguments keep their no-alias
+/// guarantees, so the row and column terms are loaded once rather than after every
+/// store to `p`.
+#[inline(never)]
+pub(crate) fn update_upper<T: Real, const N: usize, R: Copy>(
     p: &mut SMatrix<T, N, N>,
-    k: usize,
-    gain: (&[T], &[T]),
-    m: (&[T], &[T]),
-    d: (&[T], &[T]),
+    rows: &[R],
+    f: impl Fn(T, &R, &R) -> T,
 ) {
+    let k = rows.len().min(N);
     let data = p.as_mut_slice();
-    let (g0, g1) = gain;
-    let (m0, m1) = m;
-    let (d0, d1) = d;
-    let update = |p: &mut T, row: (T, T, T, T), col: (T, T, T, T)| {
-        let (di0, di1, ki0, ki1) = row;
-        let (kj0, kj1, mj0, mj1) = col;
-        *p += (di0 * kj0 + di1 * kj1) - (ki0 * mj0 + ki1 * mj1);
-    };
-    let column = |j: usize| Some((*g0.get(j)?, *g1.get(j)?, *m0.get(j)?, *m1.get(j)?));
-    let row = |i: usize| Some((*d0.get(i)?, *d1.get(i)?, *g0.get(i)?, *g1.get(i)?));
     let mut j = 0;
-    while j + 1 < k {
-        let (Some(cl), Some(cr)) = (column(j), column(j + 1)) else {
+    while j + 4 <= k {
+        let (Some(block), Some([c0, c1, c2, c3]), Some(head)) = (
+            data.get_mut(j * N..(j + 4) * N),
+            rows.get(j..j + 4),
+            rows.get(..=j),
+        ) else {
             return;
         };
-        let Some((left, right)) = column_pair_mut::<T, N>(data, j, j + 2) else {
-            return;
-        };
-        let (left, _) = left.split_at_mut(j + 1);
-        let (right, corner) = right.split_at_mut(j + 1);
-        let rows = d0.iter().zip(d1).zip(g0.iter().zip(g1));
-        for ((pl, pr), ((&di0, &di1), (&ki0, &ki1))) in
-            left.iter_mut().zip(right.iter_mut()).zip(rows)
-        {
-            update(pl, (di0, di1, ki0, ki1), cl);
-            update(pr, (di0, di1, ki0, ki1), cr);
+        // Copies, so that the column terms stay in registers.
+        let (c0, c1, c2, c3) = (*c0, *c1, *c2, *c3);
+        let (p0, rest) = block.split_at_mut(N);
+        let (p1, rest) = rest.split_at_mut(N);
+        let (p2, p3) = rest.split_at_mut(N);
+        // Rows 0..=j are above the diagonal in all four columns.
+        let columns = p0
+            .iter_mut()
+            .zip(p1.iter_mut())
+            .zip(p2.iter_mut().zip(p3.iter_mut()));
+        for (((x0, x1), (x2, x3)), &r) in columns.zip(head) {
+            *x0 = f(*x0, &r, &c0);
+            *x1 = f(*x1, &r, &c1);
+            *x2 = f(*x2, &r, &c2);
+            *x3 = f(*x3, &r, &c3);
         }
-        if let (Some(pc), Some(r)) = (corner.first_mut(), row(j + 1)) {
-            update(pc, r, cr);
-        }
-        j += 2;
-    }
-    if j < k {
-        let Some(c) = column(j) else {
-            return;
-        };
-        if let Some(col) = data.get_mut(j * N..=j * N + j) {
-            for (i, pl) in col.iter_mut().enumerate() {
-                if let Some(r) = row(i) {
-                    update(pl, r, c);
+        // The corner: rows j+1..=j+c of column j+c.
+        for (c, (column, col)) in [(p1, c1), (p2, c2), (p3, c3)].into_iter().enumerate() {
+            let corner = j + 1..j + 2 + c;
+            if let (Some(xs), Some(rs)) = (column.get_mut(corner.clone()), rows.get(corner)) {
+                for (x, r) in xs.iter_mut().zip(rs) {
+                    *x = f(*x, r, &col);
                 }
             }
         }
+        j += 4;
+    }
+    while j < k {
+        let (Some(column), Some(&col)) = (data.get_mut(j * N..=j * N + j), rows.get(j)) else {
+            return;
+        };
+        for (x, r) in column.iter_mut().zip(rows) {
+            *x = f(*x, r, &col);
+        }
+        j += 1;
     }
 }
 
@@ -242,14 +211,13 @@ mod tests {
         SMatrix::from_fn(|i, j| if i <= j { values(i, j) } else { 0.0 })
     }
 
-    fn dense_rank2(k: usize, p: &SMatrix<f64, 7, 7>, a: [&[f64]; 2], g: [&[f64]; 2]) -> Vec<f64> {
-        let mut out = Vec::new();
-        for j in 0..k {
-            for i in 0..=j {
-                out.push(entry(p, i, j) - (a[0][i] * g[0][j] + a[1][i] * g[1][j]));
-            }
+    fn row(i: usize) -> UpdateRow<f64> {
+        let x = i as f64;
+        UpdateRow {
+            m: [0.3 - 0.1 * x, 0.05 * x * x - 0.2],
+            k: [1.0 / (1.0 + x), -0.4 + 0.15 * x],
+            a: [0.2 * x - 0.5, 0.7 - 0.03 * x * x],
         }
-        out
     }
 
     fn upper(k: usize, p: &SMatrix<f64, 7, 7>) -> Vec<f64> {
@@ -259,34 +227,27 @@ mod tests {
     }
 
     #[test]
-    fn entries_fold_onto_the_upper_triangle() {
-        let p = stored(|i, j| (10 * i + j) as f64);
-        assert_eq!(entry(&p, 1, 3), 13.0);
-        assert_eq!(entry(&p, 3, 1), 13.0);
-        assert_eq!(entry(&p, 9, 0), 0.0);
-        let b: SMatrix<f64, 2, 3> = block(&p, 2, 1);
-        assert_eq!(
-            b,
-            SMatrix::<f64, 2, 3>::new(12.0, 22.0, 23.0, 13.0, 23.0, 33.0)
-        );
-    }
-
-    #[test]
-    fn rank2_update_matches_the_plain_loop_for_every_size() {
-        let a0 = [0.3, -1.2, 2.5, 0.7, -0.4, 1.1, 0.9];
-        let a1 = [1.5, 0.2, -0.8, 0.1, 2.2, -0.6, 0.4];
-        let g0 = [0.11, 0.52, -0.3, 0.9, 0.05, -0.7, 0.2];
-        let g1 = [-0.4, 0.33, 0.6, -0.2, 0.8, 0.1, -0.9];
-        for k in 0..=7 {
-            let mut p = stored(|i, j| 1.0 + (i * 7 + j) as f64 / 9.0);
-            let expected = dense_rank2(k, &p, [&a0, &a1], [&g0, &g1]);
-            let untouched = p;
-            subtract_rank2(&mut p, k, (&a0, &a1), (&g0, &g1));
-            assert_eq!(upper(k, &p), expected, "k = {k}");
-            for j in 0..7 {
-                for i in 0..7 {
-                    if i > j || j >= k {
-                        assert_eq!(p[(i, j)], untouched[(i, j)], "({i}, {j}) written, k = {k}");
+    fn blocked_update_matches_the_plain_loop_for_every_size() {
+        type Form = fn(f64, &UpdateRow<f64>, &UpdateRow<f64>) -> f64;
+        let forms: [Form; 2] = [symmetric_entry, joseph_entry];
+        for f in forms {
+            for k in 0..=7 {
+                let mut p = stored(|i, j| 1.0 + (i * 7 + j) as f64 / 9.0);
+                let rows: Vec<_> = (0..k).map(row).collect();
+                let mut expected = Vec::new();
+                for j in 0..k {
+                    for i in 0..=j {
+                        expected.push(f(entry(&p, i, j), &rows[i], &rows[j]));
+                    }
+                }
+                let untouched = p;
+                update_upper(&mut p, &rows, f);
+                assert_eq!(upper(k, &p), expected, "k = {k}");
+                for j in 0..7 {
+                    for i in 0..7 {
+                        if i > j || j >= k {
+                            assert_eq!(p[(i, j)], untouched[(i, j)], "({i}, {j}) written");
+                        }
                     }
                 }
             }
@@ -294,28 +255,12 @@ mod tests {
     }
 
     #[test]
-    fn joseph_pass_matches_the_plain_loop_for_every_size() {
-        let g0 = [0.3, -1.2, 2.5, 0.7, -0.4, 1.1, 0.9];
-        let g1 = [1.5, 0.2, -0.8, 0.1, 2.2, -0.6, 0.4];
-        let m0 = [0.11, 0.52, -0.3, 0.9, 0.05, -0.7, 0.2];
-        let m1 = [-0.4, 0.33, 0.6, -0.2, 0.8, 0.1, -0.9];
-        let d0 = [0.2, 0.1, -0.5, 0.3, 0.6, 0.25, -0.15];
-        let d1 = [0.7, -0.35, 0.45, -0.1, 0.05, 0.9, 0.3];
-        for k in 0..=7 {
-            let mut p = stored(|i, j| 2.0 - (i + 3 * j) as f64 / 11.0);
-            let mut expected = Vec::new();
-            for j in 0..k {
-                for i in 0..=j {
-                    expected.push(
-                        entry(&p, i, j)
-                            + ((d0[i] * g0[j] + d1[i] * g1[j]) - (g0[i] * m0[j] + g1[i] * m1[j])),
-                    );
-                }
-            }
-            joseph_pass(&mut p, k, (&g0, &g1), (&m0, &m1), (&d0, &d1));
-            assert_eq!(upper(k, &p), expected, "k = {k}");
-            assert!((0..7).all(|j| (j + 1..7).all(|i| p[(i, j)] == 0.0)));
-        }
+    fn update_forms_are_the_textbook_expressions() {
+        let (r, c) = (row(2), row(5));
+        let sym = 1.5 - (r.a[0] * c.k[0] + r.a[1] * c.k[1]);
+        let jos = 1.5 + (r.a[0] * c.k[0] + r.a[1] * c.k[1]) - (r.k[0] * c.m[0] + r.k[1] * c.m[1]);
+        assert!((symmetric_entry(1.5, &r, &c) - sym).abs() < 1e-12);
+        assert!((joseph_entry(1.5, &r, &c) - jos).abs() < 1e-12);
     }
 
     #[test]

@@ -59,7 +59,7 @@
 
 use crate::error::EkfError;
 use crate::gate::ChiSquareGate;
-use crate::geometry::{Pose2, wrap_angle};
+use crate::geometry::{Pose2, wrap_angle, wrap_near};
 use crate::motion::{
     IncrementNoise, MotionStep, OdometryIncrement, VelocityNoise, compose_increment,
     integrate_velocity,
@@ -71,7 +71,9 @@ use nalgebra::{ArrayStorage, Matrix2, Matrix2x3, Matrix3, SMatrix, SVector, Vect
 pub mod covariance;
 
 pub use covariance::CovarianceView;
-use covariance::{block, entry, joseph_pass, set_diagonal_block, subtract_rank2};
+use covariance::{
+    UpdateRow, block, entry, joseph_entry, set_diagonal_block, symmetric_entry, update_upper,
+};
 
 /// State dimension for a maximum of `max_landmarks` point landmarks: `3 + 2 · max_landmarks`.
 ///
@@ -444,7 +446,8 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
 
     /// The largest variance of the active block: bounds every covariance entry (P is PSD).
     fn max_variance(&self) -> T {
-        max_abs((0..self.active_dim()).map(|i| self.covariance[(i, i)]))
+        let diagonal = self.covariance.as_slice().iter().step_by(N + 1);
+        max_abs(diagonal.take(self.active_dim()).copied())
     }
 
     fn reject<R>(&mut self, e: EkfError) -> Result<R, EkfError> {
@@ -542,13 +545,12 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
     }
 
     /// The innovation of sighting `z` (covariance `r`) against landmark `index`, without
-    /// changing anything; also fills `m = P Hᵀ` (active rows) when given.
+    /// changing anything.
     fn innovation_with(
         &self,
         index: usize,
         z: &RangeBearing<T>,
         r: &Matrix2<T>,
-        m: Option<&mut SMatrix<T, N, 2>>,
     ) -> Result<Innovation<T>, EkfError> {
         if index >= self.landmark_count() {
             return Err(EkfError::UnknownLandmark);
@@ -561,7 +563,6 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             .predict(&self.pose(), &landmark)
             .ok_or(EkfError::LandmarkOnSensor)?;
         let (hr, hl) = (pred.wrt_robot, pred.wrt_landmark);
-        let k = self.active_dim();
         // S = H P Hᵀ + R, from the robot and landmark blocks only.
         let p_rr: Matrix3<T> = block(&self.covariance, 0, 0);
         let p_rl = self.covariance.fixed_view::<3, 2>(0, li); // above the diagonal: li ≥ 3
@@ -579,30 +580,11 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let s_inv = Matrix2::new(s[(1, 1)] / det, -off / det, -off / det, s[(0, 0)] / det);
         let nu = Vector2::new(
             z.range - pred.z.range,
-            wrap_angle(z.bearing - pred.z.bearing),
+            wrap_near(z.bearing - pred.z.bearing),
         );
         let d2 = (nu.transpose() * s_inv * nu)[(0, 0)];
         if !d2.finite() {
             return Err(EkfError::NumericalFailure);
-        }
-        if let Some(m) = m {
-            // M = P Hᵀ over the active rows: columns 0..3 with Hr, li..li+2 with Hl.
-            for i in 0..k {
-                let mut acc0 = T::ZERO;
-                let mut acc1 = T::ZERO;
-                for c in 0..3 {
-                    let p = entry(&self.covariance, i, c);
-                    acc0 += p * hr[(0, c)];
-                    acc1 += p * hr[(1, c)];
-                }
-                for c in 0..2 {
-                    let p = entry(&self.covariance, i, li + c);
-                    acc0 += p * hl[(0, c)];
-                    acc1 += p * hl[(1, c)];
-                }
-                m[(i, 0)] = acc0;
-                m[(i, 1)] = acc1;
-            }
         }
         Ok(Innovation {
             nu,
@@ -644,7 +626,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
     /// with the configured measurement noise, without changing the state.
     pub fn innovation(&self, index: usize, z: &RangeBearing<T>) -> Result<Innovation<T>, EkfError> {
         let r = self.checked_measurement(z, None)?;
-        self.innovation_with(index, z, &r, None)
+        self.innovation_with(index, z, &r)
     }
 
     /// Corrects the state with a sighting `z` of landmark `index`, using the configured
@@ -683,8 +665,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             Ok(r) => r,
             Err(e) => return self.reject(e),
         };
-        let mut m = SMatrix::<T, N, 2>::zeros();
-        let inn = match self.innovation_with(index, z, &r, Some(&mut m)) {
+        let inn = match self.innovation_with(index, z, &r) {
             Ok(inn) => inn,
             Err(e) => return self.reject(e),
         };
@@ -694,103 +675,205 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             return Ok(UpdateOutcome::Gated { nis });
         }
         let k = self.active_dim();
-        // K = M S⁻¹ (k × 2).
-        let mut gain = SMatrix::<T, N, 2>::zeros();
-        for i in 0..k {
-            let row = Vector2::new(m[(i, 0)], m[(i, 1)]).transpose() * inn.s_inv;
-            gain[(i, 0)] = row[0];
-            gain[(i, 1)] = row[1];
-        }
-        // Nothing is written before the step is known to stay finite: with `D = K R − A Hᵀ`
-        // bounded by `2|K|(|R| + |S|) + |M|`, every new covariance entry is bounded by
-        // `max var + 2|K|·(|M| + |K|(|R| + |S|))` (entrywise maxima).
-        let (g0, g1) = split_columns(&gain, k);
-        let (m0, m1) = split_columns(&m, k);
-        let gmax = max_abs(g0.iter().chain(g1).copied());
-        let mmax = max_abs(m0.iter().chain(m1).copied());
-        let sr = max_abs(inn.s.iter().chain(r.iter()).copied());
-        let bound = self.max_variance() + T::lit(16.0) * gmax * (mmax + gmax * sr);
-        if !bound.finite() {
-            return self.reject(EkfError::NumericalFailure);
-        }
         let li = 3 + 2 * index;
+        let mut storage = [UpdateRow {
+            m: [T::ZERO; 2],
+            k: [T::ZERO; 2],
+            a: [T::ZERO; 2],
+        }; N];
+        let rows = storage.get_mut(..k).unwrap_or(&mut []);
+        self.cross_covariance(li, &inn, rows);
         let form = self.config.covariance_update;
-        let aux = match form {
-            CovarianceUpdate::Joseph => self.joseph_terms(k, li, &inn, &gain, &m, &r),
-            CovarianceUpdate::Symmetric => symmetric_terms(k, &gain, &inn.s),
-        };
-        // Every new variance is computed here exactly as the pass below will, so that an
-        // update that would leave a negative variance (f32 cancellation after absurd
-        // inputs) is refused before anything is written.
-        let (a0, a1) = split_columns(&aux, k);
-        for i in 0..k {
-            let (ki0, ki1) = (g0[i], g1[i]);
-            let new = match form {
-                CovarianceUpdate::Joseph => {
-                    self.covariance[(i, i)]
-                        + ((a0[i] * ki0 + a1[i] * ki1) - (ki0 * m0[i] + ki1 * m1[i]))
-                }
-                CovarianceUpdate::Symmetric => {
-                    self.covariance[(i, i)] - (a0[i] * ki0 + a1[i] * ki1)
-                }
-            };
-            let dx = ki0 * inn.nu[0] + ki1 * inn.nu[1];
-            if !(new >= T::ZERO && new.finite() && (self.mean[i] + dx).finite()) {
-                return self.reject(EkfError::NumericalFailure);
-            }
+        if let Err(e) = self.gain_and_terms(li, &inn, &r, rows, form) {
+            return self.reject(e);
         }
-        for i in 0..k {
-            self.mean[i] += gain[(i, 0)] * inn.nu[0] + gain[(i, 1)] * inn.nu[1];
+        let nu = inn.nu;
+        for (x, row) in self.mean.as_mut_slice().iter_mut().zip(rows.iter()) {
+            *x += row.k[0] * nu[0] + row.k[1] * nu[1];
         }
-        self.mean[2] = wrap_angle(self.mean[2]);
+        self.mean[2] = wrap_near(self.mean[2]);
+        // One monomorphised pass per form (a function pointer would cost a call per entry).
         match form {
-            CovarianceUpdate::Joseph => {
-                let (m0, m1) = split_columns(&m, k);
-                joseph_pass(&mut self.covariance, k, (g0, g1), (m0, m1), (a0, a1));
-            }
+            CovarianceUpdate::Joseph => update_upper(&mut self.covariance, rows, joseph_entry),
             CovarianceUpdate::Symmetric => {
-                subtract_rank2(&mut self.covariance, k, (a0, a1), (g0, g1));
+                update_upper(&mut self.covariance, rows, symmetric_entry)
             }
         }
         self.counters.updates = self.counters.updates.saturating_add(1);
         Ok(UpdateOutcome::Accepted { nis })
     }
 
-    /// `D = K R − A Hᵀ` of the Joseph form (see [`EkfSlam::joseph_update`]).
-    ///
-    /// With `M = P Hᵀ` and `A = P − K Mᵀ` (= (I − KH) P), the Joseph result is
-    /// `A − (A Hᵀ) Kᵀ + K R Kᵀ = P − K Mᵀ + D Kᵀ`. `A Hᵀ` needs only the five columns of
-    /// `A` where `H` is nonzero, so `A` is never stored.
-    fn joseph_terms(
+    /// Fills the gain `K = M S⁻¹` and the form's terms (`K S`, or the Joseph form's `D`)
+    /// of every row, and refuses (before anything is written) an update that would not
+    /// stay finite or would leave a negative variance.
+    fn gain_and_terms(
         &self,
-        k: usize,
         li: usize,
         inn: &Innovation<T>,
-        gain: &SMatrix<T, N, 2>,
-        m: &SMatrix<T, N, 2>,
         r: &Matrix2<T>,
-    ) -> SMatrix<T, N, 2> {
-        let (g0, g1) = split_columns(gain, k);
-        let (m0, m1) = split_columns(m, k);
-        let (hr, hl) = (&inn.jacobian_robot, &inn.jacobian_landmark);
-        let cols = [0usize, 1, 2, li, li + 1];
-        let h = [
-            [hr[(0, 0)], hr[(0, 1)], hr[(0, 2)], hl[(0, 0)], hl[(0, 1)]],
-            [hr[(1, 0)], hr[(1, 1)], hr[(1, 2)], hl[(1, 0)], hl[(1, 1)]],
-        ];
-        let mut d = SMatrix::<T, N, 2>::zeros();
-        for i in 0..k {
-            let (ki0, ki1) = (g0[i], g1[i]);
-            let (mut b0, mut b1) = (T::ZERO, T::ZERO);
-            for (c, &col) in cols.iter().enumerate() {
-                let a = entry(&self.covariance, i, col) - (ki0 * m0[col] + ki1 * m1[col]);
-                b0 += a * h[0][c];
-                b1 += a * h[1][c];
+        rows: &mut [UpdateRow<T>],
+        form: CovarianceUpdate,
+    ) -> Result<(), EkfError> {
+        let s = inn.s;
+        match form {
+            CovarianceUpdate::Joseph => {
+                // A Hᵀ reads M at the five columns where H is nonzero.
+                let (hr, hl) = (&inn.jacobian_robot, &inn.jacobian_landmark);
+                let h = [
+                    [hr[(0, 0)], hr[(0, 1)], hr[(0, 2)], hl[(0, 0)], hl[(0, 1)]],
+                    [hr[(1, 0)], hr[(1, 1)], hr[(1, 2)], hl[(1, 0)], hl[(1, 1)]],
+                ];
+                let m_at =
+                    [0, 1, 2, li, li + 1].map(|c| rows.get(c).map_or([T::ZERO; 2], |row| row.m));
+                let terms = |i: usize, [k0, k1]: [T; 2]| {
+                    let (robot, landmark) = self.observed_entries(i, li);
+                    let p_at = [robot[0], robot[1], robot[2], landmark[0], landmark[1]];
+                    let (mut b0, mut b1) = (T::ZERO, T::ZERO);
+                    for (c, (&p, mc)) in p_at.iter().zip(&m_at).enumerate() {
+                        let a = p - (k0 * mc[0] + k1 * mc[1]);
+                        b0 += a * h[0][c];
+                        b1 += a * h[1][c];
+                    }
+                    [
+                        k0 * r[(0, 0)] + k1 * r[(1, 0)] - b0,
+                        k0 * r[(0, 1)] + k1 * r[(1, 1)] - b1,
+                    ]
+                };
+                self.checked_terms(inn, r, rows, terms, joseph_entry)
             }
-            d[(i, 0)] = ki0 * r[(0, 0)] + ki1 * r[(1, 0)] - b0;
-            d[(i, 1)] = ki0 * r[(0, 1)] + ki1 * r[(1, 1)] - b1;
+            CovarianceUpdate::Symmetric => {
+                let terms = |_: usize, [k0, k1]: [T; 2]| {
+                    [
+                        k0 * s[(0, 0)] + k1 * s[(1, 0)],
+                        k0 * s[(0, 1)] + k1 * s[(1, 1)],
+                    ]
+                };
+                self.checked_terms(inn, r, rows, terms, symmetric_entry)
+            }
         }
-        d
+    }
+
+    /// The pass behind [`EkfSlam::gain_and_terms`] for one form: `terms(i, K_i)` gives row
+    /// `i`'s form terms and `new_entry` the form's covariance entry.
+    ///
+    /// Every new variance is computed here exactly as the covariance pass will compute it
+    /// (`f32` cancellation after absurd inputs can make one negative). The off-diagonal
+    /// entries are bounded instead: with `D = K R − A Hᵀ` bounded by
+    /// `2|K|(|R| + |S|) + |M|`, every new entry is at most
+    /// `max var + 2|K|·(|M| + |K|(|R| + |S|))` in size, with `|·|` entrywise maxima — here
+    /// over-estimated by sums over the rows (the trace for the largest variance), which is
+    /// cheaper and still finite whenever the update is sane.
+    #[inline(always)]
+    fn checked_terms(
+        &self,
+        inn: &Innovation<T>,
+        r: &Matrix2<T>,
+        rows: &mut [UpdateRow<T>],
+        terms: impl Fn(usize, [T; 2]) -> [T; 2],
+        new_entry: impl Fn(T, &UpdateRow<T>, &UpdateRow<T>) -> T,
+    ) -> Result<(), EkfError> {
+        let (si, nu) = (inn.s_inv, inn.nu);
+        let data = self.covariance.as_slice();
+        let (mut gsum, mut msum, mut trace, mut poison) = (T::ZERO, T::ZERO, T::ZERO, T::ZERO);
+        let means = self.mean.as_slice();
+        for (i, (row, &mean)) in rows.iter_mut().zip(means).enumerate() {
+            let [m0, m1] = row.m;
+            let k = [
+                m0 * si[(0, 0)] + m1 * si[(1, 0)],
+                m0 * si[(0, 1)] + m1 * si[(1, 1)],
+            ];
+            row.k = k;
+            row.a = terms(i, k);
+            let p_ii = data.get(i * (N + 1)).copied().unwrap_or(T::ZERO);
+            let new = new_entry(p_ii, row, row);
+            if new < T::ZERO {
+                return Err(EkfError::NumericalFailure);
+            }
+            trace += p_ii;
+            gsum += k[0].abs() + k[1].abs();
+            msum += m0.abs() + m1.abs();
+            // `x · 0` is 0 for a finite x and NaN otherwise (NaN variances included), so
+            // `poison` stays 0 only while everything is finite (a non-finite M makes K
+            // non-finite too; a sum of finite values that overflows is refused as well).
+            let moved = mean + (k[0] * nu[0] + k[1] * nu[1]);
+            poison += (new + moved + k[0] + k[1]) * T::ZERO;
+        }
+        let sr = max_abs(inn.s.iter().chain(r.iter()).copied());
+        let bound = trace + T::lit(16.0) * gsum * (msum + gsum * sr);
+        if poison != T::ZERO || !bound.finite() {
+            return Err(EkfError::NumericalFailure);
+        }
+        Ok(())
+    }
+
+    /// Row `i`'s entries in the columns where `H` is nonzero: the robot's (0..3) and the
+    /// landmark's (`li`, `li + 1`), read straight from the stored triangle: for `i ≥ 3`
+    /// the robot entries are rows 0..3 of column `i`; the landmark entries are row `i` of
+    /// columns `li`, `li + 1` above the landmark and rows `li`, `li + 1` of column `i`
+    /// below it.
+    #[inline(always)]
+    fn observed_entries(&self, i: usize, li: usize) -> ([T; 3], [T; 2]) {
+        let data = self.covariance.as_slice();
+        let at = |n: usize| data.get(n).copied().unwrap_or(T::ZERO);
+        let robot = if i >= 3 {
+            [at(i * N), at(i * N + 1), at(i * N + 2)]
+        } else {
+            [0, 1, 2].map(|c| entry(&self.covariance, i, c))
+        };
+        let landmark = if i < li {
+            [at(li * N + i), at((li + 1) * N + i)]
+        } else if i >= li + 2 {
+            [at(i * N + li), at(i * N + li + 1)]
+        } else {
+            [
+                entry(&self.covariance, i, li),
+                entry(&self.covariance, i, li + 1),
+            ]
+        };
+        (robot, landmark)
+    }
+
+    /// Fills `m` of each row `i` with row `i` of `M = P Hᵀ`, where `H` is nonzero only on
+    /// the robot's columns (`∂h/∂robot`) and the landmark's columns `li`, `li + 1`.
+    ///
+    /// Row by row from the stored triangle: rows 3.. take the robot entries from rows 0..3
+    /// of their own column; rows above the landmark take the landmark entries from row `i`
+    /// of columns `li`, `li + 1`, rows below it from rows `li`, `li + 1` of their own
+    /// column. The five rows of the robot and the landmark go through [`entry`].
+    fn cross_covariance(&self, li: usize, inn: &Innovation<T>, rows: &mut [UpdateRow<T>]) {
+        let (hr, hl) = (&inn.jacobian_robot, &inn.jacobian_landmark);
+        let m = |robot: [T; 3], landmark: [T; 2]| -> [T; 2] {
+            [0, 1].map(|r| {
+                robot[0] * hr[(r, 0)]
+                    + robot[1] * hr[(r, 1)]
+                    + robot[2] * hr[(r, 2)]
+                    + landmark[0] * hl[(r, 0)]
+                    + landmark[1] * hl[(r, 1)]
+            })
+        };
+        let data = self.covariance.as_slice();
+        let (lm0, lm1) = (data.get(li * N..), data.get((li + 1) * N..));
+        let (Some(lm0), Some(lm1)) = (lm0, lm1) else {
+            return;
+        };
+        let columns = data.chunks_exact(N);
+        for (i, (row, column)) in rows.iter_mut().zip(columns).enumerate() {
+            let robot = match column {
+                [a, b, c, ..] if i >= 3 => [*a, *b, *c],
+                _ => [0, 1, 2].map(|c| entry(&self.covariance, i, c)),
+            };
+            let landmark = if i < li {
+                [lm0.get(i), lm1.get(i)].map(|v| v.copied().unwrap_or(T::ZERO))
+            } else if i >= li + 2 {
+                [column.get(li), column.get(li + 1)].map(|v| v.copied().unwrap_or(T::ZERO))
+            } else {
+                [
+                    entry(&self.covariance, i, li),
+                    entry(&self.covariance, i, li + 1),
+                ]
+            };
+            row.m = m(robot, landmark);
+        }
     }
 
     /// Adds a landmark seen at `z`, with the configured measurement noise. See
@@ -874,27 +957,6 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         self.landmarks += 1;
         Ok(index)
     }
-}
-
-/// `K S` of the optimal-gain form `P − K S Kᵀ`.
-fn symmetric_terms<T: Real, const N: usize>(
-    k: usize,
-    gain: &SMatrix<T, N, 2>,
-    s: &Matrix2<T>,
-) -> SMatrix<T, N, 2> {
-    let (g0, g1) = split_columns(gain, k);
-    let mut ks = SMatrix::<T, N, 2>::zeros();
-    for (i, (&a, &b)) in g0.iter().zip(g1).enumerate() {
-        ks[(i, 0)] = a * s[(0, 0)] + b * s[(1, 0)];
-        ks[(i, 1)] = a * s[(0, 1)] + b * s[(1, 1)];
-    }
-    ks
-}
-
-/// The first `k` entries of the two columns of an `N × 2` matrix.
-fn split_columns<T: Real, const N: usize>(m: &SMatrix<T, N, 2>, k: usize) -> (&[T], &[T]) {
-    let (a, b) = m.as_slice().split_at(N);
-    (a.get(..k).unwrap_or(&[]), b.get(..k).unwrap_or(&[]))
 }
 
 /// The largest absolute value (NaN propagates as NaN, an empty sequence gives 0).

@@ -14,7 +14,7 @@
 //! eq. 12 compares a Cartesian prediction with a polar measurement and is not used.
 //! Every Jacobian here is checked against central finite differences in the tests.
 
-use crate::geometry::{Pose2, wrap_angle};
+use crate::geometry::{Pose2, wrap_near};
 use crate::scalar::Real;
 use nalgebra::{Matrix2, Matrix2x3, Vector2};
 
@@ -140,7 +140,7 @@ impl<T: Real> RangeBearingSensor<T> {
             (-dy * ddx_dth + dx * ddy_dth) / q - T::ONE,
         );
         Some(Prediction {
-            z: RangeBearing::new(r, wrap_angle(dy.atan2(dx) - sth)),
+            z: RangeBearing::new(r, wrap_near(dy.atan2(dx) - sth)),
             wrt_robot,
             wrt_landmark,
         })
