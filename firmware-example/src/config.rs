@@ -15,8 +15,9 @@ pub const EKF_LANDMARKS: usize = 32;
 /// The EKF of the firmware: `f32`, 32 landmarks (18 KB).
 pub type Ekf = EkfSlam<f32, { state_dim(EKF_LANDMARKS) }>;
 
-/// The settings the EKF runs with (the session re-initialises the filter with them).
-pub const EKF_CONFIG: EkfConfig<f32> = EkfConfig::DEFAULT_F32;
+/// The settings the EKF runs with (the session re-initialises the filter with them): the
+/// generic defaults with the cheaper optimal-gain covariance update.
+pub const EKF_CONFIG: EkfConfig<f32> = EkfConfig::MICROCONTROLLER;
 
 /// A configuration of all-zero bytes, used only to build the filter in a `static`: a
 /// value of zero bytes lands in `.bss`, so the 18 KB filter costs no flash for initial

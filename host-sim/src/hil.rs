@@ -116,7 +116,7 @@ pub fn encode_all_corrupted(messages: &[ToDevice], rate: f64, seed: u64) -> (Vec
 /// and grid estimator (sizes and configurations), fed the same bytes.
 pub fn host_replies(bytes: &[u8]) -> Vec<ToHost> {
     let mut ekf = Box::new(EkfSlam::<f32, { state_dim(FIRMWARE_LANDMARKS) }>::new(
-        EkfConfig::DEFAULT_F32,
+        EkfConfig::MICROCONTROLLER,
     ));
     let config = GridPfConfig::MICROCONTROLLER;
     let mut grid = Box::new(OccupancyGrid::<256, 256>::centred(
@@ -128,7 +128,7 @@ pub fn host_replies(bytes: &[u8]) -> Vec<ToHost> {
     };
     let mut session = Session::<_, FIRMWARE_LANDMARKS>::with_grid(
         &mut ekf,
-        EkfConfig::DEFAULT_F32,
+        EkfConfig::MICROCONTROLLER,
         &mut slam,
         FIRMWARE_GRID_SETUP,
     );

@@ -174,6 +174,16 @@ impl EkfConfig<f32> {
     /// Generic defaults for `f32`: 5 % odometry noise, 0.1 m / 2° sightings, a 99.9 % gate.
     /// Tune them per robot and dataset.
     pub const DEFAULT_F32: Self = default_config!(f32);
+
+    /// [`EkfConfig::DEFAULT_F32`] with the optimal-gain covariance update
+    /// ([`CovarianceUpdate::Symmetric`]): what the example firmware runs. On a Cortex-M4F
+    /// an update at 64 landmarks costs about 64 k instructions this way against 104 k
+    /// for the Joseph form (2 instead of 4 multiply-adds per covariance entry); both
+    /// forms refuse an update that would leave a negative variance.
+    pub const MICROCONTROLLER: Self = Self {
+        covariance_update: CovarianceUpdate::Symmetric,
+        ..Self::DEFAULT_F32
+    };
 }
 
 impl EkfConfig<f64> {
