@@ -46,8 +46,9 @@
 //!
 //! Such a filter belongs in a `static` on a microcontroller: [`EkfSlam::new`] is a
 //! `const fn`, so `static`s are laid out by the linker (`.bss`/`.data`) and never pass
-//! through the stack; [`EkfSlam::init`] re-initialises in place. A step itself uses
-//! about `4 · N · size_of::<T>()` bytes of stack for its `N × 2` temporaries.
+//! through the stack; [`EkfSlam::init`] re-initialises in place. An update uses
+//! `6 · N · size_of::<T>()` bytes of stack for its per-row terms. The strict lower
+//! triangle of the storage is never used (see [`covariance`]).
 //!
 //! A state dimension that is not `3 + 2k` is rejected at compile time:
 //!
