@@ -6,8 +6,8 @@
 //! keeping both halves this halves the work of the O(n²) update and removes its strided
 //! mirror writes; the matrix is symmetric by construction.
 //!
-//! Everything that reads the covariance goes through [`entry`], [`block`] or
-//! [`CovarianceView`], which fold `(i, j)` onto the upper triangle.
+//! Everything that reads the covariance goes through [`CovarianceView`] (or the crate's
+//! internal equivalents), which fold `(i, j)` onto the upper triangle.
 
 use crate::scalar::Real;
 use nalgebra::SMatrix;
