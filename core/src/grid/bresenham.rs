@@ -46,6 +46,45 @@ impl Bresenham {
     }
 }
 
+/// Longest line, in cells, that [`walk_to_end`] draws (its `i32` error term stays far from
+/// overflow below this).
+pub(crate) const MAX_WALK_CELLS: u64 = 1 << 28;
+
+/// Calls `visit` for each cell of the line from `(x0, y0)` to `(x1, y1)` except the last
+/// one, in order: the cells [`Bresenham`] yields before `(x1, y1)`, in `i32` arithmetic
+/// (on a 32-bit microcontroller several times fewer instructions than the iterator's
+/// `i64`). Lines longer than [`MAX_WALK_CELLS`] are not drawn and `false` is returned.
+pub(crate) fn walk_to_end(
+    x0: i32,
+    y0: i32,
+    x1: i32,
+    y1: i32,
+    mut visit: impl FnMut(i32, i32),
+) -> bool {
+    if Bresenham::cell_count(x0, y0, x1, y1) > MAX_WALK_CELLS {
+        return false;
+    }
+    // |x1 − x0|, |y1 − y0| < 2²⁸: none of the sums below overflows.
+    let dx = x1.wrapping_sub(x0).wrapping_abs();
+    let dy = y1.wrapping_sub(y0).wrapping_abs().wrapping_neg();
+    let sx = if x0 < x1 { 1 } else { -1 };
+    let sy = if y0 < y1 { 1 } else { -1 };
+    let (mut x, mut y, mut err) = (x0, y0, dx.wrapping_add(dy));
+    while x != x1 || y != y1 {
+        visit(x, y);
+        let e2 = err.wrapping_mul(2);
+        if e2 >= dy {
+            err = err.wrapping_add(dy);
+            x = x.wrapping_add(sx);
+        }
+        if e2 <= dx {
+            err = err.wrapping_add(dx);
+            y = y.wrapping_add(sy);
+        }
+    }
+    true
+}
+
 impl Iterator for Bresenham {
     type Item = (i32, i32);
 
@@ -78,6 +117,27 @@ mod tests {
 
     fn line(x0: i32, y0: i32, x1: i32, y1: i32) -> Vec<(i32, i32)> {
         Bresenham::new(x0, y0, x1, y1).collect()
+    }
+
+    #[test]
+    fn walk_visits_the_iterators_cells_but_the_last() {
+        let mut seed = 12345u32;
+        let mut next = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 16) as i32 % 200 - 100
+        };
+        for _ in 0..3000 {
+            let (x0, y0, x1, y1) = (next(), next(), next(), next());
+            let mut want = line(x0, y0, x1, y1);
+            want.pop();
+            let mut got = Vec::new();
+            assert!(walk_to_end(x0, y0, x1, y1, |x, y| got.push((x, y))));
+            assert_eq!(got, want, "({x0}, {y0}) → ({x1}, {y1})");
+        }
+        let mut none = 0;
+        assert!(!walk_to_end(0, 0, i32::MAX, 5, |_, _| none += 1));
+        assert!(!walk_to_end(i32::MIN, 0, i32::MAX, 0, |_, _| none += 1));
+        assert_eq!(none, 0);
     }
 
     #[test]

@@ -18,7 +18,7 @@ mod view;
 
 pub use bresenham::Bresenham;
 pub use occupancy::{OccupancyGrid, ScanIntegration};
-pub use view::GridView;
+pub use view::{GridView, fill_occupancy_bits};
 
 use core::fmt;
 
@@ -96,6 +96,13 @@ impl GridGeometry {
     pub fn contains(&self, ix: i32, iy: i32) -> bool {
         ix >= 0 && iy >= 0 && (ix as usize) < self.width && (iy as usize) < self.height
     }
+}
+
+/// Size in 32-bit words of the occupied-cell bitmap of a `width × height` grid:
+/// `⌈width / 32⌉` words per row (the `BITS` of [`OccupancyGrid`], the length
+/// [`GridView::with_occupancy_bits`] expects).
+pub const fn occupancy_words(width: usize, height: usize) -> usize {
+    width.div_ceil(32) * height
 }
 
 /// `floor(v)` as an `i32`: exact for |v| < 2³¹, saturating beyond, 0 for NaN.

@@ -1,22 +1,55 @@
 //! The owned, fixed-size occupancy grid that SLAM writes scans into.
 
-use super::{Bresenham, GridError, GridGeometry, GridView, LogOdds, floor_i32};
+use super::bresenham::walk_to_end;
+use super::{Bresenham, GridError, GridGeometry, GridView, LogOdds, floor_i32, occupancy_words};
 use crate::geometry::Pose2;
-use crate::sensors::lidar::{LidarScan, robot_to_world, sensor_pose};
+use crate::sensors::lidar::LidarScan;
 
-/// A `W × H` grid of `i8` log-odds cells (see [`LogOdds`]).
+/// A `W × H` grid of `i8` log-odds cells (see [`LogOdds`]), optionally with a bitmap of
+/// its occupied cells.
 ///
-/// RAM: `W · H` bytes plus 40 bytes (256 × 256: 65,576 bytes). Build it in place in a
+/// `BITS` is the bitmap's size in 32-bit words: `0` (the default) for none, or
+/// [`occupancy_words`]`(W, H)` (`⌈W/32⌉ · H`, any other value does not compile). The
+/// grid keeps the bitmap equal to `value > occupied_above` on every write, and
+/// [`OccupancyGrid::view`] hands it to the shift search, which then visits only the
+/// occupied cells of each window (on a Cortex-M4 about 4× fewer instructions than the
+/// byte-wise search; same scores). Write the type as
+/// `OccupancyGrid<256, 256, { occupancy_words(256, 256) }>`.
+///
+/// RAM: `W · H + 4 · BITS` bytes plus 40 bytes (256 × 256: 65,576 bytes without the
+/// bitmap, 73,768 with it). Build it in place in a
 /// `static` with the `const fn` [`OccupancyGrid::new`], or, so that the static is all
 /// zero bytes and lands in `.bss` (no flash for initial values), with
 /// [`OccupancyGrid::zeroed`] followed by [`OccupancyGrid::init`] at start-up. No method
 /// moves the cells through the stack.
 #[derive(Clone, Debug)]
-pub struct OccupancyGrid<const W: usize, const H: usize> {
+pub struct OccupancyGrid<const W: usize, const H: usize, const BITS: usize = 0> {
     cells: [[i8; W]; H],
+    occupied: [u32; BITS],
     geometry: GridGeometry,
     log_odds: LogOdds,
     off_grid: u32,
+}
+
+/// The bitmap of a grid whose cells are all occupied (`on`) or all not: the `W` valid
+/// bits of each row set or clear.
+const fn uniform_bits<const BITS: usize>(width: usize, on: bool) -> [u32; BITS] {
+    let mut bits = [0u32; BITS];
+    if !on || width == 0 {
+        return bits;
+    }
+    let words_per_row = width.div_ceil(32);
+    let mut i = 0;
+    while i < BITS {
+        let used = width - (i % words_per_row) * 32;
+        bits[i] = if used >= 32 {
+            u32::MAX
+        } else {
+            (1u32 << used) - 1
+        };
+        i += 1;
+    }
+    bits
 }
 
 /// What writing one scan did.
@@ -33,11 +66,19 @@ pub struct ScanIntegration {
     pub rays_skipped: u32,
 }
 
-impl<const W: usize, const H: usize> OccupancyGrid<W, H> {
+impl<const W: usize, const H: usize, const BITS: usize> OccupancyGrid<W, H, BITS> {
+    /// Compile-time check of the bitmap size.
+    const BITMAP_SIZE_OK: () = assert!(
+        BITS == 0 || BITS == occupancy_words(W, H),
+        "OccupancyGrid<W, H, BITS>: BITS must be 0 or occupancy_words(W, H)"
+    );
+
     /// An unknown (all-zero) grid whose lower-left corner is at `(origin_x, origin_y)`.
     pub const fn new(resolution: f32, origin_x: f32, origin_y: f32, log_odds: LogOdds) -> Self {
+        let () = Self::BITMAP_SIZE_OK;
         Self {
             cells: [[0; W]; H],
+            occupied: uniform_bits(W, 0 > log_odds.occupied_above),
             geometry: GridGeometry {
                 width: W,
                 height: H,
@@ -54,8 +95,10 @@ impl<const W: usize, const H: usize> OccupancyGrid<W, H> {
     /// reads as off the grid and nothing is written) until [`OccupancyGrid::init`] sets
     /// the real geometry in place.
     pub const fn zeroed() -> Self {
+        let () = Self::BITMAP_SIZE_OK;
         Self {
             cells: [[0; W]; H],
+            occupied: [0; BITS],
             geometry: GridGeometry {
                 width: 0,
                 height: 0,
@@ -121,7 +164,15 @@ impl<const W: usize, const H: usize> OccupancyGrid<W, H> {
         for row in self.cells.iter_mut() {
             row.fill(0);
         }
+        self.occupied = uniform_bits(W, 0 > self.log_odds.occupied_above);
         self.off_grid = 0;
+    }
+
+    /// The bitmap of occupied cells (`⌈W/32⌉` words per row, bit `x % 32` of word
+    /// `y · ⌈W/32⌉ + x / 32` for cell `(x, y)`); empty when `BITS = 0`.
+    #[inline]
+    pub fn occupancy_bits(&self) -> &[u32] {
+        &self.occupied
     }
 
     /// Size, resolution and origin.
@@ -152,14 +203,19 @@ impl<const W: usize, const H: usize> OccupancyGrid<W, H> {
         self.cells.as_flattened()
     }
 
-    /// A read-only view for scoring scans.
+    /// A read-only view for scoring scans (with the occupied-cell bitmap when `BITS > 0`).
     #[inline]
     pub fn view(&self) -> GridView<'_> {
-        GridView::from_trusted(
+        let view = GridView::from_trusted(
             self.cells.as_flattened(),
             self.geometry,
             self.log_odds.occupied_above,
-        )
+        );
+        if BITS > 0 && self.geometry.width == W && self.geometry.height == H {
+            view.with_trusted_bits(&self.occupied)
+        } else {
+            view
+        }
     }
 
     /// Log-odds of cell `(ix, iy)`, `None` off the grid.
@@ -176,20 +232,30 @@ impl<const W: usize, const H: usize> OccupancyGrid<W, H> {
 
     /// Sets cell `(ix, iy)`; returns `false` (and writes nothing) off the grid.
     pub fn set_cell(&mut self, ix: i32, iy: i32, value: i8) -> bool {
+        self.update_cell(ix, iy, |_| value)
+    }
+
+    /// Replaces the value of cell `(ix, iy)` by `f(value)` and keeps the bitmap in step;
+    /// `false` (nothing written) off the grid.
+    #[inline]
+    fn update_cell(&mut self, ix: i32, iy: i32, f: impl FnOnce(i8) -> i8) -> bool {
         if !self.geometry.contains(ix, iy) {
             return false;
         }
-        match self
-            .cells
-            .get_mut(iy as usize)
-            .and_then(|r| r.get_mut(ix as usize))
+        let (x, y) = (ix as usize, iy as usize);
+        let Some(c) = self.cells.get_mut(y).and_then(|r| r.get_mut(x)) else {
+            return false;
+        };
+        let (old, new) = (*c, f(*c));
+        *c = new;
+        let t = self.log_odds.occupied_above;
+        if BITS > 0
+            && (old > t) != (new > t)
+            && let Some(bits) = self.occupied.get_mut(y * W.div_ceil(32) + x / 32)
         {
-            Some(c) => {
-                *c = value;
-                true
-            }
-            None => false,
+            *bits ^= 1u32 << (x % 32);
         }
+        true
     }
 
     /// End points counted off the grid since the last [`OccupancyGrid::reset`].
@@ -209,18 +275,34 @@ impl<const W: usize, const H: usize> OccupancyGrid<W, H> {
         scan: &LidarScan<'_>,
         decimation: usize,
     ) -> Result<ScanIntegration, GridError> {
+        let points = scan.beams(decimation).map(|b| b.robot_point);
+        self.integrate_points(pose, &scan.geometry.mount, points)
+    }
+
+    /// [`OccupancyGrid::integrate_scan`] for end points already in the robot frame (e.g.
+    /// [`crate::pf::ScanPoints::robot_points`], so that a scan's trigonometry is done
+    /// once for scoring and mapping): rays start at the sensor, mounted at `mount` on the
+    /// robot; `points` is walked twice (free rays, then hits).
+    pub fn integrate_points(
+        &mut self,
+        pose: &Pose2<f32>,
+        mount: &Pose2<f32>,
+        points: impl Iterator<Item = (f32, f32)> + Clone,
+    ) -> Result<ScanIntegration, GridError> {
         if !pose.is_finite() {
             return Err(GridError::NonFinite);
         }
-        let sensor = sensor_pose(pose, &scan.geometry.mount);
+        let (s, c) = libm::sincosf(pose.theta);
+        let to_world = |p: (f32, f32)| (pose.x + c * p.0 - s * p.1, pose.y + s * p.0 + c * p.1);
+        let sensor = to_world((mount.x, mount.y));
         let g = self.geometry;
-        let (su, sv) = g.world_to_grid(sensor.x, sensor.y);
+        let (su, sv) = g.world_to_grid(sensor.0, sensor.1);
         let (sx, sy) = (floor_i32(su), floor_i32(sv));
         let max_cells = 4 * (W as u64 + H as u64);
         let mut report = ScanIntegration::default();
         for pass in 0..2 {
-            for beam in scan.beams(decimation) {
-                let (wx, wy) = robot_to_world(pose, beam.robot_point);
+            for point in points.clone() {
+                let (wx, wy) = to_world(point);
                 let (u, v) = g.world_to_grid(wx, wy);
                 if !(u.is_finite() && v.is_finite()) {
                     continue;
@@ -233,20 +315,18 @@ impl<const W: usize, const H: usize> OccupancyGrid<W, H> {
                     continue;
                 }
                 if pass == 0 {
-                    report.beams += 1;
                     let lo = self.log_odds;
-                    for (cx, cy) in Bresenham::new(sx, sy, ex, ey) {
-                        if (cx, cy) == (ex, ey) {
-                            break;
-                        }
-                        if let Some(c) = self.cell_mut(cx, cy) {
-                            *c = lo.after_miss(*c);
-                        }
+                    let drawn = walk_to_end(sx, sy, ex, ey, |cx, cy| {
+                        self.update_cell(cx, cy, |c| lo.after_miss(c));
+                    });
+                    if drawn {
+                        report.beams += 1;
+                    } else {
+                        report.rays_skipped += 1;
                     }
                 } else {
                     let lo = self.log_odds;
-                    if let Some(c) = self.cell_mut(ex, ey) {
-                        *c = lo.after_hit(*c);
+                    if self.update_cell(ex, ey, |c| lo.after_hit(c)) {
                         report.hits += 1;
                     } else {
                         report.off_grid += 1;
@@ -256,16 +336,6 @@ impl<const W: usize, const H: usize> OccupancyGrid<W, H> {
         }
         self.off_grid = self.off_grid.saturating_add(report.off_grid);
         Ok(report)
-    }
-
-    #[inline]
-    fn cell_mut(&mut self, ix: i32, iy: i32) -> Option<&mut i8> {
-        if !self.geometry.contains(ix, iy) {
-            return None;
-        }
-        self.cells
-            .get_mut(iy as usize)
-            .and_then(|r| r.get_mut(ix as usize))
     }
 }
 
@@ -283,6 +353,92 @@ mod tests {
             no_return_range: 50.0,
             mount: Pose2::new(0.0, 0.0, 0.0),
         }
+    }
+
+    /// The bitmap a grid keeps equals the one computed from its cells.
+    fn assert_bitmap_matches<const W: usize, const H: usize, const BITS: usize>(
+        grid: &OccupancyGrid<W, H, BITS>,
+    ) {
+        let mut want = [0u32; BITS];
+        crate::grid::fill_occupancy_bits(
+            grid.cells(),
+            W,
+            H,
+            grid.log_odds_model().occupied_above,
+            &mut want,
+        )
+        .unwrap();
+        assert_eq!(grid.occupancy_bits(), &want[..]);
+    }
+
+    #[test]
+    fn occupancy_bitmap_follows_every_write() {
+        const BITS: usize = crate::grid::occupancy_words(40, 20);
+        let mut grid = OccupancyGrid::<40, 20, BITS>::new(0.1, 0.0, 0.0, LogOdds::SEED);
+        let mut plain = OccupancyGrid::<40, 20>::new(0.1, 0.0, 0.0, LogOdds::SEED);
+        assert_bitmap_matches(&grid);
+        let g = LidarGeometry {
+            first_angle: -3.0,
+            angle_increment: 0.15,
+            ..lidar_ahead()
+        };
+        // Ranges that end inside the grid, on its border and beyond it.
+        let ranges: Vec<f32> = (0..40).map(|i| 0.3 + (i * 7 % 23) as f32 * 0.12).collect();
+        for step in 0..30 {
+            // Each pose three times, so that end cells collect hits above the threshold.
+            let k = (step / 3) as f32;
+            let pose = Pose2::new(1.0 + 0.07 * k, 0.9 + 0.02 * k, 0.2 * k);
+            let scan = LidarScan::new(&ranges, g);
+            let a = grid.integrate_scan(&pose, &scan, 1 + step % 3).unwrap();
+            let b = plain.integrate_scan(&pose, &scan, 1 + step % 3).unwrap();
+            assert_eq!(a, b);
+            assert_eq!(grid.cells(), plain.cells(), "the bitmap changes no cell");
+            assert_bitmap_matches(&grid);
+        }
+        assert!(grid.occupancy_bits().iter().any(|w| *w != 0));
+        assert!(grid.set_cell(39, 19, 50) && !grid.set_cell(40, 0, 50));
+        assert!(grid.set_cell(5, 5, -50));
+        assert_bitmap_matches(&grid);
+        assert_eq!(grid.view().occupancy_bits(), Some(grid.occupancy_bits()));
+        assert_eq!(plain.view().occupancy_bits(), None);
+        // A threshold below zero makes unknown cells occupied: the bitmap says so too.
+        let low = LogOdds {
+            occupied_above: -1,
+            ..LogOdds::SEED
+        };
+        let mut unknown_occupied = OccupancyGrid::<40, 20, BITS>::new(0.1, 0.0, 0.0, low);
+        assert_bitmap_matches(&unknown_occupied);
+        unknown_occupied
+            .integrate_scan(&Pose2::new(2.0, 1.0, 0.0), &LidarScan::new(&ranges, g), 1)
+            .unwrap();
+        assert_bitmap_matches(&unknown_occupied);
+        unknown_occupied.reset();
+        assert_bitmap_matches(&unknown_occupied);
+        assert!(grid.init(0.1, 0.0, 0.0, low).is_ok());
+        assert_bitmap_matches(&grid);
+    }
+
+    #[test]
+    fn points_write_what_the_scan_writes() {
+        let g = LidarGeometry {
+            first_angle: -1.5,
+            angle_increment: 0.1,
+            mount: Pose2::new(0.2, -0.05, 0.3),
+            ..lidar_ahead()
+        };
+        let ranges: Vec<f32> = (0..30).map(|i| 0.4 + (i % 7) as f32 * 0.3).collect();
+        let scan = LidarScan::new(&ranges, g);
+        let pose = Pose2::new(2.0, 1.0, 0.7);
+        let mut a = OccupancyGrid::<40, 20>::new(0.1, 0.0, 0.0, LogOdds::SEED);
+        let mut b = OccupancyGrid::<40, 20>::new(0.1, 0.0, 0.0, LogOdds::SEED);
+        let ra = a.integrate_scan(&pose, &scan, 2).unwrap();
+        let points: Vec<(f32, f32)> = scan.beams(2).map(|b| b.robot_point).collect();
+        let rb = b
+            .integrate_points(&pose, &g.mount, points.iter().copied())
+            .unwrap();
+        assert_eq!(ra, rb);
+        assert_eq!(a.cells(), b.cells());
+        assert!(ra.hits > 0);
     }
 
     #[test]

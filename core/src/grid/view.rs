@@ -5,11 +5,16 @@ use super::{GridError, GridGeometry};
 /// Read-only log-odds cells (row-major, row 0 at the grid's bottom edge) with their
 /// geometry and occupied threshold. Borrows from an [`super::OccupancyGrid`] or from any
 /// `&[i8]`, e.g. a `&'static [i8]` map kept in flash for localization.
+///
+/// A view may also carry the bitmap of the occupied cells
+/// ([`GridView::with_occupancy_bits`]; an [`super::OccupancyGrid`] with a bitmap hands
+/// out its own): the shift search then visits only the occupied cells of each window.
 #[derive(Clone, Copy, Debug)]
 pub struct GridView<'a> {
     cells: &'a [i8],
     geometry: GridGeometry,
     occupied_above: i8,
+    bits: Option<&'a [u32]>,
 }
 
 /// Widest window [`GridView::occupied_row_mask`] answers in one call, cells.
@@ -33,7 +38,38 @@ impl<'a> GridView<'a> {
             cells,
             geometry,
             occupied_above,
+            bits: None,
         })
+    }
+
+    /// The same view with the bitmap of its occupied cells: [`super::occupancy_words`]
+    /// words, bit `x % 32` of word `y · ⌈width/32⌉ + x / 32` set when cell `(x, y)` is
+    /// above the threshold — as [`fill_occupancy_bits`] computes it (e.g. once at
+    /// start-up for a map in flash). A bitmap of another length is refused with
+    /// [`GridError::SizeMismatch`]; one that disagrees with the cells is not detected
+    /// and makes the scores follow the bitmap.
+    pub fn with_occupancy_bits(self, bits: &'a [u32]) -> Result<Self, GridError> {
+        if bits.len() != super::occupancy_words(self.geometry.width, self.geometry.height) {
+            return Err(GridError::SizeMismatch);
+        }
+        Ok(Self {
+            bits: Some(bits),
+            ..self
+        })
+    }
+
+    /// [`GridView::with_occupancy_bits`] for a bitmap kept by the grid itself.
+    pub(crate) fn with_trusted_bits(self, bits: &'a [u32]) -> Self {
+        Self {
+            bits: Some(bits),
+            ..self
+        }
+    }
+
+    /// The occupied-cell bitmap, when the view has one.
+    #[inline]
+    pub fn occupancy_bits(&self) -> Option<&'a [u32]> {
+        self.bits
     }
 
     /// A view over cells whose length is known to be `width × height` (for
@@ -47,6 +83,7 @@ impl<'a> GridView<'a> {
             cells,
             geometry,
             occupied_above,
+            bits: None,
         }
     }
 
@@ -113,6 +150,37 @@ impl<'a> GridView<'a> {
         }
         mask
     }
+}
+
+/// Writes the occupied-cell bitmap of `width × height` `cells` (row-major) into `bits`
+/// ([`super::occupancy_words`] words, see [`GridView::with_occupancy_bits`]): bit set
+/// when the cell is above `occupied_above`. Refused with [`GridError::SizeMismatch`]
+/// (nothing written) when a length does not fit.
+pub fn fill_occupancy_bits(
+    cells: &[i8],
+    width: usize,
+    height: usize,
+    occupied_above: i8,
+    bits: &mut [u32],
+) -> Result<(), GridError> {
+    let words_per_row = width.div_ceil(32);
+    if width.checked_mul(height) != Some(cells.len())
+        || bits.len() != super::occupancy_words(width, height)
+    {
+        return Err(GridError::SizeMismatch);
+    }
+    if words_per_row == 0 {
+        return Ok(());
+    }
+    for (row, row_bits) in cells.chunks(width).zip(bits.chunks_mut(words_per_row)) {
+        for (word, chunk) in row_bits.iter_mut().zip(row.chunks(32)) {
+            *word = chunk
+                .iter()
+                .enumerate()
+                .fold(0, |w, (k, c)| w | (u32::from(*c > occupied_above) << k));
+        }
+    }
+    Ok(())
 }
 
 /// Bit `k` set when `bytes[k] > t`: one vector compare into 0/1 bytes, then each group of

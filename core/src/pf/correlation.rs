@@ -18,7 +18,7 @@
 
 use crate::geometry::Pose2;
 use crate::grid::{GridView, floor_i32};
-use crate::sensors::lidar::LidarScan;
+use crate::sensors::lidar::{BeamDirections, LidarScan};
 
 /// The fixed-point weight that stands for 1.0 (a beam of the unweighted count).
 pub const WEIGHT_ONE: u32 = 256;
@@ -46,12 +46,14 @@ pub struct ScanPoint {
 
 /// Up to `B` end points of one scan, prepared once per scan for all particles.
 ///
-/// RAM: 16 · B bytes + 16.
+/// RAM: 24 · B bytes + 40 (the end points and the beam directions of the lidar,
+/// [`BeamDirections`], kept from scan to scan).
 #[derive(Clone, Debug)]
 pub struct ScanPoints<const B: usize> {
     points: [ScanPoint; B],
     len: usize,
     thinned: bool,
+    directions: BeamDirections<B>,
 }
 
 impl<const B: usize> Default for ScanPoints<B> {
@@ -72,6 +74,7 @@ impl<const B: usize> ScanPoints<B> {
             }; B],
             len: 0,
             thinned: false,
+            directions: BeamDirections::new(),
         }
     }
 
@@ -99,7 +102,11 @@ impl<const B: usize> ScanPoints<B> {
         } else {
             0.0
         };
-        for (slot, beam) in self.points.iter_mut().zip(scan.beams(dec)) {
+        for (slot, beam) in self
+            .points
+            .iter_mut()
+            .zip(scan.beams_cached(dec, &mut self.directions))
+        {
             let w = if gamma == 0.0 {
                 1.0
             } else {
@@ -127,6 +134,12 @@ impl<const B: usize> ScanPoints<B> {
     /// The points loaded.
     pub fn as_slice(&self) -> &[ScanPoint] {
         self.points.get(..self.len).unwrap_or(&[])
+    }
+
+    /// The robot-frame end points `(x, y)` loaded, in beam order (what
+    /// [`crate::grid::OccupancyGrid::integrate_points`] writes).
+    pub fn robot_points(&self) -> impl Iterator<Item = (f32, f32)> + Clone + '_ {
+        self.as_slice().iter().map(|p| (p.x, p.y))
     }
 
     /// `true` when the last [`ScanPoints::load`] had to raise the decimation to fit `B`.
@@ -193,6 +206,18 @@ pub fn search_window(
     scores: &mut [u32; MAX_SHIFTS],
 ) -> ShiftScore {
     let hw = half_width.min(MAX_SHIFT_WINDOW);
+    if let Some(bits) = map.occupancy_bits() {
+        return match hw {
+            0 => search_sparse::<1>(map, bits, pose, points, scores),
+            1 => search_sparse::<3>(map, bits, pose, points, scores),
+            2 => search_sparse::<5>(map, bits, pose, points, scores),
+            3 => search_sparse::<7>(map, bits, pose, points, scores),
+            4 => search_sparse::<9>(map, bits, pose, points, scores),
+            5 => search_sparse::<11>(map, bits, pose, points, scores),
+            6 => search_sparse::<13>(map, bits, pose, points, scores),
+            _ => search_sparse::<15>(map, bits, pose, points, scores),
+        };
+    }
     match hw {
         0 => search_fixed::<1>(map, pose, points, scores),
         1 => search_fixed::<3>(map, pose, points, scores),
@@ -247,14 +272,7 @@ fn search_fixed<const N: usize>(
                     n += 1;
                 }
             } else {
-                for (r, row_acc) in acc.iter_mut().enumerate() {
-                    for (b, s) in row_acc.iter_mut().enumerate() {
-                        if map.is_occupied(x0.saturating_add(b as i32), y0.saturating_add(r as i32))
-                        {
-                            *s = s.wrapping_add(p.weight);
-                        }
-                    }
-                }
+                add_checked(map, x0, y0, p.weight, &mut acc);
             }
         }
         // Pass 2: row by row, all inside points of the chunk.
@@ -281,6 +299,81 @@ fn search_fixed<const N: usize>(
         *dst = *src;
     }
     best_shift(&scores[..N * N], (N / 2) as u8)
+}
+
+/// [`search_window`] over a map with an occupied-cell bitmap, for a window of `N = 2k+1`
+/// cells: for each end point, each of the `N` window rows is cut out of the bitmap as
+/// `N` bits (one or two words, a shift) and only its set bits — the occupied cells —
+/// add the point's weight to their shift. Rows without an occupied cell, most of them,
+/// cost a load, a shift and a test. Same integer sums as the other searches, in another
+/// order, so the scores are identical.
+fn search_sparse<const N: usize>(
+    map: &GridView<'_>,
+    bits: &[u32],
+    pose: &Pose2<f32>,
+    points: &[ScanPoint],
+    scores: &mut [u32; MAX_SHIFTS],
+) -> ShiftScore {
+    let k = (N / 2) as i32;
+    let mut acc = [[0u32; N]; N];
+    let (sin, cos) = libm::sincosf(pose.theta);
+    let g = map.geometry();
+    let (w, h) = (g.width, g.height);
+    let words_per_row = w.div_ceil(32);
+    let row_mask = if N >= 32 { u32::MAX } else { (1u32 << N) - 1 };
+    for p in points {
+        let (cx, cy) = end_cell(map, pose, sin, cos, p);
+        let (x0, y0) = (cx.saturating_sub(k), cy.saturating_sub(k));
+        let inside = x0 >= 0 && y0 >= 0 && (x0 as usize) + N <= w && (y0 as usize) + N <= h;
+        if !inside {
+            add_checked(map, x0, y0, p.weight, &mut acc);
+            continue;
+        }
+        let (x0, y0) = (x0 as usize, y0 as usize);
+        let shift = (x0 % 32) as u32;
+        // The window's bits straddle two words when they do not fit in the first one
+        // (then shift > 32 − N > 0, and the second word is in the same row).
+        let straddles = shift as usize + N > 32;
+        let mut word = y0 * words_per_row + x0 / 32;
+        for row_acc in acc.iter_mut() {
+            let lo = bits.get(word).copied().unwrap_or(0) >> shift;
+            let hi = if straddles {
+                bits.get(word + 1).copied().unwrap_or(0) << (32 - shift)
+            } else {
+                0
+            };
+            let mut m = (lo | hi) & row_mask;
+            while m != 0 {
+                if let Some(s) = row_acc.get_mut(m.trailing_zeros() as usize) {
+                    *s = s.wrapping_add(p.weight);
+                }
+                m &= m - 1;
+            }
+            word += words_per_row;
+        }
+    }
+    for (dst, src) in scores.iter_mut().zip(acc.as_flattened()) {
+        *dst = *src;
+    }
+    best_shift(&scores[..N * N], (N / 2) as u8)
+}
+
+/// Adds `weight` to every shift of the window at `(x0, y0)` whose cell is occupied, with a
+/// bounds check per cell: the path for windows that reach over the grid's edge.
+fn add_checked<const N: usize>(
+    map: &GridView<'_>,
+    x0: i32,
+    y0: i32,
+    weight: u32,
+    acc: &mut [[u32; N]; N],
+) {
+    for (r, row_acc) in acc.iter_mut().enumerate() {
+        for (b, s) in row_acc.iter_mut().enumerate() {
+            if map.is_occupied(x0.saturating_add(b as i32), y0.saturating_add(r as i32)) {
+                *s = s.wrapping_add(weight);
+            }
+        }
+    }
 }
 
 /// The brute-force reference of [`search_window`]: for every shift, for every point,
@@ -390,6 +483,14 @@ mod tests {
             assert_eq!(a[..n], b[..n], "trial {trial}");
             assert_eq!(fast, slow, "trial {trial}");
             assert!(fast.score > 0 || trial % 8 == 0);
+            // The same search over the occupied-cell bitmap (the sparse path).
+            let mut bits = vec![0u32; crate::grid::occupancy_words(g.width, g.height)];
+            crate::grid::fill_occupancy_bits(&cells, g.width, g.height, 20, &mut bits).unwrap();
+            let with_bits = view.with_occupancy_bits(&bits).unwrap();
+            let mut c = [0u32; MAX_SHIFTS];
+            let sparse = search_window(&with_bits, &pose, pts.as_slice(), k, &mut c);
+            assert_eq!(c[..n], b[..n], "sparse, trial {trial}");
+            assert_eq!(sparse, slow, "sparse, trial {trial}");
         }
     }
 

@@ -10,7 +10,7 @@ use crate::sensors::lidar::LidarScan;
 /// Localizer with `P` particles and at most `B` beams per scan on a borrowed map (owned
 /// grid's [`crate::grid::OccupancyGrid::view`] or a `&'static` map in flash).
 ///
-/// RAM: `28·P + 16·B` bytes plus ~100; the map is not copied.
+/// RAM: `28·P + 24·B` bytes plus ~100; the map is not copied.
 pub struct GridLocalizer<'m, const P: usize, const B: usize> {
     map: GridView<'m>,
     filter: ParticleFilter<P>,

@@ -7,17 +7,26 @@ use crate::geometry::Pose2;
 use crate::grid::{OccupancyGrid, ScanIntegration};
 use crate::sensors::lidar::LidarScan;
 
-/// Grid SLAM with `P` particles, at most `B` beams per scan, on a borrowed `W × H` grid.
+/// Grid SLAM with `P` particles, at most `B` beams per scan, on a borrowed `W × H` grid
+/// (with an occupied-cell bitmap of `BITS` words when `BITS > 0`, see
+/// [`OccupancyGrid`]: the shift search is then the sparse one).
 ///
 /// The grid is borrowed so that it can live in a `static` (built in place with
-/// [`OccupancyGrid::new`]); the filter itself is small: `28·P + 16·B` bytes plus ~100
-/// (P = 32, B = 90: ~2.5 KB).
+/// [`OccupancyGrid::new`]); the filter itself is small: `28·P + 24·B` bytes plus ~100
+/// (P = 32, B = 90: ~3.2 KB).
 ///
 /// The first scan builds the map at the start pose; every later scan is scored by all
 /// particles (each moved to its best shift) and then written into the grid at the pose of
 /// the heaviest particle, which is the estimate.
-pub struct GridSlam<'g, const W: usize, const H: usize, const P: usize, const B: usize> {
-    map: &'g mut OccupancyGrid<W, H>,
+pub struct GridSlam<
+    'g,
+    const W: usize,
+    const H: usize,
+    const P: usize,
+    const B: usize,
+    const BITS: usize = 0,
+> {
+    map: &'g mut OccupancyGrid<W, H, BITS>,
     filter: ParticleFilter<P>,
     points: ScanPoints<B>,
     config: GridPfConfig,
@@ -43,11 +52,13 @@ pub struct StepReport {
     pub map: ScanIntegration,
 }
 
-impl<'g, const W: usize, const H: usize, const P: usize, const B: usize> GridSlam<'g, W, H, P, B> {
+impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const BITS: usize>
+    GridSlam<'g, W, H, P, B, BITS>
+{
     /// SLAM on `map` (cleared here) starting at `start`. The map's resolution must be
     /// the configured one.
     pub fn new(
-        map: &'g mut OccupancyGrid<W, H>,
+        map: &'g mut OccupancyGrid<W, H, BITS>,
         config: GridPfConfig,
         start: Pose2<f32>,
     ) -> Result<Self, PfError> {
@@ -87,7 +98,7 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize> GridSla
     }
 
     /// The map.
-    pub fn map(&self) -> &OccupancyGrid<W, H> {
+    pub fn map(&self) -> &OccupancyGrid<W, H, BITS> {
         self.map
     }
 
@@ -162,21 +173,14 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize> GridSla
         }
         report.map = self
             .map
-            .integrate_scan(&report.pose, scan, self.points_decimation(scan))
+            .integrate_points(
+                &report.pose,
+                &scan.geometry.mount,
+                self.points.robot_points(),
+            )
             .map_err(|_| PfError::NonFiniteInput)?;
         self.pose = report.pose;
         self.scans = self.scans.saturating_add(1);
         Ok(report)
-    }
-
-    /// The decimation [`ScanPoints::load`] used (raised when the scan has more than `B`
-    /// beams), so the map gets the same beams that were scored.
-    fn points_decimation(&self, scan: &LidarScan<'_>) -> usize {
-        let dec = self.config.beam_decimation.max(1);
-        if B > 0 && scan.ranges.len().div_ceil(dec) > B {
-            scan.ranges.len().div_ceil(B)
-        } else {
-            dec
-        }
     }
 }

@@ -12,7 +12,7 @@ use cortex_m_rt::{ExceptionFrame, entry, exception};
 use firmware_example::board::{self, Serial};
 use firmware_example::cost::{Ticks, thousand_nops};
 use microslam::geometry::Pose2;
-use microslam::grid::OccupancyGrid;
+use microslam::grid::{OccupancyGrid, occupancy_words};
 use microslam::pf::{GridPfConfig, GridSlam};
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
 use panic_probe as _;
@@ -20,7 +20,7 @@ use static_cell::ConstStaticCell;
 
 const BEAMS: usize = 90;
 const CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
-type Grid = OccupancyGrid<256, 256>;
+type Grid = OccupancyGrid<256, 256, { occupancy_words(256, 256) }>;
 
 static GRID: ConstStaticCell<Grid> = ConstStaticCell::new(Grid::zeroed());
 
@@ -78,7 +78,9 @@ fn measure<const P: usize>(
     grid: &mut Grid,
 ) -> core::fmt::Result {
     let mut truth = Pose2::new(-1.0, -1.0, 0.3);
-    let Ok(mut slam) = GridSlam::<256, 256, P, BEAMS>::new(grid, CONFIG, truth) else {
+    let Ok(mut slam) =
+        GridSlam::<256, 256, P, BEAMS, { occupancy_words(256, 256) }>::new(grid, CONFIG, truth)
+    else {
         return writeln!(out, "error grid p={P} new");
     };
     let mut ranges = [0.0f32; BEAMS];
