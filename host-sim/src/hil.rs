@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 use microslam::ekf::{EkfConfig, EkfSlam, state_dim};
 use microslam::geometry::Pose2;
-use microslam::grid::OccupancyGrid;
+use microslam::grid::{OccupancyGrid, occupancy_bytes};
 use microslam::pf::{GridPfConfig, GridSlam};
 use microslam::wire::{
     Command as WireCommand, EventsToWire, FrameDecoder, GridSetup, MAX_FRAME_LEN, Session,
@@ -32,9 +32,15 @@ use crate::readers::Recording;
 /// Landmarks of the firmware's EKF (`firmware_example::config::EKF_LANDMARKS`).
 pub const FIRMWARE_LANDMARKS: usize = 32;
 
+/// Bytes of the firmware grid's occupied-cell bitmap (`firmware_example::config::GRID_BITMAP`).
+pub const FIRMWARE_GRID_BITMAP: usize = occupancy_bytes(256, 256);
+
+/// The firmware's grid (`firmware_example::config::Grid`): 256 × 256 cells with the bitmap.
+pub type FirmwareGrid = OccupancyGrid<256, 256, FIRMWARE_GRID_BITMAP>;
+
 /// The firmware's grid estimator (`firmware_example::config::GridEstimator`): 256 × 256
 /// cells, 32 particles, 90 beams, [`GridPfConfig::MICROCONTROLLER`].
-pub type FirmwareGridSlam<'g> = GridSlam<'g, 256, 256, 32, 90>;
+pub type FirmwareGridSlam<'g> = GridSlam<'g, 256, 256, 32, 90, FIRMWARE_GRID_BITMAP>;
 
 /// The firmware's lidar and wheels (`firmware_example::config::GRID_SETUP`).
 pub const FIRMWARE_GRID_SETUP: GridSetup = GridSetup::EXAMPLE;
@@ -119,10 +125,7 @@ pub fn host_replies(bytes: &[u8]) -> Vec<ToHost> {
         EkfConfig::MICROCONTROLLER,
     ));
     let config = GridPfConfig::MICROCONTROLLER;
-    let mut grid = Box::new(OccupancyGrid::<256, 256>::centred(
-        config.resolution,
-        config.log_odds,
-    ));
+    let mut grid = Box::new(FirmwareGrid::centred(config.resolution, config.log_odds));
     let Ok(mut slam) = FirmwareGridSlam::new(&mut grid, config, Pose2::new(0.0, 0.0, 0.0)) else {
         unreachable!("the firmware's grid configuration is valid")
     };

@@ -98,11 +98,11 @@ impl GridGeometry {
     }
 }
 
-/// Size in 32-bit words of the occupied-cell bitmap of a `width × height` grid:
-/// `⌈width / 32⌉` words per row (the `BITS` of [`OccupancyGrid`], the length
-/// [`GridView::with_occupancy_bits`] expects).
-pub const fn occupancy_words(width: usize, height: usize) -> usize {
-    width.div_ceil(32) * height
+/// Size in bytes of the occupied-cell bitmap of a `width × height` grid: `⌈width / 8⌉`
+/// bytes per row, bit `x % 8` of byte `y · ⌈width/8⌉ + x / 8` for cell `(x, y)` (the
+/// `BITMAP` of [`OccupancyGrid`], the length [`GridView::with_occupancy_bits`] expects).
+pub const fn occupancy_bytes(width: usize, height: usize) -> usize {
+    width.div_ceil(8) * height
 }
 
 /// `floor(v)` as an `i32`: exact for |v| < 2³¹, saturating beyond, 0 for NaN.

@@ -1,55 +1,55 @@
 //! The owned, fixed-size occupancy grid that SLAM writes scans into.
 
 use super::bresenham::walk_to_end;
-use super::{Bresenham, GridError, GridGeometry, GridView, LogOdds, floor_i32, occupancy_words};
+use super::{Bresenham, GridError, GridGeometry, GridView, LogOdds, floor_i32, occupancy_bytes};
 use crate::geometry::Pose2;
 use crate::sensors::lidar::LidarScan;
 
 /// A `W × H` grid of `i8` log-odds cells (see [`LogOdds`]), optionally with a bitmap of
 /// its occupied cells.
 ///
-/// `BITS` is the bitmap's size in 32-bit words: `0` (the default) for none, or
-/// [`occupancy_words`]`(W, H)` (`⌈W/32⌉ · H`, any other value does not compile). The
+/// `BITMAP` is the bitmap's size in bytes: `0` (the default) for none, or
+/// [`occupancy_bytes`]`(W, H)` (`⌈W/8⌉ · H`, any other value does not compile). The
 /// grid keeps the bitmap equal to `value > occupied_above` on every write, and
 /// [`OccupancyGrid::view`] hands it to the shift search, which then visits only the
 /// occupied cells of each window (on a Cortex-M4 about 4× fewer instructions than the
 /// byte-wise search; same scores). Write the type as
-/// `OccupancyGrid<256, 256, { occupancy_words(256, 256) }>`.
+/// `OccupancyGrid<256, 256, { occupancy_bytes(256, 256) }>`.
 ///
-/// RAM: `W · H + 4 · BITS` bytes plus 40 bytes (256 × 256: 65,576 bytes without the
+/// RAM: `W · H + BITMAP` bytes plus 40 bytes (256 × 256: 65,576 bytes without the
 /// bitmap, 73,768 with it). Build it in place in a
 /// `static` with the `const fn` [`OccupancyGrid::new`], or, so that the static is all
 /// zero bytes and lands in `.bss` (no flash for initial values), with
 /// [`OccupancyGrid::zeroed`] followed by [`OccupancyGrid::init`] at start-up. No method
 /// moves the cells through the stack.
 #[derive(Clone, Debug)]
-pub struct OccupancyGrid<const W: usize, const H: usize, const BITS: usize = 0> {
+pub struct OccupancyGrid<const W: usize, const H: usize, const BITMAP: usize = 0> {
     cells: [[i8; W]; H],
-    occupied: [u32; BITS],
+    occupied: [u8; BITMAP],
     geometry: GridGeometry,
     log_odds: LogOdds,
     off_grid: u32,
 }
 
-/// The bitmap of a grid whose cells are all occupied (`on`) or all not: the `W` valid
-/// bits of each row set or clear.
-const fn uniform_bits<const BITS: usize>(width: usize, on: bool) -> [u32; BITS] {
-    let mut bits = [0u32; BITS];
-    if !on || width == 0 {
-        return bits;
-    }
-    let words_per_row = width.div_ceil(32);
+/// Sets the bitmap of a `width`-cell-wide grid whose cells are all occupied (`on`) or
+/// all not: the `width` valid bits of each row set, or every bit clear. In place, so
+/// that no bitmap-sized temporary lands on a microcontroller's stack.
+const fn set_uniform_bits(bits: &mut [u8], width: usize, on: bool) {
+    let bytes_per_row = width.div_ceil(8);
     let mut i = 0;
-    while i < BITS {
-        let used = width - (i % words_per_row) * 32;
-        bits[i] = if used >= 32 {
-            u32::MAX
+    while i < bits.len() {
+        let used = if on && bytes_per_row > 0 {
+            width - (i % bytes_per_row) * 8
         } else {
-            (1u32 << used) - 1
+            0
+        };
+        bits[i] = if used >= 8 {
+            u8::MAX
+        } else {
+            (1u8 << used) - 1
         };
         i += 1;
     }
-    bits
 }
 
 /// What writing one scan did.
@@ -66,19 +66,21 @@ pub struct ScanIntegration {
     pub rays_skipped: u32,
 }
 
-impl<const W: usize, const H: usize, const BITS: usize> OccupancyGrid<W, H, BITS> {
+impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BITMAP> {
     /// Compile-time check of the bitmap size.
     const BITMAP_SIZE_OK: () = assert!(
-        BITS == 0 || BITS == occupancy_words(W, H),
-        "OccupancyGrid<W, H, BITS>: BITS must be 0 or occupancy_words(W, H)"
+        BITMAP == 0 || BITMAP == occupancy_bytes(W, H),
+        "OccupancyGrid<W, H, BITMAP>: BITMAP must be 0 or occupancy_bytes(W, H)"
     );
 
     /// An unknown (all-zero) grid whose lower-left corner is at `(origin_x, origin_y)`.
     pub const fn new(resolution: f32, origin_x: f32, origin_y: f32, log_odds: LogOdds) -> Self {
         let () = Self::BITMAP_SIZE_OK;
+        let mut occupied = [0; BITMAP];
+        set_uniform_bits(&mut occupied, W, 0 > log_odds.occupied_above);
         Self {
             cells: [[0; W]; H],
-            occupied: uniform_bits(W, 0 > log_odds.occupied_above),
+            occupied,
             geometry: GridGeometry {
                 width: W,
                 height: H,
@@ -98,7 +100,7 @@ impl<const W: usize, const H: usize, const BITS: usize> OccupancyGrid<W, H, BITS
         let () = Self::BITMAP_SIZE_OK;
         Self {
             cells: [[0; W]; H],
-            occupied: [0; BITS],
+            occupied: [0; BITMAP],
             geometry: GridGeometry {
                 width: 0,
                 height: 0,
@@ -164,14 +166,14 @@ impl<const W: usize, const H: usize, const BITS: usize> OccupancyGrid<W, H, BITS
         for row in self.cells.iter_mut() {
             row.fill(0);
         }
-        self.occupied = uniform_bits(W, 0 > self.log_odds.occupied_above);
+        set_uniform_bits(&mut self.occupied, W, 0 > self.log_odds.occupied_above);
         self.off_grid = 0;
     }
 
-    /// The bitmap of occupied cells (`⌈W/32⌉` words per row, bit `x % 32` of word
-    /// `y · ⌈W/32⌉ + x / 32` for cell `(x, y)`); empty when `BITS = 0`.
+    /// The bitmap of occupied cells (`⌈W/8⌉` bytes per row, bit `x % 8` of byte
+    /// `y · ⌈W/8⌉ + x / 8` for cell `(x, y)`); empty when `BITMAP = 0`.
     #[inline]
-    pub fn occupancy_bits(&self) -> &[u32] {
+    pub fn occupancy_bits(&self) -> &[u8] {
         &self.occupied
     }
 
@@ -211,7 +213,7 @@ impl<const W: usize, const H: usize, const BITS: usize> OccupancyGrid<W, H, BITS
             self.geometry,
             self.log_odds.occupied_above,
         );
-        if BITS > 0 && self.geometry.width == W && self.geometry.height == H {
+        if BITMAP > 0 && self.geometry.width == W && self.geometry.height == H {
             view.with_trusted_bits(&self.occupied)
         } else {
             view
@@ -249,11 +251,11 @@ impl<const W: usize, const H: usize, const BITS: usize> OccupancyGrid<W, H, BITS
         let (old, new) = (*c, f(*c));
         *c = new;
         let t = self.log_odds.occupied_above;
-        if BITS > 0
+        if BITMAP > 0
             && (old > t) != (new > t)
-            && let Some(bits) = self.occupied.get_mut(y * W.div_ceil(32) + x / 32)
+            && let Some(bits) = self.occupied.get_mut(y * W.div_ceil(8) + x / 8)
         {
-            *bits ^= 1u32 << (x % 32);
+            *bits ^= 1u8 << (x % 8);
         }
         true
     }
@@ -356,10 +358,10 @@ mod tests {
     }
 
     /// The bitmap a grid keeps equals the one computed from its cells.
-    fn assert_bitmap_matches<const W: usize, const H: usize, const BITS: usize>(
-        grid: &OccupancyGrid<W, H, BITS>,
+    fn assert_bitmap_matches<const W: usize, const H: usize, const BITMAP: usize>(
+        grid: &OccupancyGrid<W, H, BITMAP>,
     ) {
-        let mut want = [0u32; BITS];
+        let mut want = [0u8; BITMAP];
         crate::grid::fill_occupancy_bits(
             grid.cells(),
             W,
@@ -373,8 +375,8 @@ mod tests {
 
     #[test]
     fn occupancy_bitmap_follows_every_write() {
-        const BITS: usize = crate::grid::occupancy_words(40, 20);
-        let mut grid = OccupancyGrid::<40, 20, BITS>::new(0.1, 0.0, 0.0, LogOdds::SEED);
+        const BITMAP: usize = crate::grid::occupancy_bytes(40, 20);
+        let mut grid = OccupancyGrid::<40, 20, BITMAP>::new(0.1, 0.0, 0.0, LogOdds::SEED);
         let mut plain = OccupancyGrid::<40, 20>::new(0.1, 0.0, 0.0, LogOdds::SEED);
         assert_bitmap_matches(&grid);
         let g = LidarGeometry {
@@ -406,7 +408,7 @@ mod tests {
             occupied_above: -1,
             ..LogOdds::SEED
         };
-        let mut unknown_occupied = OccupancyGrid::<40, 20, BITS>::new(0.1, 0.0, 0.0, low);
+        let mut unknown_occupied = OccupancyGrid::<40, 20, BITMAP>::new(0.1, 0.0, 0.0, low);
         assert_bitmap_matches(&unknown_occupied);
         unknown_occupied
             .integrate_scan(&Pose2::new(2.0, 1.0, 0.0), &LidarScan::new(&ranges, g), 1)

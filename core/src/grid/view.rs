@@ -14,7 +14,7 @@ pub struct GridView<'a> {
     cells: &'a [i8],
     geometry: GridGeometry,
     occupied_above: i8,
-    bits: Option<&'a [u32]>,
+    bits: Option<&'a [u8]>,
 }
 
 /// Widest window [`GridView::occupied_row_mask`] answers in one call, cells.
@@ -42,14 +42,14 @@ impl<'a> GridView<'a> {
         })
     }
 
-    /// The same view with the bitmap of its occupied cells: [`super::occupancy_words`]
-    /// words, bit `x % 32` of word `y · ⌈width/32⌉ + x / 32` set when cell `(x, y)` is
+    /// The same view with the bitmap of its occupied cells: [`super::occupancy_bytes`]
+    /// bytes, bit `x % 8` of byte `y · ⌈width/8⌉ + x / 8` set when cell `(x, y)` is
     /// above the threshold — as [`fill_occupancy_bits`] computes it (e.g. once at
     /// start-up for a map in flash). A bitmap of another length is refused with
     /// [`GridError::SizeMismatch`]; one that disagrees with the cells is not detected
     /// and makes the scores follow the bitmap.
-    pub fn with_occupancy_bits(self, bits: &'a [u32]) -> Result<Self, GridError> {
-        if bits.len() != super::occupancy_words(self.geometry.width, self.geometry.height) {
+    pub fn with_occupancy_bits(self, bits: &'a [u8]) -> Result<Self, GridError> {
+        if bits.len() != super::occupancy_bytes(self.geometry.width, self.geometry.height) {
             return Err(GridError::SizeMismatch);
         }
         Ok(Self {
@@ -59,7 +59,7 @@ impl<'a> GridView<'a> {
     }
 
     /// [`GridView::with_occupancy_bits`] for a bitmap kept by the grid itself.
-    pub(crate) fn with_trusted_bits(self, bits: &'a [u32]) -> Self {
+    pub(crate) fn with_trusted_bits(self, bits: &'a [u8]) -> Self {
         Self {
             bits: Some(bits),
             ..self
@@ -68,7 +68,7 @@ impl<'a> GridView<'a> {
 
     /// The occupied-cell bitmap, when the view has one.
     #[inline]
-    pub fn occupancy_bits(&self) -> Option<&'a [u32]> {
+    pub fn occupancy_bits(&self) -> Option<&'a [u8]> {
         self.bits
     }
 
@@ -153,7 +153,7 @@ impl<'a> GridView<'a> {
 }
 
 /// Writes the occupied-cell bitmap of `width × height` `cells` (row-major) into `bits`
-/// ([`super::occupancy_words`] words, see [`GridView::with_occupancy_bits`]): bit set
+/// ([`super::occupancy_bytes`] bytes, see [`GridView::with_occupancy_bits`]): bit set
 /// when the cell is above `occupied_above`. Refused with [`GridError::SizeMismatch`]
 /// (nothing written) when a length does not fit.
 pub fn fill_occupancy_bits(
@@ -161,23 +161,23 @@ pub fn fill_occupancy_bits(
     width: usize,
     height: usize,
     occupied_above: i8,
-    bits: &mut [u32],
+    bits: &mut [u8],
 ) -> Result<(), GridError> {
-    let words_per_row = width.div_ceil(32);
+    let bytes_per_row = width.div_ceil(8);
     if width.checked_mul(height) != Some(cells.len())
-        || bits.len() != super::occupancy_words(width, height)
+        || bits.len() != super::occupancy_bytes(width, height)
     {
         return Err(GridError::SizeMismatch);
     }
-    if words_per_row == 0 {
+    if bytes_per_row == 0 {
         return Ok(());
     }
-    for (row, row_bits) in cells.chunks(width).zip(bits.chunks_mut(words_per_row)) {
-        for (word, chunk) in row_bits.iter_mut().zip(row.chunks(32)) {
-            *word = chunk
+    for (row, row_bits) in cells.chunks(width).zip(bits.chunks_mut(bytes_per_row)) {
+        for (byte, chunk) in row_bits.iter_mut().zip(row.chunks(8)) {
+            *byte = chunk
                 .iter()
                 .enumerate()
-                .fold(0, |w, (k, c)| w | (u32::from(*c > occupied_above) << k));
+                .fold(0, |b, (k, c)| b | (u8::from(*c > occupied_above) << k));
         }
     }
     Ok(())

@@ -206,17 +206,8 @@ pub fn search_window(
     scores: &mut [u32; MAX_SHIFTS],
 ) -> ShiftScore {
     let hw = half_width.min(MAX_SHIFT_WINDOW);
-    if let Some(bits) = map.occupancy_bits() {
-        return match hw {
-            0 => search_sparse::<1>(map, bits, pose, points, scores),
-            1 => search_sparse::<3>(map, bits, pose, points, scores),
-            2 => search_sparse::<5>(map, bits, pose, points, scores),
-            3 => search_sparse::<7>(map, bits, pose, points, scores),
-            4 => search_sparse::<9>(map, bits, pose, points, scores),
-            5 => search_sparse::<11>(map, bits, pose, points, scores),
-            6 => search_sparse::<13>(map, bits, pose, points, scores),
-            _ => search_sparse::<15>(map, bits, pose, points, scores),
-        };
+    if map.occupancy_bits().is_some() {
+        return search_window_sparse(map, pose, points, half_width, scores);
     }
     match hw {
         0 => search_fixed::<1>(map, pose, points, scores),
@@ -272,7 +263,7 @@ fn search_fixed<const N: usize>(
                     n += 1;
                 }
             } else {
-                add_checked(map, x0, y0, p.weight, &mut acc);
+                add_checked(map, x0, y0, N, p.weight, acc.as_flattened_mut());
             }
         }
         // Pass 2: row by row, all inside points of the chunk.
@@ -301,73 +292,97 @@ fn search_fixed<const N: usize>(
     best_shift(&scores[..N * N], (N / 2) as u8)
 }
 
-/// [`search_window`] over a map with an occupied-cell bitmap, for a window of `N = 2k+1`
-/// cells: for each end point, each of the `N` window rows is cut out of the bitmap as
-/// `N` bits (one or two words, a shift) and only its set bits — the occupied cells —
-/// add the point's weight to their shift. Rows without an occupied cell, most of them,
-/// cost a load, a shift and a test. Same integer sums as the other searches, in another
-/// order, so the scores are identical.
-fn search_sparse<const N: usize>(
+/// [`search_window`] with the sparse search only, so that a build that always has a
+/// bitmap carries no byte-wise search: over a view without a bitmap every window takes
+/// the checked per-cell path (same scores, slowly).
+pub fn search_window_sparse(
     map: &GridView<'_>,
-    bits: &[u32],
     pose: &Pose2<f32>,
     points: &[ScanPoint],
+    half_width: u8,
     scores: &mut [u32; MAX_SHIFTS],
 ) -> ShiftScore {
-    let k = (N / 2) as i32;
-    let mut acc = [[0u32; N]; N];
+    let hw = half_width.min(MAX_SHIFT_WINDOW);
+    let bits = map.occupancy_bits();
+    // The seed's 9 × 9 window (every preset's) gets its own constant-size copy.
+    if hw == 4 {
+        search_sparse::<9>(map, bits, pose, points, hw, scores)
+    } else {
+        search_sparse::<0>(map, bits, pose, points, hw, scores)
+    }
+}
+
+/// [`search_window`] over a map with an occupied-cell bitmap: for each end point, each of
+/// the `n = 2k+1` window rows is cut out of the bitmap as `n` bits (one or two words, a
+/// shift) and only its set bits — the occupied cells — add the point's weight to their
+/// shift. Rows without an occupied cell, most of them, cost a load, a shift and a test.
+/// Same integer sums as the other searches, in another order, so the scores are
+/// identical. `N` is the window size when it is known at compile time (`N = 2k+1`), or
+/// 0 for any size (one copy for all of them: a microcontroller's flash is scarce).
+fn search_sparse<const N: usize>(
+    map: &GridView<'_>,
+    bits: Option<&[u8]>,
+    pose: &Pose2<f32>,
+    points: &[ScanPoint],
+    half_width: u8,
+    scores: &mut [u32; MAX_SHIFTS],
+) -> ShiftScore {
+    let n = if N > 0 {
+        N
+    } else {
+        2 * half_width as usize + 1
+    };
+    let k = (n / 2) as i32;
+    scores.fill(0);
+    let acc = scores;
     let (sin, cos) = libm::sincosf(pose.theta);
     let g = map.geometry();
     let (w, h) = (g.width, g.height);
-    let words_per_row = w.div_ceil(32);
-    let row_mask = if N >= 32 { u32::MAX } else { (1u32 << N) - 1 };
+    let stride = w.div_ceil(8);
+    let row_mask = (1u32 << n) - 1;
     for p in points {
         let (cx, cy) = end_cell(map, pose, sin, cos, p);
         let (x0, y0) = (cx.saturating_sub(k), cy.saturating_sub(k));
-        let inside = x0 >= 0 && y0 >= 0 && (x0 as usize) + N <= w && (y0 as usize) + N <= h;
-        if !inside {
-            add_checked(map, x0, y0, p.weight, &mut acc);
+        let inside = x0 >= 0 && y0 >= 0 && (x0 as usize) + n <= w && (y0 as usize) + n <= h;
+        // The window's rows: 4 bytes from the one holding column x0 (its n ≤ 15 bits
+        // start at most 7 bits in, so they are all there), one row stride apart. Only
+        // the grid's last rows can lack the bytes past their end: the checked path.
+        let window = match bits {
+            Some(b) if inside => {
+                let first = y0 as usize * stride + x0 as usize / 8;
+                b.get(first..first + (n - 1) * stride + 4)
+            }
+            _ => None,
+        };
+        let Some(window) = window else {
+            add_checked(map, x0, y0, n, p.weight, acc);
             continue;
-        }
-        let (x0, y0) = (x0 as usize, y0 as usize);
-        let shift = (x0 % 32) as u32;
-        // The window's bits straddle two words when they do not fit in the first one
-        // (then shift > 32 − N > 0, and the second word is in the same row).
-        let straddles = shift as usize + N > 32;
-        let mut word = y0 * words_per_row + x0 / 32;
-        for row_acc in acc.iter_mut() {
-            let lo = bits.get(word).copied().unwrap_or(0) >> shift;
-            let hi = if straddles {
-                bits.get(word + 1).copied().unwrap_or(0) << (32 - shift)
-            } else {
-                0
+        };
+        let shift = x0 as usize % 8;
+        let mut offset = 0;
+        for row_acc in acc.chunks_exact_mut(n).take(n) {
+            let row = window.get(offset..).and_then(<[u8]>::first_chunk::<4>);
+            offset += stride;
+            let Some(&row) = row else {
+                continue;
             };
-            let mut m = (lo | hi) & row_mask;
+            let mut m = (u32::from_le_bytes(row) >> shift) & row_mask;
             while m != 0 {
                 if let Some(s) = row_acc.get_mut(m.trailing_zeros() as usize) {
                     *s = s.wrapping_add(p.weight);
                 }
                 m &= m - 1;
             }
-            word += words_per_row;
         }
     }
-    for (dst, src) in scores.iter_mut().zip(acc.as_flattened()) {
-        *dst = *src;
-    }
-    best_shift(&scores[..N * N], (N / 2) as u8)
+    best_shift(&acc[..n * n], (n / 2) as u8)
 }
 
-/// Adds `weight` to every shift of the window at `(x0, y0)` whose cell is occupied, with a
-/// bounds check per cell: the path for windows that reach over the grid's edge.
-fn add_checked<const N: usize>(
-    map: &GridView<'_>,
-    x0: i32,
-    y0: i32,
-    weight: u32,
-    acc: &mut [[u32; N]; N],
-) {
-    for (r, row_acc) in acc.iter_mut().enumerate() {
+/// Adds `weight` to every shift of the `n × n` window at `(x0, y0)` (scores row-major in
+/// `acc`) whose cell is occupied, with a bounds check per cell: the path for windows that
+/// reach over the grid's edge.
+fn add_checked(map: &GridView<'_>, x0: i32, y0: i32, n: usize, weight: u32, acc: &mut [u32]) {
+    for (r, row_acc) in acc.chunks_exact_mut(n).take(n).enumerate() {
         for (b, s) in row_acc.iter_mut().enumerate() {
             if map.is_occupied(x0.saturating_add(b as i32), y0.saturating_add(r as i32)) {
                 *s = s.wrapping_add(weight);
@@ -484,7 +499,7 @@ mod tests {
             assert_eq!(fast, slow, "trial {trial}");
             assert!(fast.score > 0 || trial % 8 == 0);
             // The same search over the occupied-cell bitmap (the sparse path).
-            let mut bits = vec![0u32; crate::grid::occupancy_words(g.width, g.height)];
+            let mut bits = vec![0u8; crate::grid::occupancy_bytes(g.width, g.height)];
             crate::grid::fill_occupancy_bits(&cells, g.width, g.height, 20, &mut bits).unwrap();
             let with_bits = view.with_occupancy_bits(&bits).unwrap();
             let mut c = [0u32; MAX_SHIFTS];

@@ -2,6 +2,10 @@
 //! correlation with the shift search, move each particle to its best shift, resample.
 
 use super::correlation::{MAX_SHIFTS, ScanPoint, ShiftScore, WEIGHT_ONE, search_window};
+
+/// A shift search: [`search_window`] or one of its variants.
+pub(crate) type ShiftSearch =
+    fn(&GridView<'_>, &Pose2<f32>, &[ScanPoint], u8, &mut [u32; MAX_SHIFTS]) -> ShiftScore;
 use super::prediction::drive_arc;
 use super::resampling::resample;
 use super::{FilterConfig, PfError};
@@ -197,6 +201,17 @@ impl<const P: usize> ParticleFilter<P> {
         map: &GridView<'_>,
         points: &[ScanPoint],
     ) -> Result<UpdateReport, PfError> {
+        self.update_with(map, points, search_window)
+    }
+
+    /// [`ParticleFilter::update`] with the given shift search (all give the same scores;
+    /// the choice decides which code a build carries).
+    pub(crate) fn update_with(
+        &mut self,
+        map: &GridView<'_>,
+        points: &[ScanPoint],
+        search: ShiftSearch,
+    ) -> Result<UpdateReport, PfError> {
         if points.is_empty() {
             return Err(PfError::EmptyScan);
         }
@@ -208,7 +223,7 @@ impl<const P: usize> ParticleFilter<P> {
             dy: 0,
             score: 0,
         }; P];
-        let scored = score_particles(map, &self.poses, points, k, &mut shifts);
+        let scored = score_particles(map, &self.poses, points, k, search, &mut shifts);
         for (p, s) in self.poses.iter_mut().zip(shifts.iter()) {
             p.x += s.dx as f32 * res;
             p.y += s.dy as f32 * res;
@@ -292,6 +307,7 @@ fn score_particles<const P: usize>(
     poses: &[Pose2<f32>; P],
     points: &[ScanPoint],
     half_width: u8,
+    search: ShiftSearch,
     shifts: &mut [ShiftScore; P],
 ) -> usize {
     let mut scores = [0u32; MAX_SHIFTS];
@@ -302,7 +318,7 @@ fn score_particles<const P: usize>(
             Some((q, s)) if q == p => s,
             _ => {
                 scored += 1;
-                search_window(map, p, points, half_width, &mut scores)
+                search(map, p, points, half_width, &mut scores)
             }
         };
         previous = Some((p, *shift));
@@ -318,6 +334,7 @@ fn score_particles<const P: usize>(
     poses: &[Pose2<f32>; P],
     points: &[ScanPoint],
     half_width: u8,
+    search: ShiftSearch,
     shifts: &mut [ShiftScore; P],
 ) -> usize {
     use rayon::prelude::*;
@@ -330,7 +347,7 @@ fn score_particles<const P: usize>(
             if !repeats(i) {
                 let mut scores = [0u32; MAX_SHIFTS];
                 if let Some(p) = poses.get(i) {
-                    *shift = search_window(map, p, points, half_width, &mut scores);
+                    *shift = search(map, p, points, half_width, &mut scores);
                 }
             }
         });

@@ -1,6 +1,7 @@
 //! The seed's grid SLAM: one shared occupancy grid, written by the best particle.
 
-use super::correlation::ScanPoints;
+use super::correlation::{ScanPoints, search_window, search_window_sparse};
+use super::filter::ShiftSearch;
 use super::prediction::arc_between;
 use super::{GridPfConfig, ParticleFilter, PfError};
 use crate::geometry::Pose2;
@@ -8,7 +9,7 @@ use crate::grid::{OccupancyGrid, ScanIntegration};
 use crate::sensors::lidar::LidarScan;
 
 /// Grid SLAM with `P` particles, at most `B` beams per scan, on a borrowed `W × H` grid
-/// (with an occupied-cell bitmap of `BITS` words when `BITS > 0`, see
+/// (with an occupied-cell bitmap of `BITMAP` bytes when `BITMAP > 0`, see
 /// [`OccupancyGrid`]: the shift search is then the sparse one).
 ///
 /// The grid is borrowed so that it can live in a `static` (built in place with
@@ -24,9 +25,9 @@ pub struct GridSlam<
     const H: usize,
     const P: usize,
     const B: usize,
-    const BITS: usize = 0,
+    const BITMAP: usize = 0,
 > {
-    map: &'g mut OccupancyGrid<W, H, BITS>,
+    map: &'g mut OccupancyGrid<W, H, BITMAP>,
     filter: ParticleFilter<P>,
     points: ScanPoints<B>,
     config: GridPfConfig,
@@ -52,13 +53,13 @@ pub struct StepReport {
     pub map: ScanIntegration,
 }
 
-impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const BITS: usize>
-    GridSlam<'g, W, H, P, B, BITS>
+impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const BITMAP: usize>
+    GridSlam<'g, W, H, P, B, BITMAP>
 {
     /// SLAM on `map` (cleared here) starting at `start`. The map's resolution must be
     /// the configured one.
     pub fn new(
-        map: &'g mut OccupancyGrid<W, H, BITS>,
+        map: &'g mut OccupancyGrid<W, H, BITMAP>,
         config: GridPfConfig,
         start: Pose2<f32>,
     ) -> Result<Self, PfError> {
@@ -98,7 +99,7 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const B
     }
 
     /// The map.
-    pub fn map(&self) -> &OccupancyGrid<W, H, BITS> {
+    pub fn map(&self) -> &OccupancyGrid<W, H, BITMAP> {
         self.map
     }
 
@@ -163,9 +164,16 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const B
         if self.scans == 0 {
             report.pose = self.filter.best_pose();
         } else {
+            // A grid with a bitmap needs only the sparse search (and so does not carry
+            // the byte-wise one: `BITMAP` is a constant).
+            let search: ShiftSearch = if BITMAP > 0 {
+                search_window_sparse
+            } else {
+                search_window
+            };
             let u = self
                 .filter
-                .update(&self.map.view(), self.points.as_slice())?;
+                .update_with(&self.map.view(), self.points.as_slice(), search)?;
             report.pose = u.best_pose;
             report.n_eff = u.n_eff;
             report.resampled = u.resampled;

@@ -46,8 +46,8 @@ pub trait GridEstimator {
     fn resamples(&self) -> u32;
 }
 
-impl<const W: usize, const H: usize, const P: usize, const B: usize, const BITS: usize>
-    GridEstimator for GridSlam<'_, W, H, P, B, BITS>
+impl<const W: usize, const H: usize, const P: usize, const B: usize, const BITMAP: usize>
+    GridEstimator for GridSlam<'_, W, H, P, B, BITMAP>
 {
     fn reset(&mut self, start: Pose2<f32>) -> Result<(), PfError> {
         GridSlam::reset(self, start)

@@ -12,7 +12,7 @@ use cortex_m_rt::{ExceptionFrame, entry, exception};
 use firmware_example::board::{self, Serial};
 use firmware_example::cost::{Ticks, thousand_nops};
 use microslam::geometry::Pose2;
-use microslam::grid::{OccupancyGrid, occupancy_words};
+use microslam::grid::{OccupancyGrid, occupancy_bytes};
 use microslam::pf::{GridPfConfig, GridSlam};
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
 use panic_probe as _;
@@ -20,7 +20,7 @@ use static_cell::ConstStaticCell;
 
 const BEAMS: usize = 90;
 const CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
-type Grid = OccupancyGrid<256, 256, { occupancy_words(256, 256) }>;
+type Grid = OccupancyGrid<256, 256, { occupancy_bytes(256, 256) }>;
 
 static GRID: ConstStaticCell<Grid> = ConstStaticCell::new(Grid::zeroed());
 
@@ -79,7 +79,7 @@ fn measure<const P: usize>(
 ) -> core::fmt::Result {
     let mut truth = Pose2::new(-1.0, -1.0, 0.3);
     let Ok(mut slam) =
-        GridSlam::<256, 256, P, BEAMS, { occupancy_words(256, 256) }>::new(grid, CONFIG, truth)
+        GridSlam::<256, 256, P, BEAMS, { occupancy_bytes(256, 256) }>::new(grid, CONFIG, truth)
     else {
         return writeln!(out, "error grid p={P} new");
     };
