@@ -8,7 +8,9 @@
 //!   free ray, saturating at configurable limits, occupied/free thresholds ±2 log 4.
 //! - [`OccupancyGrid`]: a fixed `W × H` grid of `i8` cells (one byte per cell: a 256 × 256
 //!   grid is 64 KB), built in place with a `const fn` so it can live in a `static`; writes
-//!   scans with Bresenham rays; end points off the grid are skipped and counted.
+//!   scans with Bresenham rays; end points off the grid are skipped and counted. Optionally
+//!   it keeps a bitmap of its occupied cells ([`occupancy_bytes`]; 8 KB more for
+//!   256 × 256), which makes the particle filter's shift search sparse.
 //! - [`GridView`]: a borrowed read-only map (`&[i8]` + geometry), e.g. a `&'static` map in
 //!   flash, which is what the particle filter scores scans against.
 

@@ -14,6 +14,13 @@
 //! cell, no branch on the map's content, so the compiler vectorises the row. Windows that
 //! reach over the grid's edge take a checked path. Identical particles are scored once
 //! (in [`ParticleFilter::update`](super::ParticleFilter::update)).
+//!
+//! Over a map with an occupied-cell bitmap ([`GridView::with_occupancy_bits`], or an
+//! [`crate::grid::OccupancyGrid`] with a `BITMAP`) the search is sparse
+//! ([`search_window_sparse`]): each window row is cut from the bitmap by one 4-byte read
+//! and only its set bits add the beam's weight. Walls are thin, so most rows are empty
+//! and the rest hold a few bits: on a Cortex-M4F a third of the byte-wise search's
+//! instructions (on x86 the vectorised byte-wise search is the faster one).
 //! [`search_window_brute_force`] is the plain triple loop, kept as the reference.
 
 use crate::geometry::Pose2;
