@@ -211,11 +211,14 @@ pub fn wire_decoder(data: &[u8]) {
 /// Fuzzes the grid SLAM step API on a small map: each op is a selector byte and three
 /// `f32`s (predictions), or a scan whose ranges are the next bytes read as `f32`s and
 /// whose geometry comes from the input too. No panic; refused input changes nothing; the
-/// estimate and every particle stay finite; the weights stay normalised (Σ w = 1).
+/// estimate and every particle stay finite; the weights stay normalised (Σ w = 1). A twin
+/// filter on a grid with an occupied-cell bitmap (the sparse shift search) gets the same
+/// ops and must stay identical: same answers, particles, weights and cells.
 pub fn grid_steps(data: &[u8]) {
-    use microslam::grid::{LogOdds, OccupancyGrid};
+    use microslam::grid::{LogOdds, OccupancyGrid, occupancy_bytes};
     use microslam::pf::{GridPfConfig, GridSlam};
     use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+    const BITMAP: usize = occupancy_bytes(64, 64);
     let config = GridPfConfig::MICROCONTROLLER;
     let mut map = Box::new(OccupancyGrid::<64, 64>::new(
         config.resolution,
@@ -223,8 +226,17 @@ pub fn grid_steps(data: &[u8]) {
         -1.6,
         LogOdds::SEED,
     ));
-    let Ok(mut slam) = GridSlam::<64, 64, 8, 64>::new(&mut map, config, Pose2::new(0.0, 0.0, 0.0))
-    else {
+    let mut map_with_bits = Box::new(OccupancyGrid::<64, 64, BITMAP>::new(
+        config.resolution,
+        -1.6,
+        -1.6,
+        LogOdds::SEED,
+    ));
+    let start = Pose2::new(0.0, 0.0, 0.0);
+    let (Ok(mut slam), Ok(mut twin)) = (
+        GridSlam::<64, 64, 8, 64>::new(&mut map, config, start),
+        GridSlam::<64, 64, 8, 64, BITMAP>::new(&mut map_with_bits, config, start),
+    ) else {
         panic!("the MICROCONTROLLER preset is valid");
     };
     let mut bytes = data;
@@ -234,9 +246,12 @@ pub fn grid_steps(data: &[u8]) {
             return;
         };
         let before = (slam.pose(), *slam.filter().poses());
-        let refused = match op % 4 {
-            0 => slam.predict(a, b).is_err(),
-            1 => slam.predict_velocity(a, b, c).is_err(),
+        let (refused, twin_refused) = match op % 4 {
+            0 => (slam.predict(a, b).is_err(), twin.predict(a, b).is_err()),
+            1 => (
+                slam.predict_velocity(a, b, c).is_err(),
+                twin.predict_velocity(a, b, c).is_err(),
+            ),
             _ => {
                 let n = usize::from(op >> 2).min(bytes.len() / 4);
                 let mut ranges = Vec::with_capacity(n);
@@ -254,13 +269,25 @@ pub fn grid_steps(data: &[u8]) {
                     no_return_range: 30.0,
                     mount: Pose2::new(0.0, 0.0, 0.0),
                 };
-                slam.observe(&LidarScan {
+                let scan = LidarScan {
                     ranges: &ranges,
                     geometry,
-                })
-                .is_err()
+                };
+                let (one, other) = (slam.observe(&scan), twin.observe(&scan));
+                assert_eq!(
+                    one, other,
+                    "op {op}: the sparse search answered differently"
+                );
+                (one.is_err(), other.is_err())
             }
         };
+        assert_eq!(refused, twin_refused);
+        assert_eq!(slam.filter().poses(), twin.filter().poses());
+        assert_eq!(
+            slam.filter().log_weights().map(f32::to_bits),
+            twin.filter().log_weights().map(f32::to_bits)
+        );
+        assert_eq!(slam.map().cells(), twin.map().cells());
         if refused && op % 4 < 2 {
             assert_eq!(
                 before.0,
