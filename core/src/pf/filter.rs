@@ -140,6 +140,50 @@ impl<const P: usize> ParticleFilter<P> {
             .unwrap_or_default()
     }
 
+    /// Weighted covariance of the particle poses about their weighted mean, its upper
+    /// triangle row by row: `[xx, xy, xθ, yy, yθ, θθ]` (m², m·rad, rad²; what an estimate
+    /// on the wire carries). Headings enter as their difference to the heaviest particle's,
+    /// wrapped to (−π, π], so that a cloud across ±π is not torn apart. All zero when the
+    /// particles coincide; never NaN (non-finite sums give zeros).
+    pub fn pose_covariance(&self) -> [f32; 6] {
+        let reference = self.best_pose().theta;
+        let mut weights = [0.0f32; P];
+        let mut total = 0.0f32;
+        let mut mean = [0.0f32; 3];
+        for ((w, lw), p) in weights.iter_mut().zip(&self.log_weights).zip(&self.poses) {
+            *w = libm::expf(*lw);
+            total += *w;
+            let d = crate::geometry::wrap_near(p.theta - reference);
+            mean[0] += *w * p.x;
+            mean[1] += *w * p.y;
+            mean[2] += *w * d;
+        }
+        if !(total > 0.0 && total.is_finite()) {
+            return [0.0; 6];
+        }
+        let mean = mean.map(|m| m / total);
+        let mut c = [0.0f32; 6];
+        for (w, p) in weights.iter().zip(&self.poses) {
+            let e = [
+                p.x - mean[0],
+                p.y - mean[1],
+                crate::geometry::wrap_near(p.theta - reference) - mean[2],
+            ];
+            let w = *w / total;
+            c[0] += w * e[0] * e[0];
+            c[1] += w * e[0] * e[1];
+            c[2] += w * e[0] * e[2];
+            c[3] += w * e[1] * e[1];
+            c[4] += w * e[1] * e[2];
+            c[5] += w * e[2] * e[2];
+        }
+        if c.iter().all(|v| v.is_finite()) {
+            c
+        } else {
+            [0.0; 6]
+        }
+    }
+
     /// Effective number of particles after the last update.
     pub fn n_eff(&self) -> f32 {
         self.last_neff

@@ -349,3 +349,25 @@ fn memory_per_capacity_is_as_documented() {
     );
     assert!(slam < 3400 && loc < 3400, "{slam} {loc}");
 }
+
+#[test]
+fn pose_covariance_is_the_cloud_spread_across_the_heading_seam() {
+    let config = GridPfConfig::DEFAULT.filter;
+    // A cloud straddling ±π: headings near π and near −π are 0.1 rad apart, not 2π.
+    let centre = Pose2::new(1.0, -2.0, core::f32::consts::PI - 0.02);
+    let mut pf = ParticleFilter::<2000>::new(config, centre).unwrap();
+    assert_eq!(pf.pose_covariance(), [0.0; 6], "coinciding particles");
+    pf.reset_around(centre, 0.1, 0.05).unwrap();
+    assert!(
+        pf.poses().iter().any(|p| p.theta < 0.0),
+        "the cloud crosses the seam"
+    );
+    let c = pf.pose_covariance();
+    // Sample variances of 2000 draws: relative standard error ≈ √(2/2000) ≈ 3 %.
+    for (got, want) in [(c[0], 0.01), (c[3], 0.01), (c[5], 0.0025)] {
+        assert!((got / want - 1.0).abs() < 0.12, "{c:?}");
+    }
+    for cross in [c[1], c[2], c[4]] {
+        assert!(cross.abs() < 0.0015, "{c:?}");
+    }
+}

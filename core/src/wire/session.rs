@@ -44,6 +44,9 @@ pub trait GridEstimator {
     fn pose(&self) -> Pose2<f32>;
     /// How often the particles were resampled.
     fn resamples(&self) -> u32;
+    /// Covariance of the particle cloud, upper triangle `[xx, xy, xθ, yy, yθ, θθ]`
+    /// ([`crate::pf::ParticleFilter::pose_covariance`]).
+    fn pose_covariance(&self) -> [f32; 6];
 }
 
 impl<const W: usize, const H: usize, const P: usize, const B: usize, const BITMAP: usize>
@@ -69,6 +72,9 @@ impl<const W: usize, const H: usize, const P: usize, const B: usize, const BITMA
     }
     fn resamples(&self) -> u32 {
         self.filter().resample_count()
+    }
+    fn pose_covariance(&self) -> [f32; 6] {
+        self.filter().pose_covariance()
     }
 }
 
@@ -133,8 +139,8 @@ const TICKS_REFUSED: u8 = 0x81;
 /// With [`Session::with_grid`] it also drives a grid estimator: after
 /// [`Command::SelectEstimator`]`(Grid)` odometry predicts the grid filter, scan chunks are
 /// reassembled and observed (each chunk is answered; the one completing a scan with the
-/// grid step's result), and estimates carry the grid pose (covariance zero) and its
-/// resample count.
+/// grid step's result), and estimates carry the grid pose (the heaviest particle), the
+/// particle cloud's covariance and the resample count.
 pub struct Session<'a, const N: usize, const L: usize> {
     decoder: FrameDecoder<MAX_FRAME_LEN>,
     ekf: &'a mut EkfSlam<f32, N>,
@@ -408,7 +414,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
                 estimator: self.active,
                 result,
                 pose: [pose.x, pose.y, pose.theta],
-                covariance: [0.0; 6],
+                covariance: grid.pose_covariance(),
                 status: self.status,
             };
         }
@@ -738,6 +744,7 @@ mod tests {
         let pose = direct.pose();
         assert_eq!(last.pose, [pose.x, pose.y, pose.theta]);
         assert_eq!(last.status.resamples, direct.filter().resample_count());
-        assert_eq!(last.covariance, [0.0; 6]);
+        assert_eq!(last.covariance, direct.filter().pose_covariance());
+        assert!(last.covariance[0] > 0.0 && last.covariance[3] > 0.0 && last.covariance[5] > 0.0);
     }
 }
