@@ -150,9 +150,11 @@ pub struct ReplayArgs {
     /// THOR run number (`thor:` datasets: 20 or 21).
     #[arg(long, default_value_t = 20)]
     pub run: u32,
-    /// Inject faults into the event stream before the replay, e.g.
-    /// `drop=0.01,duplicate=0.01,reorder=0.01,nan=0.01,spike=0.01,backwards=0.01` or
-    /// `all=0.01` (landmark datasets); what was injected is reported in `metrics.json`.
+    /// Inject faults before the replay, e.g.
+    /// `drop=0.01,duplicate=0.01,reorder=0.01,nan=0.01,spike=0.01,backwards=0.01,stuck=0.01`
+    /// or `all=0.01`: into the event stream (landmark datasets) or the laser messages
+    /// (`carmen:` logs; `stuck` repeats the previous scan, for lidar logs only); what was
+    /// injected is reported in `metrics.json`.
     #[arg(long)]
     pub faults: Option<crate::faults::FaultRates>,
     /// Seed of the fault generator.

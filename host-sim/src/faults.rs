@@ -1,6 +1,8 @@
-//! Fault injection for event streams, in the spirit of smoltcp's `FaultInjector`: drops,
-//! duplicates, reordering, corrupted readings and time stamps going backwards, each at a
-//! configurable rate, from a seeded generator so that a run can be repeated exactly.
+//! Fault injection for event streams and lidar logs, in the spirit of smoltcp's
+//! `FaultInjector`: drops, duplicates, reordering, corrupted readings, a stuck lidar and
+//! time stamps going backwards, each at a configurable rate, from a seeded generator so
+//! that a run can be repeated exactly. [`inject`] works on landmark event streams,
+//! [`inject_scans`] on the laser messages of a CARMEN log.
 //!
 //! ```
 //! use host_sim::faults::{inject, FaultRates};
@@ -14,10 +16,11 @@
 //! # Ok::<(), anyhow::Error>(())
 //! ```
 
+use crate::readers::carmen::LaserMessage;
 use anyhow::{Context, Result, bail};
 use microslam::event::{Event, EventKind};
 use rand_core::SeedableRng;
-use rand_distr::{Bernoulli, Distribution};
+use rand_distr::{Bernoulli, Distribution, Uniform};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::Serialize;
 use std::str::FromStr;
@@ -37,12 +40,22 @@ pub struct FaultRates {
     pub spike: f64,
     /// The stamp jumps one second back (a clock glitch), the content unchanged.
     pub backwards: f64,
+    /// The lidar is stuck: the scan repeats the previous scan's ranges (lidar logs only;
+    /// event streams have no scans and ignore it).
+    pub stuck: f64,
 }
 
 impl FaultRates {
     /// Names accepted by [`FromStr`], in order.
-    pub const NAMES: [&'static str; 6] =
-        ["drop", "duplicate", "reorder", "nan", "spike", "backwards"];
+    pub const NAMES: [&'static str; 7] = [
+        "drop",
+        "duplicate",
+        "reorder",
+        "nan",
+        "spike",
+        "backwards",
+        "stuck",
+    ];
 
     /// Every fault at the same rate.
     pub fn all(rate: f64) -> Self {
@@ -53,6 +66,7 @@ impl FaultRates {
             nan: rate,
             spike: rate,
             backwards: rate,
+            stuck: rate,
         }
     }
 
@@ -69,6 +83,7 @@ impl FaultRates {
             "nan" => &mut self.nan,
             "spike" => &mut self.spike,
             "backwards" => &mut self.backwards,
+            "stuck" => &mut self.stuck,
             _ => return None,
         })
     }
@@ -118,16 +133,30 @@ pub struct FaultCounts {
     pub reordered: usize,
     /// Events with a NaN reading.
     pub nan: usize,
+    /// Lidar messages delivered with a NaN odometry pose (one delivered twice counts
+    /// twice).
+    pub nan_odometry: usize,
+    /// NaN ranges delivered in lidar messages that were not NaN in the log (copies made
+    /// by `stuck` and by duplication count again).
+    pub nan_ranges: usize,
     /// Events with an outlier reading.
     pub spiked: usize,
     /// Events whose stamp jumped back.
     pub backwards: usize,
+    /// Scans that repeat the previous scan's ranges.
+    pub stuck: usize,
 }
 
 impl FaultCounts {
     /// Total number of faults.
     pub fn total(&self) -> usize {
-        self.dropped + self.duplicated + self.reordered + self.nan + self.spiked + self.backwards
+        self.dropped
+            + self.duplicated
+            + self.reordered
+            + self.nan
+            + self.spiked
+            + self.backwards
+            + self.stuck
     }
 }
 
@@ -226,6 +255,99 @@ pub fn inject(
         if dup.sample(&mut rng) {
             out.push(e);
             counts.duplicated += 1;
+        }
+    }
+    (out, counts)
+}
+
+/// Beams a range spike covers (a reflection burst): that many consecutive ranges ×3.
+pub const SPIKE_BEAMS: usize = 10;
+
+/// Applies the faults to a copy of the laser messages `scans` (file order), drawing from a
+/// generator seeded by `seed`. Per message, in this order: dropped (no other fault);
+/// stuck (its ranges become the previous delivered scan's); NaN (a coin chooses: one
+/// range, or the odometry pose's x); spiked (a run of [`SPIKE_BEAMS`] ranges ×3); stamp
+/// one second back; swapped with the next message; delivered twice. Besides the faults
+/// drawn, the counts say how many NaN odometry poses and NaN ranges were delivered in
+/// all (`nan_odometry`, `nan_ranges`): what a replay must refuse.
+pub fn inject_scans(
+    scans: &[&LaserMessage],
+    rates: &FaultRates,
+    seed: u64,
+) -> (Vec<LaserMessage>, FaultCounts) {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let (drop, dup, reorder, nan, spk, back, stuck) = (
+        coin(rates.drop),
+        coin(rates.duplicate),
+        coin(rates.reorder),
+        coin(rates.nan),
+        coin(rates.spike),
+        coin(rates.backwards),
+        coin(rates.stuck),
+    );
+    let half = coin(0.5);
+    let mut counts = FaultCounts::default();
+    let mut out: Vec<LaserMessage> = Vec::with_capacity(scans.len() + scans.len() / 8);
+    // The previous delivered scan's ranges and how many NaNs were injected into them.
+    let mut previous: Option<(Vec<f32>, usize)> = None;
+    let mut swap_next = false;
+    for scan in scans {
+        if drop.sample(&mut rng) {
+            counts.dropped += 1;
+            continue;
+        }
+        let mut m = (*scan).clone();
+        let mut nan_ranges = 0;
+        if stuck.sample(&mut rng)
+            && let Some((r, injected)) = &previous
+        {
+            m.ranges.clone_from(r);
+            nan_ranges = *injected;
+            counts.stuck += 1;
+        }
+        let n = m.ranges.len();
+        if nan.sample(&mut rng) {
+            let beam = Uniform::new(0, n).map_or(0, |u| u.sample(&mut rng));
+            if half.sample(&mut rng) || n == 0 {
+                m.odom[0] = f64::NAN;
+            } else if let Some(r) = m.ranges.get_mut(beam)
+                && !r.is_nan()
+            {
+                *r = f32::NAN;
+                nan_ranges += 1;
+            }
+            counts.nan += 1;
+        }
+        if spk.sample(&mut rng) && n > 0 {
+            let start = Uniform::new(0, n).map_or(0, |u| u.sample(&mut rng));
+            for r in m.ranges.iter_mut().skip(start).take(SPIKE_BEAMS) {
+                *r *= 3.0;
+            }
+            counts.spiked += 1;
+        }
+        if back.sample(&mut rng) {
+            m.stamp -= 1.0;
+            counts.backwards += 1;
+        }
+        previous = Some((m.ranges.clone(), nan_ranges));
+        let nan_odometry = usize::from(m.odom.iter().any(|v| v.is_nan()));
+        let twice = dup.sample(&mut rng).then(|| m.clone());
+        counts.nan_odometry += nan_odometry;
+        counts.nan_ranges += nan_ranges;
+        out.push(m);
+        if swap_next {
+            let len = out.len();
+            out.swap(len - 2, len - 1);
+            counts.reordered += 1;
+            swap_next = false;
+        } else if reorder.sample(&mut rng) {
+            swap_next = true;
+        }
+        if let Some(t) = twice {
+            out.push(t);
+            counts.duplicated += 1;
+            counts.nan_odometry += nan_odometry;
+            counts.nan_ranges += nan_ranges;
         }
     }
     (out, counts)
@@ -342,5 +464,50 @@ mod tests {
         let (same, none) = inject(&events, &FaultRates::default(), 9);
         assert_eq!(none.total(), 0);
         assert_eq!(same, events);
+    }
+
+    fn scans(n: usize) -> Vec<LaserMessage> {
+        (0..n)
+            .map(|i| LaserMessage {
+                rear: false,
+                ranges: (0..30).map(|b| 1.0 + (i * 31 + b) as f32 * 0.001).collect(),
+                pose: [0.0; 3],
+                odom: [i as f64 * 0.01, 0.0, 0.0],
+                stamp: i as f64 * 0.1,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn scan_faults_are_counted_and_repeatable() {
+        let log = scans(3_000);
+        let refs: Vec<&LaserMessage> = log.iter().collect();
+        let (same, none) = inject_scans(&refs, &FaultRates::default(), 3);
+        assert_eq!(none.total(), 0);
+        assert_eq!(same, log);
+        let rates = FaultRates::all(0.03);
+        let (a, ca) = inject_scans(&refs, &rates, 3);
+        let (b, cb) = inject_scans(&refs, &rates, 3);
+        assert_eq!(ca, cb);
+        assert_eq!(format!("{a:?}"), format!("{b:?}"));
+        assert_eq!(a.len(), log.len() - ca.dropped + ca.duplicated);
+        // What a replay must refuse is exactly what was delivered.
+        let nan_odometry = a
+            .iter()
+            .filter(|m| m.odom.iter().any(|v| v.is_nan()))
+            .count();
+        let nan_ranges: usize = a
+            .iter()
+            .map(|m| m.ranges.iter().filter(|r| r.is_nan()).count())
+            .sum();
+        assert_eq!((ca.nan_odometry, ca.nan_ranges), (nan_odometry, nan_ranges));
+        assert!(ca.nan_odometry > 0 && ca.nan_ranges > 0, "{ca:?}");
+        // A stuck lidar repeats earlier ranges: some delivered scans are equal to others.
+        let repeats = a.windows(2).filter(|w| w[0].ranges == w[1].ranges).count();
+        assert!(repeats > 0, "{ca:?}");
+        assert!(
+            ca.stuck > 50 && ca.spiked > 50 && ca.backwards > 50,
+            "{ca:?}"
+        );
     }
 }

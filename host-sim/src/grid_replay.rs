@@ -6,8 +6,9 @@
 //! `map_server`), `map.png` (map and trajectory), `trajectory.tum` and `metrics.json`
 //! (Kümmerle relation error when a relations file is given or found next to the log).
 
+use crate::faults::FaultReport;
 use crate::metrics::relations::{self, RelationError};
-use crate::readers::carmen::{self, CarmenLog};
+use crate::readers::carmen::{self, CarmenLog, LaserMessage};
 use anyhow::{Context, Result, bail};
 use microslam::geometry::Pose2;
 use microslam::grid::{GridGeometry, GridView, OccupancyGrid};
@@ -50,6 +51,10 @@ pub struct GridRun {
     pub filter_time_s: f64,
     /// Scans refused (no usable beam).
     pub skipped_scans: usize,
+    /// Odometry poses refused (not finite): the prediction waits for the next good one.
+    pub refused_odometry: usize,
+    /// Ranges that were NaN or ±∞ in the processed scans (skipped beam by beam).
+    pub non_finite_beams: usize,
 }
 
 /// Optional TOML overrides of the grid filter (`--config FILE`), every key optional:
@@ -144,12 +149,28 @@ macro_rules! dispatch_particles {
     };
 }
 
+/// The front-laser messages of `log` in file order: what the grid filters process.
+pub fn front_scans(log: &CarmenLog) -> Vec<&LaserMessage> {
+    log.lasers().filter(|l| !l.rear).collect()
+}
+
 /// Grid SLAM over the front-laser scans of `log`, starting at the origin.
+pub fn run_slam(
+    log: &CarmenLog,
+    options: &GridRunOptions,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<GridRun> {
+    run_slam_scans(&front_scans(log), options, progress)
+}
+
+/// Grid SLAM over `scans` (laser messages in the order they arrive), starting at the
+/// origin. An odometry pose that is not finite is refused and counted
+/// ([`GridRun::refused_odometry`]), and the next good one predicts the whole motion.
 ///
 /// Runs on a thread with a 64 MB stack: the 1 MB grid is built on the stack before it is
 /// boxed in unoptimised builds.
-pub fn run_slam(
-    log: &CarmenLog,
+pub fn run_slam_scans(
+    scans: &[&LaserMessage],
     options: &GridRunOptions,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<GridRun> {
@@ -157,7 +178,7 @@ pub fn run_slam(
         let worker = std::thread::Builder::new()
             .stack_size(64 << 20)
             .spawn_scoped(scope, || -> Result<GridRun> {
-                dispatch_particles!(options.particles, slam_p, log, options, progress)
+                dispatch_particles!(options.particles, slam_p, scans, options, progress)
             })?;
         worker
             .join()
@@ -166,7 +187,7 @@ pub fn run_slam(
 }
 
 fn slam_p<const P: usize>(
-    log: &CarmenLog,
+    scans: &[&LaserMessage],
     options: &GridRunOptions,
     progress: &dyn Fn(usize),
 ) -> Result<GridRun> {
@@ -178,6 +199,8 @@ fn slam_p<const P: usize>(
         geometry: *grid.geometry(),
         filter_time_s: 0.0,
         skipped_scans: 0,
+        refused_odometry: 0,
+        non_finite_beams: 0,
     };
     let t0 = Instant::now();
     {
@@ -185,14 +208,20 @@ fn slam_p<const P: usize>(
             GridSlam::<GRID_CELLS, GRID_CELLS, P, MAX_BEAMS>::new(&mut grid, c, Pose2::IDENTITY)
                 .map_err(|e| anyhow::anyhow!("grid SLAM: {e}"))?;
         let mut previous: Option<Pose2<f32>> = None;
-        for (i, laser) in log.lasers().filter(|l| !l.rear).enumerate() {
+        for (i, laser) in scans.iter().enumerate() {
             let odom = odom_pose(&laser.odom);
-            if let Some(p) = previous {
-                slam.predict_odometry(&p, &odom)
-                    .map_err(|e| anyhow::anyhow!("scan {i}: {e}"))?;
+            match previous {
+                _ if !odom.is_finite() => run.refused_odometry += 1,
+                Some(p) => {
+                    slam.predict_odometry(&p, &odom)
+                        .map_err(|e| anyhow::anyhow!("scan {i}: {e}"))?;
+                    previous = Some(odom);
+                }
+                None => previous = Some(odom),
             }
-            previous = Some(odom);
-            match slam.observe(&LidarScan::new(&laser.ranges, options.lidar)) {
+            let scan = LidarScan::new(&laser.ranges, options.lidar);
+            run.non_finite_beams += scan.census().1;
+            match slam.observe(&scan) {
                 Ok(r) => run.trajectory.push((laser.stamp, r.pose)),
                 Err(_) => {
                     run.skipped_scans += 1;
@@ -216,10 +245,11 @@ pub fn run_localizer(
     options: &GridRunOptions,
     progress: &dyn Fn(usize),
 ) -> Result<GridRun> {
+    let scans = front_scans(log);
     dispatch_particles!(
         options.particles,
         localize_p,
-        log,
+        &scans,
         map,
         start,
         options,
@@ -228,7 +258,7 @@ pub fn run_localizer(
 }
 
 fn localize_p<const P: usize>(
-    log: &CarmenLog,
+    scans: &[&LaserMessage],
     map: &GridView<'_>,
     start: Pose2<f32>,
     options: &GridRunOptions,
@@ -240,19 +270,27 @@ fn localize_p<const P: usize>(
         geometry: *map.geometry(),
         filter_time_s: 0.0,
         skipped_scans: 0,
+        refused_odometry: 0,
+        non_finite_beams: 0,
     };
     let t0 = Instant::now();
     let mut loc = GridLocalizer::<P, MAX_BEAMS>::new(*map, options.config, start)
         .map_err(|e| anyhow::anyhow!("grid localizer: {e}"))?;
     let mut previous: Option<Pose2<f32>> = None;
-    for (i, laser) in log.lasers().filter(|l| !l.rear).enumerate() {
+    for (i, laser) in scans.iter().enumerate() {
         let odom = odom_pose(&laser.odom);
-        if let Some(p) = previous {
-            loc.predict_odometry(&p, &odom)
-                .map_err(|e| anyhow::anyhow!("scan {i}: {e}"))?;
+        match previous {
+            _ if !odom.is_finite() => run.refused_odometry += 1,
+            Some(p) => {
+                loc.predict_odometry(&p, &odom)
+                    .map_err(|e| anyhow::anyhow!("scan {i}: {e}"))?;
+                previous = Some(odom);
+            }
+            None => previous = Some(odom),
         }
-        previous = Some(odom);
-        match loc.observe(&LidarScan::new(&laser.ranges, options.lidar)) {
+        let scan = LidarScan::new(&laser.ranges, options.lidar);
+        run.non_finite_beams += scan.census().1;
+        match loc.observe(&scan) {
             Ok(r) => run.trajectory.push((laser.stamp, r.pose)),
             Err(_) => {
                 run.skipped_scans += 1;
@@ -394,6 +432,7 @@ fn metrics_json(
     run: &GridRun,
     options: &GridRunOptions,
     rel: Option<RelationError>,
+    faults: Option<&FaultReport>,
     wall: f64,
 ) -> serde_json::Value {
     let scans = run.trajectory.len();
@@ -412,6 +451,9 @@ fn metrics_json(
         "filter_time_s": run.filter_time_s,
         "ms_per_scan": 1e3 * run.filter_time_s / scans.max(1) as f64,
         "skipped_scans": run.skipped_scans,
+        "refused_odometry": run.refused_odometry,
+        "non_finite_beams": run.non_finite_beams,
+        "faults": faults,
         "window": 2 * u32::from(options.config.filter.shift_window_cells) + 1,
         "beam_decimation": options.config.beam_decimation,
         "range_weight_exponent": options.config.range_weight_exponent,
@@ -462,9 +504,27 @@ pub fn replay_cli(args: &crate::cli::ReplayArgs, quiet: bool) -> Result<()> {
     let path = resolve_log(file)?;
     let log = read_log(&path)?;
     let options = options_from(args.config.as_deref(), &args.grid, &log)?;
-    let scans = log.lasers().filter(|l| !l.rear).count();
-    let pb = progress_bar(scans, quiet);
-    let run = run_slam(&log, &options, &|i| {
+    let clean = front_scans(&log);
+    // Faults (`--faults`) go into a copy of the laser messages.
+    let (faulty, faults) = match args.faults.filter(|f| !f.is_none()) {
+        Some(rates) => {
+            let (scans, injected) = crate::faults::inject_scans(&clean, &rates, args.fault_seed);
+            let report = FaultReport {
+                rates,
+                seed: args.fault_seed,
+                injected,
+            };
+            (scans, Some(report))
+        }
+        None => (Vec::new(), None),
+    };
+    let scans: Vec<&LaserMessage> = if faults.is_some() {
+        faulty.iter().collect()
+    } else {
+        clean
+    };
+    let pb = progress_bar(scans.len(), quiet);
+    let run = run_slam_scans(&scans, &options, &|i| {
         if i % 64 == 0 {
             pb.set_position(i as u64);
         }
@@ -479,7 +539,7 @@ pub fn replay_cli(args: &crate::cli::ReplayArgs, quiet: bool) -> Result<()> {
         .map_or_else(|| file.clone(), |n| n.to_string_lossy().to_string());
     // Wall time: the whole replay (reading, filtering, metrics) before the files are written.
     let wall = start.elapsed().as_secs_f64();
-    let metrics = metrics_json(&name, &run, &options, rel, wall);
+    let metrics = metrics_json(&name, &run, &options, rel, faults.as_ref(), wall);
     write_outputs(&args.out, &run, &options.config, &metrics)?;
     report(quiet, &name, &metrics, &args.out);
     Ok(())
@@ -521,7 +581,7 @@ pub fn localize_cli(args: &crate::cli::LocalizeArgs, quiet: bool) -> Result<()> 
         .file_name()
         .map_or_else(|| file.clone(), |n| n.to_string_lossy().to_string());
     let wall = start.elapsed().as_secs_f64();
-    let metrics = metrics_json(&name, &run, &options, rel, wall);
+    let metrics = metrics_json(&name, &run, &options, rel, None, wall);
     write_outputs(&args.out, &run, &options.config, &metrics)?;
     report(quiet, &name, &metrics, &args.out);
     Ok(())

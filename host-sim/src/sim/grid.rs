@@ -39,6 +39,8 @@ pub fn run_slam<const P: usize, const B: usize>(
         geometry: *grid.geometry(),
         filter_time_s: 0.0,
         skipped_scans: 0,
+        refused_odometry: 0,
+        non_finite_beams: 0,
     };
     let t0 = Instant::now();
     {
@@ -104,6 +106,8 @@ pub fn run_localizer<const P: usize, const B: usize>(
         geometry: *map.geometry(),
         filter_time_s: 0.0,
         skipped_scans: 0,
+        refused_odometry: 0,
+        non_finite_beams: 0,
     };
     let t0 = Instant::now();
     let mut loc = GridLocalizer::<P, B>::new(*map, config, f32_pose(&first.truth))
