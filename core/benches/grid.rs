@@ -1,12 +1,13 @@
 //! One grid particle-filter step (prediction + correlation with the 9 × 9 shift search +
 //! reweighting/resampling) for P = 32, 64, 200 particles and 90 / 180 beams, on a
 //! 256 × 256 map of a simulated office (walls drawn by ray-cast scans). `localize` scores
-//! against a fixed map; `slam` also writes the scan into the grid.
+//! against a fixed map; `slam` also writes the scan into the grid; `slam_bitmap` does so on
+//! a grid with an occupied-cell bitmap (the sparse shift search the firmware runs).
 
 use core::hint::black_box;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use microslam::geometry::Pose2;
-use microslam::grid::OccupancyGrid;
+use microslam::grid::{OccupancyGrid, occupancy_bytes};
 use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam};
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
 
@@ -55,9 +56,14 @@ fn config() -> GridPfConfig {
     GridPfConfig::DEFAULT
 }
 
-fn map() -> Box<OccupancyGrid<256, 256>> {
+const BITMAP: usize = occupancy_bytes(256, 256);
+
+fn map<const BITMAP: usize>() -> Box<OccupancyGrid<256, 256, BITMAP>> {
     let c = config();
-    let mut grid = Box::new(OccupancyGrid::<256, 256>::centred(c.resolution, c.log_odds));
+    let mut grid = Box::new(OccupancyGrid::<256, 256, BITMAP>::centred(
+        c.resolution,
+        c.log_odds,
+    ));
     for k in 0..40 {
         let pose = Pose2::new(
             -3.0 + 0.15 * k as f32,
@@ -88,7 +94,7 @@ macro_rules! bench_p {
 }
 
 fn grid_step(c: &mut Criterion) {
-    let grid = map();
+    let grid = map::<0>();
     let mut group = c.benchmark_group("grid_step");
     group
         .measurement_time(std::time::Duration::from_secs(2))
@@ -103,10 +109,19 @@ fn grid_step(c: &mut Criterion) {
         let pose = Pose2::new(0.5f32, -0.5, 0.3);
         let (ranges, geometry) = scan_at(&pose, beams);
         let scan = LidarScan::new(&ranges, geometry);
-        let mut g = map();
+        let mut g = map::<0>();
         let mut slam = GridSlam::<256, 256, 32, 180>::new(&mut g, config(), pose).unwrap();
         slam.observe(&scan).unwrap();
         group.bench_function(BenchmarkId::new("slam/P32", beams), |b| {
+            b.iter(|| {
+                slam.predict(black_box(0.0), black_box(0.0)).unwrap();
+                black_box(slam.observe(&scan).unwrap())
+            })
+        });
+        let mut g = map::<BITMAP>();
+        let mut slam = GridSlam::<256, 256, 32, 180, BITMAP>::new(&mut g, config(), pose).unwrap();
+        slam.observe(&scan).unwrap();
+        group.bench_function(BenchmarkId::new("slam_bitmap/P32", beams), |b| {
             b.iter(|| {
                 slam.predict(black_box(0.0), black_box(0.0)).unwrap();
                 black_box(slam.observe(&scan).unwrap())

@@ -10,6 +10,12 @@ use crate::sensors::lidar::LidarScan;
 /// Localizer with `P` particles and at most `B` beams per scan on a borrowed map (owned
 /// grid's [`crate::grid::OccupancyGrid::view`] or a `&'static` map in flash).
 ///
+/// On a microcontroller give the map its occupied-cell bitmap
+/// ([`GridView::with_occupancy_bits`], computed once with
+/// [`crate::grid::fill_occupancy_bits`] into a RAM buffer of
+/// [`crate::grid::occupancy_bytes`] bytes, or kept in flash next to the map): the shift
+/// search is then the sparse one, a third of the instructions for the same scores.
+///
 /// RAM: `28·P + 24·B` bytes plus ~100; the map is not copied.
 pub struct GridLocalizer<'m, const P: usize, const B: usize> {
     map: GridView<'m>,
