@@ -211,6 +211,28 @@ fn simulated_localizer_on_a_true_map() {
     let e = ate(&est, &sim.truth);
     std::println!("localizer ATE {e:.3} m");
     assert!(e < 0.03, "localizer ATE {e}"); // measured 0.022 m
+
+    // The same flash map with its occupied-cell bitmap (the sparse search): the same
+    // estimates, bit for bit.
+    let mut bits = std::vec![0u8; crate::grid::occupancy_bytes(256, 256)];
+    crate::grid::fill_occupancy_bits(cells, 256, 256, config.log_odds.occupied_above, &mut bits)
+        .unwrap();
+    let sparse_view = view.with_occupancy_bits(&bits).unwrap();
+    assert!(view.with_occupancy_bits(&bits[1..]).is_err());
+    let mut sparse = GridLocalizer::<32, 180>::new(sparse_view, config, sim.truth[0]).unwrap();
+    sparse.reset_around(sim.truth[0], 0.1, 0.05).unwrap();
+    for i in 0..sim.scans.len() {
+        if i > 0 {
+            sparse
+                .predict_odometry(&sim.odometry[i - 1], &sim.odometry[i])
+                .unwrap();
+        }
+        let pose = sparse
+            .observe(&LidarScan::new(&sim.scans[i], LIDAR))
+            .unwrap()
+            .pose;
+        assert_eq!(pose, est[i], "scan {i}");
+    }
 }
 
 #[test]
