@@ -221,17 +221,14 @@ fn simulated_localizer_on_a_true_map() {
     assert!(view.with_occupancy_bits(&bits[1..]).is_err());
     let mut sparse = GridLocalizer::<32, 180>::new(sparse_view, config, sim.truth[0]).unwrap();
     sparse.reset_around(sim.truth[0], 0.1, 0.05).unwrap();
-    for i in 0..sim.scans.len() {
+    for (i, (scan, want)) in sim.scans.iter().zip(&est).enumerate() {
         if i > 0 {
             sparse
                 .predict_odometry(&sim.odometry[i - 1], &sim.odometry[i])
                 .unwrap();
         }
-        let pose = sparse
-            .observe(&LidarScan::new(&sim.scans[i], LIDAR))
-            .unwrap()
-            .pose;
-        assert_eq!(pose, est[i], "scan {i}");
+        let pose = sparse.observe(&LidarScan::new(scan, LIDAR)).unwrap().pose;
+        assert_eq!(pose, *want, "scan {i}");
     }
 }
 
