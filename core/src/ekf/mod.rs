@@ -21,8 +21,9 @@
 //!
 //! Written down as PX4's EKF2 does, and exercised by the fuzz targets in `fuzz/`:
 //! - every step checks its inputs and the finiteness of what it would write *before*
-//!   writing; an update that would leave a negative variance is refused
-//!   ([`EkfError::NumericalFailure`]) — the state is then exactly what it was;
+//!   writing; an update, prediction or new landmark that would leave a negative
+//!   variance is refused ([`EkfError::NumericalFailure`]) — the state is then exactly
+//!   what it was;
 //! - the covariance is symmetric by construction: only its upper triangle is stored and
 //!   computed ([`covariance`] module; read it through [`EkfSlam::active_covariance`]);
 //! - the robot and landmarks stay within [`MAX_COORDINATE`] of the origin, where `f32`
@@ -154,7 +155,8 @@ pub enum CovarianceUpdate {
     Joseph,
     /// The optimal-gain form `P − K S Kᵀ` on the upper triangle, mirrored (exactly
     /// symmetric): one pass over half the block, the cheapest choice. It keeps variances
-    /// non-negative (such updates are refused) but, unlike the Joseph form, not `P`
+    /// non-negative (steps that would leave a negative one are refused, predictions and
+    /// new landmarks included) but, unlike the Joseph form, not `P`
     /// positive semi-definite when an `f32` update shrinks variances by many orders of
     /// magnitude (found by the fuzzer after the variance caps): prefer Joseph unless the
     /// instruction budget forbids it.
@@ -553,7 +555,11 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let cross_bound = T::lit(3.0) * max_abs(a.iter().copied()) * self.max_variance();
         let far = T::lit(MAX_COORDINATE);
         let inside = step.pose.x.abs() <= far && step.pose.y.abs() <= far;
+        // A negative variance can only come from a `P` that is no longer positive
+        // semi-definite (the optimal-gain form allows that): refused like such updates.
+        let negative = (0..3).any(|i| new_rr[(i, i)] < T::ZERO);
         if !inside
+            || negative
             || !step.pose.is_finite()
             || !new_rr.iter().all(|v| v.finite())
             || !cross_bound.finite()
@@ -1024,7 +1030,10 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let cross_bound = T::lit(3.0) * max_abs(g_robot.iter().copied()) * self.max_variance();
         let far = T::lit(MAX_COORDINATE);
         let inside = g.landmark.iter().all(|c| c.abs() <= far);
+        // As in a prediction: negative only when `P_RR` is no longer PSD; refused.
+        let negative = p_pp[(0, 0)] < T::ZERO || p_pp[(1, 1)] < T::ZERO;
         if !inside
+            || negative
             || !g.landmark.iter().chain(p_pp.iter()).all(|v| v.finite())
             || !cross_bound.finite()
         {
