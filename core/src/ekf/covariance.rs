@@ -47,6 +47,14 @@ pub(crate) fn set_diagonal_block<T: Real, const N: usize, const R: usize>(
     }
 }
 
+/// Adds `scale · dᵢ` to variance `i` of `p` for each `dᵢ` of `d`: a diagonal loading,
+/// positive semi-definite when `scale` and the `dᵢ` are non-negative.
+pub(crate) fn load_diagonal<T: Real, const N: usize>(p: &mut SMatrix<T, N, N>, d: &[T], scale: T) {
+    for (v, d) in p.as_mut_slice().iter_mut().step_by(N + 1).zip(d) {
+        *v += scale * *d;
+    }
+}
+
 /// Per-row terms of one EKF update, for row (and column) `i` of the active block.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct UpdateRow<T> {

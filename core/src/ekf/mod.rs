@@ -21,12 +21,17 @@
 //!
 //! Written down as PX4's EKF2 does, and exercised by the fuzz targets in `fuzz/`:
 //! - every step checks its inputs and the finiteness of what it would write *before*
-//!   writing; an update that would leave a negative variance is refused
-//!   ([`EkfError::NumericalFailure`]) — the state is then exactly what it was;
+//!   writing; an update, prediction or new landmark that would leave a negative
+//!   variance is refused ([`EkfError::NumericalFailure`]) — the state is then exactly
+//!   what it was;
 //! - the covariance is symmetric by construction: only its upper triangle is stored and
 //!   computed ([`covariance`] module; read it through [`EkfSlam::active_covariance`]);
 //! - the robot and landmarks stay within [`MAX_COORDINATE`] of the origin, where `f32`
 //!   coordinates are still finer than a centimetre;
+//! - the Joseph update treats a sighting as no more precise than the rounding level of
+//!   `H P Hᵀ`, and gives rows whose terms cancel heavily their rounding error back as
+//!   variance ([`CovarianceUpdate::Joseph`]): positive semi-definite additions that
+//!   keep `f32` rounding from making `P` indefinite when it holds 10⁴ m² next to 10⁻⁴;
 //! - as a last resort, a prediction caps the robot's variances at
 //!   [`MAX_POSITION_VARIANCE`] and [`MAX_HEADING_VARIANCE`], and a new landmark's at
 //!   [`MAX_POSITION_VARIANCE`], by scaling their rows and columns (a congruence, which
@@ -47,7 +52,8 @@
 //! Such a filter belongs in a `static` on a microcontroller: [`EkfSlam::new`] is a
 //! `const fn`, so `static`s are laid out by the linker (`.bss`/`.data`) and never pass
 //! through the stack; [`EkfSlam::init`] re-initialises in place. An update uses
-//! `6 · N · size_of::<T>()` bytes of stack for its per-row terms. The strict lower
+//! `6 · N · size_of::<T>()` bytes of stack for its per-row terms, the Joseph form
+//! `N · size_of::<T>()` more for the size of each row's rounding. The strict lower
 //! triangle of the storage is never used (see [`covariance`]).
 //!
 //! A state dimension that is not `3 + 2k` is rejected at compile time:
@@ -73,7 +79,8 @@ pub mod covariance;
 
 pub use covariance::CovarianceView;
 use covariance::{
-    UpdateRow, block, entry, joseph_entry, set_diagonal_block, symmetric_entry, update_upper,
+    UpdateRow, block, entry, joseph_entry, load_diagonal, set_diagonal_block, symmetric_entry,
+    update_upper,
 };
 
 /// State dimension for a maximum of `max_landmarks` point landmarks: `3 + 2 · max_landmarks`.
@@ -103,6 +110,19 @@ pub const MAX_POSITION_VARIANCE: f64 = 1.0e4;
 /// refused ([`EkfError::NumericalFailure`]). Keep the map origin near the work area.
 pub const MAX_COORDINATE: f64 = 1.0e5;
 
+/// Diagonal loading of the Joseph update, in machine epsilons per state: variance `i`
+/// gets `JOSEPH_LOADING · k · ε · (wᵢ − CANCELLATION_RATIO · Pᵢᵢ)` added when positive,
+/// `wᵢ` being the size of row `i`'s update terms (see [`CovarianceUpdate::Joseph`]).
+const JOSEPH_LOADING: f64 = 16.0;
+
+/// A Joseph update row whose terms exceed its variance this many times cancels heavily
+/// enough to be loaded (see `JOSEPH_LOADING`).
+const CANCELLATION_RATIO: f64 = 16.0;
+
+/// Floor on the sighting variances of a Joseph update, in machine epsilons of the
+/// magnitude of `H P Hᵀ`'s terms (see [`CovarianceUpdate::Joseph`]).
+const ROUNDING_FLOOR: f64 = 16.0;
+
 /// Bytes an `f32` filter uses beyond its mean and covariance (configuration, counters).
 pub const EKF_OVERHEAD_BYTES_F32: usize = 88;
 
@@ -110,14 +130,33 @@ pub const EKF_OVERHEAD_BYTES_F32: usize = 88;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum CovarianceUpdate {
-    /// Joseph form `(I − KH) P (I − KH)ᵀ + K R Kᵀ`, evaluated in place in O(n²) and then
-    /// symmetrised: keeps `P` positive semi-definite in `f32` even when `K` carries rounding
-    /// errors. About three passes over the active block.
+    /// Joseph form `(I − KH) P (I − KH)ᵀ + K R Kᵀ`, evaluated in place in one pass over
+    /// the upper triangle (`P − K Mᵀ + D Kᵀ`, `M = P Hᵀ`): keeps `P` positive
+    /// semi-definite in `f32` even when `K` carries rounding errors.
+    ///
+    /// Two guards keep it so when `f32` cannot resolve what the update computes — a lost
+    /// robot (10⁴ m² variances, heading at the π² cap) seeing a landmark it has just
+    /// added, whose position relative to the robot is known to centimetres:
+    /// - the sighting's variances are raised, where smaller, to `16 ε (|H| |P| |H|ᵀ)ᵢᵢ`,
+    ///   the rounding level of `H P Hᵀ`: otherwise `S` there is mostly rounding, and the
+    ///   gain it gives can be thousands of times too large;
+    /// - a row `i` whose update terms cancel heavily — `wᵢ = |Kᵢ| · (|P| |H|ᵀ)ᵢ`, the
+    ///   size of the products that cancel in `M`, `A` and the pass, more than 16 times
+    ///   its variance `Pᵢᵢ` — gets its rounding error back as variance after the pass:
+    ///   `16 k ε (wᵢ − 16 Pᵢᵢ)` is added to `Pᵢᵢ` (`k = 3 + 2n`), a diagonal loading.
+    ///   Without it the pass rounds away the smallest eigenvalues of a `P` that holds
+    ///   10⁴ next to 10⁻⁴, and the next updates amplify the negative ones (−0.03 to
+    ///   −0.9 in one update).
+    ///
+    /// Both only ever add a positive semi-definite term, cost O(1) and O(k), and leave
+    /// ordinary updates untouched: the MRCLAM replays give the same figures to the
+    /// printed digits in `f32` and `f64`.
     #[default]
     Joseph,
     /// The optimal-gain form `P − K S Kᵀ` on the upper triangle, mirrored (exactly
     /// symmetric): one pass over half the block, the cheapest choice. It keeps variances
-    /// non-negative (such updates are refused) but, unlike the Joseph form, not `P`
+    /// non-negative (steps that would leave a negative one are refused, predictions and
+    /// new landmarks included) but, unlike the Joseph form, not `P`
     /// positive semi-definite when an `f32` update shrinks variances by many orders of
     /// magnitude (found by the fuzzer after the variance caps): prefer Joseph unless the
     /// instruction budget forbids it.
@@ -516,7 +555,11 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let cross_bound = T::lit(3.0) * max_abs(a.iter().copied()) * self.max_variance();
         let far = T::lit(MAX_COORDINATE);
         let inside = step.pose.x.abs() <= far && step.pose.y.abs() <= far;
+        // A negative variance can only come from a `P` that is no longer positive
+        // semi-definite (the optimal-gain form allows that): refused like such updates.
+        let negative = (0..3).any(|i| new_rr[(i, i)] < T::ZERO);
         if !inside
+            || negative
             || !step.pose.is_finite()
             || !new_rr.iter().all(|v| v.finite())
             || !cross_bound.finite()
@@ -556,13 +599,15 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
     }
 
     /// The innovation of sighting `z` (covariance `r`) against landmark `index`, without
-    /// changing anything.
+    /// changing anything, and the measurement covariance it used: `r` itself, or for the
+    /// Joseph form `r` with its variances raised to the rounding level of `H P Hᵀ`
+    /// ([`rounding_floor`]).
     fn innovation_with(
         &self,
         index: usize,
         z: &RangeBearing<T>,
         r: &Matrix2<T>,
-    ) -> Result<Innovation<T>, EkfError> {
+    ) -> Result<(Innovation<T>, Matrix2<T>), EkfError> {
         if index >= self.landmark_count() {
             return Err(EkfError::UnknownLandmark);
         }
@@ -578,6 +623,12 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let p_rr: Matrix3<T> = block(&self.covariance, 0, 0);
         let p_rl = self.covariance.fixed_view::<3, 2>(0, li); // above the diagonal: li ≥ 3
         let p_ll: Matrix2<T> = block(&self.covariance, li, li);
+        let r = match self.config.covariance_update {
+            CovarianceUpdate::Joseph => {
+                rounding_floor(r, &hr, &hl, &p_rr, &p_rl.into_owned(), &p_ll)
+            }
+            CovarianceUpdate::Symmetric => *r,
+        };
         let hphr = hr * p_rl * hl.transpose();
         let mut s =
             hr * p_rr * hr.transpose() + hphr + hphr.transpose() + hl * p_ll * hl.transpose() + r;
@@ -597,14 +648,15 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         if !d2.finite() {
             return Err(EkfError::NumericalFailure);
         }
-        Ok(Innovation {
+        let inn = Innovation {
             nu,
             s,
             s_inv,
             mahalanobis_squared: d2,
             jacobian_robot: hr,
             jacobian_landmark: hl,
-        })
+        };
+        Ok((inn, r))
     }
 
     /// Checks a sighting and its covariance; returns the covariance to use.
@@ -637,7 +689,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
     /// with the configured measurement noise, without changing the state.
     pub fn innovation(&self, index: usize, z: &RangeBearing<T>) -> Result<Innovation<T>, EkfError> {
         let r = self.checked_measurement(z, None)?;
-        self.innovation_with(index, z, &r)
+        self.innovation_with(index, z, &r).map(|(inn, _)| inn)
     }
 
     /// Corrects the state with a sighting `z` of landmark `index`, using the configured
@@ -676,8 +728,8 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             Ok(r) => r,
             Err(e) => return self.reject(e),
         };
-        let inn = match self.innovation_with(index, z, &r) {
-            Ok(inn) => inn,
+        let (inn, r) = match self.innovation_with(index, z, &r) {
+            Ok(found) => found,
             Err(e) => return self.reject(e),
         };
         let nis = inn.mahalanobis_squared;
@@ -695,23 +747,39 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let rows = storage.get_mut(..k).unwrap_or(&mut []);
         self.cross_covariance(li, &inn, rows);
         let form = self.config.covariance_update;
-        if let Err(e) = self.gain_and_terms(li, &inn, &r, rows, form) {
-            return self.reject(e);
-        }
-        let nu = inn.nu;
-        for (x, row) in self.mean.as_mut_slice().iter_mut().zip(rows.iter()) {
-            *x += row.k[0] * nu[0] + row.k[1] * nu[1];
-        }
-        self.mean[2] = wrap_near(self.mean[2]);
         // One monomorphised pass per form (a function pointer would cost a call per entry).
         match form {
-            CovarianceUpdate::Joseph => update_upper(&mut self.covariance, rows, joseph_entry),
+            CovarianceUpdate::Joseph => {
+                // The size of each row's rounding in the covariance pass (Joseph only).
+                let mut scales = [T::ZERO; N];
+                let scales = scales.get_mut(..k).unwrap_or(&mut []);
+                if let Err(e) = self.gain_and_terms(li, &inn, &r, rows, form, scales) {
+                    return self.reject(e);
+                }
+                self.correct_mean(rows, &inn.nu);
+                update_upper(&mut self.covariance, rows, joseph_entry);
+                let loading = T::lit(JOSEPH_LOADING * k as f64) * T::default_epsilon();
+                load_diagonal(&mut self.covariance, scales, loading);
+            }
             CovarianceUpdate::Symmetric => {
+                if let Err(e) = self.gain_and_terms(li, &inn, &r, rows, form, &mut []) {
+                    return self.reject(e);
+                }
+                self.correct_mean(rows, &inn.nu);
                 update_upper(&mut self.covariance, rows, symmetric_entry)
             }
         }
         self.counters.updates = self.counters.updates.saturating_add(1);
         Ok(UpdateOutcome::Accepted { nis })
+    }
+
+    /// `x ← x + K ν`, heading wrapped.
+    #[inline(always)]
+    fn correct_mean(&mut self, rows: &[UpdateRow<T>], nu: &Vector2<T>) {
+        for (x, row) in self.mean.as_mut_slice().iter_mut().zip(rows.iter()) {
+            *x += row.k[0] * nu[0] + row.k[1] * nu[1];
+        }
+        self.mean[2] = wrap_near(self.mean[2]);
     }
 
     /// Fills the gain `K = M S⁻¹` and the form's terms (`K S`, or the Joseph form's `D`)
@@ -724,6 +792,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         r: &Matrix2<T>,
         rows: &mut [UpdateRow<T>],
         form: CovarianceUpdate,
+        scales: &mut [T],
     ) -> Result<(), EkfError> {
         let s = inn.s;
         match form {
@@ -736,14 +805,27 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
                 ];
                 let m_at =
                     [0, 1, 2, li, li + 1].map(|c| rows.get(c).map_or([T::ZERO; 2], |row| row.m));
+                let data = self.covariance.as_slice();
+                let mut scales = scales.iter_mut();
                 let terms = |i: usize, [k0, k1]: [T; 2]| {
                     let (robot, landmark) = self.observed_entries(i, li);
                     let p_at = [robot[0], robot[1], robot[2], landmark[0], landmark[1]];
                     let (mut b0, mut b1) = (T::ZERO, T::ZERO);
+                    // |P| |H|ᵀ on this row: the size of the terms that cancel in M and A.
+                    let (mut u0, mut u1) = (T::ZERO, T::ZERO);
                     for (c, (&p, mc)) in p_at.iter().zip(&m_at).enumerate() {
                         let a = p - (k0 * mc[0] + k1 * mc[1]);
                         b0 += a * h[0][c];
                         b1 += a * h[1][c];
+                        u0 += p.abs() * h[0][c].abs();
+                        u1 += p.abs() * h[1][c].abs();
+                    }
+                    // Row i's loading scale (see `JOSEPH_LOADING`): terms beyond 16 Pᵢᵢ.
+                    if let Some(scale) = scales.next() {
+                        let p_ii = data.get(i * (N + 1)).copied().unwrap_or(T::ZERO);
+                        let terms = k0.abs() * u0 + k1.abs() * u1;
+                        let excess = terms - T::lit(CANCELLATION_RATIO) * p_ii;
+                        *scale = if excess > T::ZERO { excess } else { T::ZERO };
                     }
                     [
                         k0 * r[(0, 0)] + k1 * r[(1, 0)] - b0,
@@ -780,7 +862,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         inn: &Innovation<T>,
         r: &Matrix2<T>,
         rows: &mut [UpdateRow<T>],
-        terms: impl Fn(usize, [T; 2]) -> [T; 2],
+        mut terms: impl FnMut(usize, [T; 2]) -> [T; 2],
         new_entry: impl Fn(T, &UpdateRow<T>, &UpdateRow<T>) -> T,
     ) -> Result<(), EkfError> {
         let (si, nu) = (inn.s_inv, inn.nu);
@@ -948,7 +1030,10 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let cross_bound = T::lit(3.0) * max_abs(g_robot.iter().copied()) * self.max_variance();
         let far = T::lit(MAX_COORDINATE);
         let inside = g.landmark.iter().all(|c| c.abs() <= far);
+        // As in a prediction: negative only when `P_RR` is no longer PSD; refused.
+        let negative = p_pp[(0, 0)] < T::ZERO || p_pp[(1, 1)] < T::ZERO;
         if !inside
+            || negative
             || !g.landmark.iter().chain(p_pp.iter()).all(|v| v.finite())
             || !cross_bound.finite()
         {
@@ -976,6 +1061,35 @@ fn max_abs<T: Real>(values: impl Iterator<Item = T>) -> T {
         let a = v.abs();
         if a > acc || !a.finite() { a } else { acc }
     })
+}
+
+/// The measurement covariance of a Joseph update: `r` with each variance raised, where it
+/// is smaller, to `ROUNDING_FLOOR · ε · (|H| |P| |H|ᵀ)ᵢᵢ`, the rounding level of
+/// `(H P Hᵀ)ᵢᵢ` computed in `T` from the robot and landmark blocks of `P`.
+fn rounding_floor<T: Real>(
+    r: &Matrix2<T>,
+    hr: &Matrix2x3<T>,
+    hl: &Matrix2<T>,
+    p_rr: &Matrix3<T>,
+    p_rl: &SMatrix<T, 3, 2>,
+    p_ll: &Matrix2<T>,
+) -> Matrix2<T> {
+    let abs = |v: T| v.abs();
+    let (hr, hl) = (hr.map(abs), hl.map(abs));
+    let cross = hr * p_rl.map(abs) * hl.transpose();
+    let scale = hr * p_rr.map(abs) * hr.transpose()
+        + cross
+        + cross.transpose()
+        + hl * p_ll.map(abs) * hl.transpose();
+    let unit = T::lit(ROUNDING_FLOOR) * T::default_epsilon();
+    let mut r = *r;
+    for i in 0..2 {
+        let floor = unit * scale[(i, i)];
+        if floor > r[(i, i)] {
+            r[(i, i)] = floor;
+        }
+    }
+    r
 }
 
 /// `x > 0`, false for NaN.
