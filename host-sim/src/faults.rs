@@ -207,6 +207,27 @@ fn spike(kind: &mut EventKind<f64>) -> bool {
     true
 }
 
+/// Delivers `item`: swapped with the one before it when the previous draw asked for a
+/// swap (`swap_next`), otherwise a draw decides whether it will swap with the next one.
+fn push_maybe_swapped<T>(
+    out: &mut Vec<T>,
+    item: T,
+    swap_next: &mut bool,
+    reorder: &Bernoulli,
+    rng: &mut Xoshiro256PlusPlus,
+    counts: &mut FaultCounts,
+) {
+    out.push(item);
+    let n = out.len();
+    if *swap_next && n >= 2 {
+        out.swap(n - 2, n - 1);
+        counts.reordered += 1;
+        *swap_next = false;
+    } else if reorder.sample(rng) {
+        *swap_next = true;
+    }
+}
+
 /// Applies the faults to a copy of `events`, drawing from a generator seeded by `seed`.
 /// Each event is considered once for each fault, in the order of [`FaultRates::NAMES`];
 /// a dropped event gets no other fault.
@@ -243,15 +264,7 @@ pub fn inject(
             e.stamp -= 1.0;
             counts.backwards += 1;
         }
-        out.push(e);
-        if swap_next {
-            let n = out.len();
-            out.swap(n - 2, n - 1);
-            counts.reordered += 1;
-            swap_next = false;
-        } else if reorder.sample(&mut rng) {
-            swap_next = true;
-        }
+        push_maybe_swapped(&mut out, e, &mut swap_next, &reorder, &mut rng, &mut counts);
         if dup.sample(&mut rng) {
             out.push(e);
             counts.duplicated += 1;
@@ -334,15 +347,7 @@ pub fn inject_scans(
         let twice = dup.sample(&mut rng).then(|| m.clone());
         counts.nan_odometry += nan_odometry;
         counts.nan_ranges += nan_ranges;
-        out.push(m);
-        if swap_next {
-            let len = out.len();
-            out.swap(len - 2, len - 1);
-            counts.reordered += 1;
-            swap_next = false;
-        } else if reorder.sample(&mut rng) {
-            swap_next = true;
-        }
+        push_maybe_swapped(&mut out, m, &mut swap_next, &reorder, &mut rng, &mut counts);
         if let Some(t) = twice {
             out.push(t);
             counts.duplicated += 1;

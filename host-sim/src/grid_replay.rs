@@ -133,6 +133,33 @@ fn odom_pose(o: &[f64; 3]) -> Pose2<f32> {
     Pose2::new(o[0] as f32, o[1] as f32, o[2] as f32)
 }
 
+/// The odometry motion to predict before `laser`: from the last good odometry pose to this
+/// message's. `None` for the first message and for a pose that is not finite, which is
+/// refused and counted (the next good pose then predicts the whole motion).
+fn odometry_step(
+    previous: &mut Option<Pose2<f32>>,
+    laser: &LaserMessage,
+    run: &mut GridRun,
+) -> Option<(Pose2<f32>, Pose2<f32>)> {
+    let odom = odom_pose(&laser.odom);
+    if !odom.is_finite() {
+        run.refused_odometry += 1;
+        return None;
+    }
+    previous.replace(odom).map(|from| (from, odom))
+}
+
+/// The scan of `laser`, its non-finite ranges counted (the filter skips them one by one).
+fn counted_scan<'a>(
+    laser: &'a LaserMessage,
+    lidar: &LidarGeometry,
+    run: &mut GridRun,
+) -> LidarScan<'a> {
+    let scan = LidarScan::new(&laser.ranges, *lidar);
+    run.non_finite_beams += scan.census().1;
+    scan
+}
+
 macro_rules! dispatch_particles {
     ($p:expr, $f:ident, $($arg:expr),*) => {
         match $p {
@@ -209,18 +236,11 @@ fn slam_p<const P: usize>(
                 .map_err(|e| anyhow::anyhow!("grid SLAM: {e}"))?;
         let mut previous: Option<Pose2<f32>> = None;
         for (i, laser) in scans.iter().enumerate() {
-            let odom = odom_pose(&laser.odom);
-            match previous {
-                _ if !odom.is_finite() => run.refused_odometry += 1,
-                Some(p) => {
-                    slam.predict_odometry(&p, &odom)
-                        .map_err(|e| anyhow::anyhow!("scan {i}: {e}"))?;
-                    previous = Some(odom);
-                }
-                None => previous = Some(odom),
+            if let Some((from, to)) = odometry_step(&mut previous, laser, &mut run) {
+                slam.predict_odometry(&from, &to)
+                    .map_err(|e| anyhow::anyhow!("scan {i}: {e}"))?;
             }
-            let scan = LidarScan::new(&laser.ranges, options.lidar);
-            run.non_finite_beams += scan.census().1;
+            let scan = counted_scan(laser, &options.lidar, &mut run);
             match slam.observe(&scan) {
                 Ok(r) => run.trajectory.push((laser.stamp, r.pose)),
                 Err(_) => {
@@ -278,18 +298,11 @@ fn localize_p<const P: usize>(
         .map_err(|e| anyhow::anyhow!("grid localizer: {e}"))?;
     let mut previous: Option<Pose2<f32>> = None;
     for (i, laser) in scans.iter().enumerate() {
-        let odom = odom_pose(&laser.odom);
-        match previous {
-            _ if !odom.is_finite() => run.refused_odometry += 1,
-            Some(p) => {
-                loc.predict_odometry(&p, &odom)
-                    .map_err(|e| anyhow::anyhow!("scan {i}: {e}"))?;
-                previous = Some(odom);
-            }
-            None => previous = Some(odom),
+        if let Some((from, to)) = odometry_step(&mut previous, laser, &mut run) {
+            loc.predict_odometry(&from, &to)
+                .map_err(|e| anyhow::anyhow!("scan {i}: {e}"))?;
         }
-        let scan = LidarScan::new(&laser.ranges, options.lidar);
-        run.non_finite_beams += scan.census().1;
+        let scan = counted_scan(laser, &options.lidar, &mut run);
         match loc.observe(&scan) {
             Ok(r) => run.trajectory.push((laser.stamp, r.pose)),
             Err(_) => {
