@@ -12,7 +12,7 @@ use crate::sensors::lidar::LidarScan;
 /// [`occupancy_bytes`]`(W, H)` (`⌈W/8⌉ · H`, any other value does not compile). The
 /// grid keeps the bitmap equal to `value > occupied_above` on every write, and
 /// [`OccupancyGrid::view`] hands it to the shift search, which then visits only the
-/// occupied cells of each window (on a Cortex-M4 about 4× fewer instructions than the
+/// occupied cells of each window (on a Cortex-M4 about a third of the instructions of the
 /// byte-wise search; same scores). Write the type as
 /// `OccupancyGrid<256, 256, { occupancy_bytes(256, 256) }>`.
 ///
@@ -205,7 +205,7 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
         self.cells.as_flattened()
     }
 
-    /// A read-only view for scoring scans (with the occupied-cell bitmap when `BITS > 0`).
+    /// A read-only view for scoring scans (with the occupied-cell bitmap when `BITMAP > 0`).
     #[inline]
     pub fn view(&self) -> GridView<'_> {
         let view = GridView::from_trusted(

@@ -320,7 +320,7 @@ pub fn search_window_sparse(
 }
 
 /// [`search_window`] over a map with an occupied-cell bitmap: for each end point, each of
-/// the `n = 2k+1` window rows is cut out of the bitmap as `n` bits (one or two words, a
+/// the `n = 2k+1` window rows is cut out of the bitmap as `n` bits (one 4-byte read and a
 /// shift) and only its set bits — the occupied cells — add the point's weight to their
 /// shift. Rows without an occupied cell, most of them, cost a load, a shift and a test.
 /// Same integer sums as the other searches, in another order, so the scores are
@@ -513,6 +513,11 @@ mod tests {
             let sparse = search_window(&with_bits, &pose, pts.as_slice(), k, &mut c);
             assert_eq!(c[..n], b[..n], "sparse, trial {trial}");
             assert_eq!(sparse, slow, "sparse, trial {trial}");
+            // The sparse-only search over a view without a bitmap: every window checked.
+            let mut d = [0u32; MAX_SHIFTS];
+            let checked = search_window_sparse(&view, &pose, pts.as_slice(), k, &mut d);
+            assert_eq!(d[..n], b[..n], "checked, trial {trial}");
+            assert_eq!(checked, slow, "checked, trial {trial}");
         }
     }
 
