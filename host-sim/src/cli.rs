@@ -235,6 +235,14 @@ pub struct HilArgs {
     /// Seed of the frame corruption.
     #[arg(long, default_value_t = 1)]
     pub corrupt_seed: u64,
+    /// Send the dataset's tuned EKF settings (`host-sim/configs/<dataset>.toml`, or
+    /// `--config`) to the device first (`ConfigureEkf`), instead of running the
+    /// firmware's own (`EkfConfig::MICROCONTROLLER`).
+    #[arg(long)]
+    pub dataset_settings: bool,
+    /// EKF settings (TOML) laid over the dataset's defaults, with `--dataset-settings`.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
 }
 
 /// Runs what the command line asks for.

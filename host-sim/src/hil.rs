@@ -21,8 +21,8 @@ use microslam::geometry::Pose2;
 use microslam::grid::{OccupancyGrid, occupancy_bytes};
 use microslam::pf::{GridPfConfig, GridSlam};
 use microslam::wire::{
-    Command as WireCommand, EventsToWire, FrameDecoder, GridSetup, MAX_FRAME_LEN, Session,
-    ToDevice, ToHost, encode_frame,
+    Command as WireCommand, EkfSettings, EventsToWire, FrameDecoder, GridSetup, MAX_FRAME_LEN,
+    Session, ToDevice, ToHost, encode_frame,
 };
 use serde::Serialize;
 
@@ -45,17 +45,25 @@ pub type FirmwareGridSlam<'g> = GridSlam<'g, 256, 256, 32, 90, FIRMWARE_GRID_BIT
 /// The firmware's lidar and wheels (`firmware_example::config::GRID_SETUP`).
 pub const FIRMWARE_GRID_SETUP: GridSetup = GridSetup::EXAMPLE;
 
-/// The messages for a recording: reset to its initial pose, its events, a status request.
-pub fn messages_for(recording: &Recording) -> Vec<ToDevice> {
+/// The messages for a recording: EKF settings when given, reset to its initial pose, its
+/// events, a status request.
+pub fn messages_for(recording: &Recording, settings: Option<EkfSettings>) -> Vec<ToDevice> {
     let start = recording.initial_pose.unwrap_or_default();
-    let mut out = vec![ToDevice::Command {
+    let mut out: Vec<ToDevice> = settings
+        .map(|s| ToDevice::Command {
+            seq: 0,
+            command: WireCommand::ConfigureEkf(s),
+        })
+        .into_iter()
+        .collect();
+    out.push(ToDevice::Command {
         seq: 0,
         command: WireCommand::Reset {
             x: start.x as f32,
             y: start.y as f32,
             theta: start.theta as f32,
         },
-    }];
+    });
     let mut to_wire = EventsToWire::new();
     for e in &recording.events {
         out.extend(to_wire.push(e));
@@ -288,6 +296,11 @@ pub struct Comparison {
     pub corrupted_frames: usize,
     /// Bad frames the device counted, from its final status.
     pub device_frames_bad: Option<u32>,
+    /// ATE of the device's trajectory against the recording's ground truth after the SE(2)
+    /// least-squares alignment (estimates inside the ground truth's time span), m.
+    pub device_ate_se2_m: Option<f64>,
+    /// How many device estimates that ATE is over.
+    pub device_ate_poses: usize,
 }
 
 fn canonical(reply: &ToHost) -> Vec<u8> {
@@ -356,10 +369,36 @@ pub fn tum(replies: &[ToHost]) -> String {
     out
 }
 
+/// ATE (SE(2) alignment) of the estimates in `replies` against `truth`, and over how many
+/// estimates (those inside the truth's time span).
+pub fn device_ate(replies: &[ToHost], truth: &[crate::readers::TruePose]) -> (Option<f64>, usize) {
+    let (est, gt): (Vec<Pose2<f64>>, Vec<Pose2<f64>>) = replies
+        .iter()
+        .filter_map(|r| match r {
+            ToHost::Estimate(e) => {
+                let [x, y, th] = e.pose.map(f64::from);
+                let g = crate::metrics::interpolate_pose(truth, e.stamp_us as f64 * 1e-6)?;
+                Some((Pose2::new(x, y, th), g))
+            }
+            _ => None,
+        })
+        .unzip();
+    let (_, se2) = crate::metrics::transforms(&est, &gt);
+    let ate = se2.and_then(|t| crate::metrics::position_rmse(&t, &est, &gt));
+    (ate, est.len())
+}
+
 /// `host-sim hil`.
 pub fn run_cli(args: &HilArgs, quiet: bool) -> Result<()> {
     let recording = crate::readers::read(&args.dataset, args.robot)?;
-    let messages = messages_for(&recording);
+    let settings = if args.dataset_settings {
+        let family = args.dataset.family();
+        let tuned = crate::config::Settings::load_for(family, args.config.as_deref(), None)?;
+        Some(EkfSettings::from_config(&tuned.ekf_config::<f32>()))
+    } else {
+        None
+    };
+    let messages = messages_for(&recording, settings);
     let (bytes, corrupted) =
         encode_all_corrupted(&messages, args.corrupt_frames, args.corrupt_seed);
     let host = host_replies(&bytes);
@@ -380,6 +419,8 @@ pub fn run_cli(args: &HilArgs, quiet: bool) -> Result<()> {
     };
     let mut comparison = compare(messages.len(), &run, &host);
     comparison.corrupted_frames = corrupted;
+    (comparison.device_ate_se2_m, comparison.device_ate_poses) =
+        device_ate(&run.replies, &recording.ground_truth);
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let report = args.out.join("hil.json");
@@ -388,11 +429,15 @@ pub fn run_cli(args: &HilArgs, quiet: bool) -> Result<()> {
     if !quiet {
         println!(
             "{} of {} replies received, {} identical to the host bit for bit; max pose \
-             difference {:?}; {:.1} s; report in {}",
+             difference {:?}; device ATE(se2) {} over {} estimates; {:.1} s; report in {}",
             comparison.received,
             comparison.expected,
             comparison.identical,
             comparison.max_pose_difference,
+            comparison
+                .device_ate_se2_m
+                .map_or_else(|| "–".to_string(), |a| format!("{a:.4} m")),
+            comparison.device_ate_poses,
             comparison.seconds,
             report.display()
         );

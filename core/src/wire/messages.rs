@@ -6,6 +6,11 @@
 //! each estimate names the `seq` of the event it answers, so the host can stream without
 //! waiting for replies.
 
+use crate::ekf::{CovarianceUpdate, EkfConfig};
+use crate::gate::ChiSquareGate;
+use crate::geometry::Pose2;
+use crate::motion::{IncrementNoise, VelocityNoise};
+use crate::sensors::range_bearing::RangeBearingSensor;
 use heapless::Vec;
 use serde::{Deserialize, Serialize};
 
@@ -77,6 +82,99 @@ pub enum Command {
     SelectEstimator(EstimatorKind),
     /// Answer with a [`ToHost::Status`].
     ReportStatus,
+    /// Replace the EKF's settings (noise, gate, sensor mount, update form), for the running
+    /// filter (its map and pose are kept) and for every later reset. Settings that are not
+    /// valid ([`EkfConfig::is_valid`]) are refused: counted in [`Status::rejected`], the
+    /// settings unchanged.
+    ConfigureEkf(EkfSettings),
+}
+
+/// The EKF's settings on the wire: [`EkfConfig<f32>`] field by field (see its fields for
+/// the meaning and units of each).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EkfSettings {
+    /// [`IncrementNoise`]: translation std (m), per metre, rotation std (rad), per
+    /// radian, per metre.
+    pub increment_noise: [f32; 5],
+    /// [`VelocityNoise`]: linear std (m/s), per m/s, angular std (rad/s), per rad/s, per
+    /// m/s.
+    pub velocity_noise: [f32; 5],
+    /// Standard deviation of measured ranges, m.
+    pub range_std: f32,
+    /// Standard deviation of measured bearings, rad.
+    pub bearing_std: f32,
+    /// Mount of the range-bearing sensor on the robot: x, y (m), yaw (rad).
+    pub sensor_mount: [f32; 3],
+    /// Gate on the squared Mahalanobis distance.
+    pub gate_threshold: f32,
+    /// `true`: the Joseph form; `false`: the optimal-gain (symmetric) form.
+    pub joseph_form: bool,
+}
+
+impl EkfSettings {
+    /// The settings of `config`.
+    pub fn from_config(config: &EkfConfig<f32>) -> Self {
+        let (i, v, m) = (
+            &config.increment_noise,
+            &config.velocity_noise,
+            &config.sensor.mount,
+        );
+        Self {
+            increment_noise: [
+                i.translation_std,
+                i.translation_std_per_metre,
+                i.rotation_std,
+                i.rotation_std_per_radian,
+                i.rotation_std_per_metre,
+            ],
+            velocity_noise: [
+                v.linear_std,
+                v.linear_std_per_mps,
+                v.angular_std,
+                v.angular_std_per_radps,
+                v.angular_std_per_mps,
+            ],
+            range_std: config.range_std,
+            bearing_std: config.bearing_std,
+            sensor_mount: [m.x, m.y, m.theta],
+            gate_threshold: config.gate.threshold,
+            joseph_form: config.covariance_update == CovarianceUpdate::Joseph,
+        }
+    }
+
+    /// The configuration these settings describe (not checked: see
+    /// [`EkfConfig::is_valid`]).
+    pub fn to_config(&self) -> EkfConfig<f32> {
+        let [ts, tpm, rs, rpr, rpm] = self.increment_noise;
+        let [ls, lpm, as_, apr, apm] = self.velocity_noise;
+        let [mx, my, mt] = self.sensor_mount;
+        EkfConfig {
+            increment_noise: IncrementNoise {
+                translation_std: ts,
+                translation_std_per_metre: tpm,
+                rotation_std: rs,
+                rotation_std_per_radian: rpr,
+                rotation_std_per_metre: rpm,
+            },
+            velocity_noise: VelocityNoise {
+                linear_std: ls,
+                linear_std_per_mps: lpm,
+                angular_std: as_,
+                angular_std_per_radps: apr,
+                angular_std_per_mps: apm,
+            },
+            range_std: self.range_std,
+            bearing_std: self.bearing_std,
+            sensor: RangeBearingSensor::new(Pose2::new(mx, my, mt)),
+            gate: ChiSquareGate::from_threshold(self.gate_threshold),
+            covariance_update: if self.joseph_form {
+                CovarianceUpdate::Joseph
+            } else {
+                CovarianceUpdate::Symmetric
+            },
+        }
+    }
 }
 
 /// A part of one lidar scan: `ranges_mm[i]` is beam `beam_offset + i` of `beam_total`,

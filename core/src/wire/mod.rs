@@ -49,8 +49,8 @@ pub use frame::{
     encode_frame,
 };
 pub use messages::{
-    Command, Estimate, EstimatorKind, Odometry, SCAN_CHUNK_BEAMS, ScanChunk, Status, StepResult,
-    ToDevice, ToHost,
+    Command, EkfSettings, Estimate, EstimatorKind, Odometry, SCAN_CHUNK_BEAMS, ScanChunk, Status,
+    StepResult, ToDevice, ToHost,
 };
 pub use scan::{Scan, ScanAssembler, ScanError};
 pub use session::{GridEstimator, GridSetup, MAX_SCAN_BEAMS, Session};

@@ -368,6 +368,15 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
                 self.reset(Pose2::new(0.0, 0.0, 0.0));
             }
             Command::ReportStatus => {}
+            Command::ConfigureEkf(settings) => {
+                // Taken by the running filter and kept for every later reset.
+                let config = settings.to_config();
+                if self.ekf.set_config(config).is_ok() {
+                    self.ekf_config = config;
+                } else {
+                    self.status.rejected = self.status.rejected.saturating_add(1);
+                }
+            }
         }
         ToHost::Status {
             seq,
@@ -444,6 +453,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
 mod tests {
     use super::*;
     use crate::ekf::state_dim;
+    use crate::wire::EkfSettings;
     use crate::wire::encode_frame;
 
     fn frames(msgs: &[ToDevice]) -> std::vec::Vec<u8> {
@@ -533,6 +543,53 @@ mod tests {
         assert_eq!(last.status.events, 7);
         assert_eq!(last.status.rejected, 1);
         assert_eq!(last.status.frames_ok, 7);
+    }
+
+    #[test]
+    fn ekf_settings_from_the_wire_replace_the_configuration() {
+        let mut ekf = EkfSlam::<f32, { state_dim(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut session = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+        let mut wanted = EkfConfig::MICROCONTROLLER;
+        wanted.range_std = 0.123;
+        wanted.gate = crate::gate::ChiSquareGate::from_threshold(7.5);
+        wanted.sensor =
+            crate::sensors::range_bearing::RangeBearingSensor::new(Pose2::new(0.1, -0.02, 0.05));
+        let settings = EkfSettings::from_config(&wanted);
+        assert_eq!(settings.to_config(), wanted);
+        let mut bad = settings;
+        bad.bearing_std = f32::NAN;
+        let bytes = frames(&[
+            ToDevice::Command {
+                seq: 1,
+                command: Command::ConfigureEkf(settings),
+            },
+            ToDevice::Command {
+                seq: 2,
+                command: Command::ConfigureEkf(bad),
+            },
+        ]);
+        let replies: std::vec::Vec<_> = bytes.iter().filter_map(|&b| session.receive(b)).collect();
+        let statuses: std::vec::Vec<_> = replies
+            .iter()
+            .map(|r| match r {
+                ToHost::Status { seq, status, .. } => (*seq, status.rejected),
+                other => panic!("{other:?}"),
+            })
+            .collect();
+        // The valid settings are taken, the NaN ones refused and counted.
+        assert_eq!(statuses, [(1, 0), (2, 1)]);
+        // A reset keeps them.
+        let reset = frames(&[ToDevice::Command {
+            seq: 3,
+            command: Command::Reset {
+                x: 0.0,
+                y: 0.0,
+                theta: 0.0,
+            },
+        }]);
+        assert_eq!(reset.iter().filter_map(|&b| session.receive(b)).count(), 1);
+        drop(session);
+        assert_eq!(*ekf.config(), wanted);
     }
 
     #[test]
