@@ -4,7 +4,7 @@
 //! `cargo run -p microslam-replay-tests --example fuzz_seeds -- fuzz/corpus`
 
 use microslam::wire::{
-    Command, EstimatorKind, MAX_FRAME_LEN, Odometry, ScanChunk, ToDevice, encode_frame,
+    Command, EkfSettings, EstimatorKind, MAX_FRAME_LEN, Odometry, ScanChunk, ToDevice, encode_frame,
 };
 use std::path::PathBuf;
 
@@ -81,6 +81,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ToDevice::Command {
             seq: 9,
             command: Command::ReportStatus,
+        },
+        ToDevice::Command {
+            seq: 10,
+            command: Command::ConfigureEkf(EkfSettings::from_config(
+                &microslam::ekf::EkfConfig::MICROCONTROLLER,
+            )),
         },
     ];
     let mut stream = Vec::new();
