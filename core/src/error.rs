@@ -28,6 +28,9 @@ pub enum EkfError {
     SingularInnovation,
     /// The step would leave a non-finite value in the state; it was not applied.
     NumericalFailure,
+    /// A measurement with a bearing beyond one turn (`MAX_BEARING` of
+    /// `sensors::range_bearing`): a corrupted reading.
+    InvalidBearing,
 }
 
 impl fmt::Display for EkfError {
@@ -42,6 +45,7 @@ impl fmt::Display for EkfError {
             Self::MapFull => "landmark table is full",
             Self::SingularInnovation => "innovation covariance is not positive definite",
             Self::NumericalFailure => "step would make the state non-finite",
+            Self::InvalidBearing => "measured bearing is beyond one turn (±2π)",
         })
     }
 }

@@ -109,8 +109,12 @@ pub fn ekf_steps(data: &[u8]) {
         let finite = a.is_finite() && b.is_finite() && c.is_finite();
         let before = (ekf.active_mean().to_vec(), dense(&ekf));
         let index = usize::from(op >> 3);
-        // What the EKF accepts as a sighting: finite, range within 5 cm ..= 1 km.
-        let valid_z = a.is_finite() && b.is_finite() && (0.05..=1e3).contains(&a);
+        // What the EKF accepts as a sighting: finite, range within 5 cm ..= 1 km, bearing
+        // within one turn.
+        let valid_z = a.is_finite()
+            && b.is_finite()
+            && (0.05..=1e3).contains(&a)
+            && b.abs() <= std::f32::consts::TAU;
         let (refused, must_refuse) = match op % 6 {
             0 => (ekf.predict_velocity(a, b, c).is_err(), !finite || c < 0.0),
             1 => (

@@ -668,6 +668,9 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         if !(z.range.finite() && z.bearing.finite()) {
             return Err(EkfError::NonFiniteInput);
         }
+        if z.bearing.abs() > T::lit(crate::sensors::range_bearing::MAX_BEARING) {
+            return Err(EkfError::InvalidBearing);
+        }
         if !z.is_valid() {
             return Err(EkfError::InvalidRange);
         }

@@ -30,6 +30,13 @@ pub const MIN_RANGE: f64 = 0.05;
 /// next to its along-ray variance in `f32` (a 50 km sighting is not).
 pub const MAX_RANGE: f64 = 1.0e3;
 
+/// Largest bearing magnitude the model accepts, radians: one turn either way, so that
+/// sensors reporting in (−π, π] or [0, 2π) both fit. A larger bearing is no sensor's
+/// reading but a corrupted value — in `f32` a bearing of 10⁸ rad has no fractional part
+/// at all — and such sightings are refused (the fuzzer drove a lost robot's `f32`
+/// covariance indefinite with a stream of them).
+pub const MAX_BEARING: f64 = core::f64::consts::TAU;
+
 /// A range-bearing measurement: range in metres, bearing in radians (CCW positive).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -51,13 +58,14 @@ impl<T: Real> RangeBearing<T> {
         Vector2::new(self.range, self.bearing)
     }
 
-    /// `true` when both components are finite and the range within
-    /// [`MIN_RANGE`]`..=`[`MAX_RANGE`].
+    /// `true` when both components are finite, the range within
+    /// [`MIN_RANGE`]`..=`[`MAX_RANGE`] and the bearing within ±[`MAX_BEARING`].
     pub fn is_valid(&self) -> bool {
         self.range.finite()
             && self.bearing.finite()
             && self.range >= T::lit(MIN_RANGE)
             && self.range <= T::lit(MAX_RANGE)
+            && self.bearing.abs() <= T::lit(MAX_BEARING)
     }
 }
 
@@ -289,5 +297,8 @@ mod tests {
         );
         assert!(!RangeBearing::new(0.0, 0.1).is_valid());
         assert!(!RangeBearing::new(1.0, f64::NAN).is_valid());
+        assert!(RangeBearing::new(1.0, -6.2).is_valid());
+        assert!(!RangeBearing::new(1.0, 6.3).is_valid());
+        assert!(!RangeBearing::new(1.0, -4.9e13).is_valid());
     }
 }
