@@ -195,9 +195,14 @@ fn joseph_form_stays_psd_for_a_lost_robot_seeing_one_landmark_again() {
         .unwrap();
     ekf.predict_velocity(12.078369, 12.078431, 12.078431)
         .unwrap();
-    let landmark = ekf.add_landmark(&RangeBearing::new(12.078431, 25.031862));
+    // The fuzzer's bearings were 25.031862 and 12.078431 rad; bearings beyond one turn
+    // are refused now, so the same directions are given within one turn (−6π, −2π).
+    let landmark = ekf.add_landmark(&RangeBearing::new(
+        12.078431,
+        25.031862 - 6.0 * core::f32::consts::PI,
+    ));
     let landmark = landmark.unwrap();
-    let sighting = RangeBearing::new(12.078431, 12.078431);
+    let sighting = RangeBearing::new(12.078431, 12.078431 - 2.0 * core::f32::consts::PI);
     let mut worst = f64::INFINITY;
     for step in 0..6 {
         if step == 3 {
