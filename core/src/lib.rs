@@ -14,8 +14,8 @@
 //!   log-odds [`grid::OccupancyGrid`] (SLAM) or a fixed, borrowed map (localization, e.g.
 //!   from flash); wheel odometry, IMU yaw-rate filtering and stream alignment in
 //!   [`sensors`].
-//! - [`event::Event`]: one time-stamped sensor sample; readers produce them, estimators
-//!   consume them.
+//! - [`event::Event`]: one time-stamped sensor sample; readers produce them, and
+//!   [`feed::EventFeed`] turns a stream of them into estimator steps.
 //! - `wire` (feature `wire`): the messages between a host and the device on a serial line,
 //!   with a streaming, allocation-free frame decoder.
 //!
@@ -57,6 +57,7 @@ pub mod association;
 pub mod ekf;
 pub mod error;
 pub mod event;
+pub mod feed;
 pub mod gate;
 pub mod geometry;
 pub mod grid;
