@@ -148,14 +148,13 @@ fn main() {
 
 #[cfg(test)]
 mod tests {
-    /// `cargo test -p microslam --example ekf_events` runs the example and checks that
-    /// the landmarks pull the estimate back where dead reckoning drifts away.
+    /// `cargo test -p microslam --example ekf_events` runs the example (deterministic, no
+    /// noise) and checks that the landmarks hold the estimate where dead reckoning drifts
+    /// away: measured 0.0154 m against 1.8472 m; bound = measured + 5 %.
     #[test]
     fn slam_beats_dead_reckoning() {
         let (slam, dead_reckoning) = super::run().expect("the example's drive is valid");
-        assert!(
-            slam < 0.25 * dead_reckoning,
-            "EKF {slam} m, dead reckoning {dead_reckoning} m"
-        );
+        assert!(slam <= 0.0162, "EKF {slam} m");
+        assert!(dead_reckoning >= 1.75, "dead reckoning {dead_reckoning} m");
     }
 }

@@ -85,12 +85,12 @@ fn main() {
 
 #[cfg(test)]
 mod tests {
+    /// Deterministic: the start is 0.2973 m off; the worst error after a scan measured
+    /// 0.0458 m; bound = measured + 5 %.
     #[test]
     fn the_localizer_finds_the_robot_on_the_map() {
         let (start, worst) = super::run().expect("the example's drive is valid");
-        assert!(
-            worst < 0.25 * start,
-            "start {start} m off, worst error after a scan {worst} m"
-        );
+        assert!(start > 0.29, "the start is {start} m off");
+        assert!(worst <= 0.0481, "worst error after a scan {worst} m");
     }
 }
