@@ -17,11 +17,30 @@ use crate::sensors::lidar::LidarScan;
 /// `OccupancyGrid<256, 256, { occupancy_bytes(256, 256) }>`.
 ///
 /// RAM: `W · H + BITMAP` bytes plus 40 bytes (256 × 256: 65,576 bytes without the
-/// bitmap, 73,768 with it). Build it in place in a
-/// `static` with the `const fn` [`OccupancyGrid::new`], or, so that the static is all
-/// zero bytes and lands in `.bss` (no flash for initial values), with
-/// [`OccupancyGrid::zeroed`] followed by [`OccupancyGrid::init`] at start-up. No method
-/// moves the cells through the stack.
+/// bitmap, 73,768 with it). On a microcontroller, put it in a `static` built with
+/// [`OccupancyGrid::zeroed`] — all zero bytes, so it lands in `.bss` and costs no flash —
+/// and set its geometry in place at start-up with [`OccupancyGrid::init_centred`] (or
+/// [`OccupancyGrid::init`] for another origin). The `const fn`s [`OccupancyGrid::new`] and
+/// [`OccupancyGrid::centred`] give the same grid in one step, but a `static` built with
+/// them has non-zero bytes and goes to `.data` (its whole image in flash): use them on
+/// the host. No method moves the cells through the stack.
+///
+/// ```
+/// use microslam::grid::{LogOdds, OccupancyGrid};
+///
+/// type Grid = OccupancyGrid<128, 128>; // 16 KB
+/// // On a microcontroller: `static GRID: ConstStaticCell<Grid> =
+/// // ConstStaticCell::new(Grid::zeroed());` (`core/examples/statics.rs`).
+/// let mut grid = Box::new(Grid::zeroed());
+/// assert_eq!(grid.cell(0, 0), None, "no geometry yet: every cell is off the grid");
+///
+/// grid.init_centred(0.05, LogOdds::SEED)?; // 6.4 m × 6.4 m around the origin
+/// assert_eq!(grid.geometry().origin_x, -3.2);
+/// assert!(grid.set_cell(10, 20, 60));
+/// assert_eq!(grid.cell(10, 20), Some(60));
+/// assert!(grid.view().is_occupied(10, 20), "60 is above the threshold of 20");
+/// # Ok::<(), microslam::grid::GridError>(())
+/// ```
 #[derive(Clone, Debug)]
 pub struct OccupancyGrid<const W: usize, const H: usize, const BITMAP: usize = 0> {
     cells: [[i8; W]; H],

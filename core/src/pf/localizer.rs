@@ -17,6 +17,41 @@ use crate::sensors::lidar::LidarScan;
 /// search is then the sparse one, a third of the instructions for the same scores.
 ///
 /// RAM: `28·P + 24·B` bytes plus ~100; the map is not copied.
+///
+/// ```
+/// use core::f32::consts::PI;
+/// use microslam::geometry::Pose2;
+/// use microslam::grid::{GridGeometry, GridView};
+/// use microslam::pf::{GridLocalizer, GridPfConfig};
+/// use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+///
+/// // A map of 64 × 64 cells of 5 cm (e.g. a `static` array in flash, or a SLAM run's
+/// // `OccupancyGrid::cells`): a round wall of radius 1.5 m around the origin.
+/// let geometry = GridGeometry::centred(64, 64, 0.05);
+/// let mut cells = [0_i8; 64 * 64];
+/// for (i, cell) in cells.iter_mut().enumerate() {
+///     let (x, y) = geometry.cell_centre((i % 64) as i32, (i / 64) as i32);
+///     if ((x * x + y * y).sqrt() - 1.5).abs() < 0.04 {
+///         *cell = 100;
+///     }
+/// }
+/// let config = GridPfConfig::MICROCONTROLLER;
+/// let map = GridView::new(&cells, geometry, config.log_odds.occupied_above)?;
+///
+/// // Told the robot is 10 cm off the centre; it is at the centre.
+/// let mut localizer = GridLocalizer::<32, 90>::new(map, config, Pose2::new(0.1, 0.0, 0.0))?;
+/// let lidar = LidarGeometry {
+///     first_angle: -PI,
+///     angle_increment: 2.0 * PI / 90.0,
+///     min_range: 0.1,
+///     max_range: 8.0,
+///     no_return_range: f32::INFINITY,
+///     mount: Pose2::new(0.0, 0.0, 0.0),
+/// };
+/// let report = localizer.observe(&LidarScan::new(&[1.5_f32; 90], lidar))?;
+/// assert!(report.pose.x.abs() < 0.05 && report.pose.y.abs() < 0.05);
+/// # Ok::<(), Box<dyn core::error::Error>>(())
+/// ```
 pub struct GridLocalizer<'m, const P: usize, const B: usize> {
     map: GridView<'m>,
     filter: ParticleFilter<P>,

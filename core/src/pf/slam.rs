@@ -12,13 +12,47 @@ use crate::sensors::lidar::LidarScan;
 /// (with an occupied-cell bitmap of `BITMAP` bytes when `BITMAP > 0`, see
 /// [`OccupancyGrid`]: the shift search is then the sparse one).
 ///
-/// The grid is borrowed so that it can live in a `static` (built in place with
-/// [`OccupancyGrid::new`]); the filter itself is small: `28·P + 24·B` bytes plus ~100
-/// (P = 32, B = 90: ~3.2 KB).
+/// The grid is borrowed so that it can live in a `static` (all zero bytes with
+/// [`OccupancyGrid::zeroed`], given its geometry in place with
+/// [`OccupancyGrid::init_centred`]); the filter itself is small: `28·P + 24·B` bytes plus
+/// ~100 (P = 32, B = 90: ~3.2 KB).
 ///
 /// The first scan builds the map at the start pose; every later scan is scored by all
 /// particles (each moved to its best shift) and then written into the grid at the pose of
 /// the heaviest particle, which is the estimate.
+///
+/// ```
+/// use core::f32::consts::PI;
+/// use microslam::geometry::Pose2;
+/// use microslam::grid::OccupancyGrid;
+/// use microslam::pf::{GridPfConfig, GridSlam};
+/// use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+///
+/// let config = GridPfConfig::MICROCONTROLLER;
+/// // 128 × 128 cells of 5 cm (16 KB): on a microcontroller a `static`
+/// // (`core/examples/statics.rs`), here a box.
+/// let mut grid = Box::new(OccupancyGrid::<128, 128>::zeroed());
+/// grid.init_centred(config.resolution, config.log_odds)?;
+/// // 32 particles, scans of at most 90 beams.
+/// let mut slam = GridSlam::<_, _, 32, 90>::new(&mut grid, config, Pose2::new(0.0, 0.0, 0.0))?;
+///
+/// // A 360° lidar at the robot's centre in a round room of radius 2 m.
+/// let lidar = LidarGeometry {
+///     first_angle: -PI,
+///     angle_increment: 2.0 * PI / 90.0,
+///     min_range: 0.1,
+///     max_range: 8.0,
+///     no_return_range: f32::INFINITY,
+///     mount: Pose2::new(0.0, 0.0, 0.0),
+/// };
+/// let ranges = [2.0_f32; 90];
+/// slam.observe(&LidarScan::new(&ranges, lidar))?; // the first scan starts the map
+/// slam.predict_velocity(0.1, 0.0, 0.1)?; // odometry says: 1 cm forward
+/// let report = slam.observe(&LidarScan::new(&ranges, lidar))?; // ...the walls say: no
+/// assert!(report.pose.x.abs() < 0.05 && report.pose.y.abs() < 0.05);
+/// assert_eq!(slam.scans(), 2);
+/// # Ok::<(), Box<dyn core::error::Error>>(())
+/// ```
 pub struct GridSlam<
     'g,
     const W: usize,
