@@ -1,7 +1,7 @@
 //! MRCLAM dataset 6, robot 1 (known ids, f64) with faults injected into the event stream
 //! (`host-sim replay --faults`): the replay completes, the counters account for every
 //! corrupted reading, and the accuracy degrades gracefully. Bounds are the measured
-//! figures (README, "Reliability") plus a small margin.
+//! figures (docs/reliability.md) plus a small margin.
 
 use host_sim::cli::{AssociationMode, Precision};
 use host_sim::config::Settings;

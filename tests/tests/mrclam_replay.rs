@@ -1,6 +1,6 @@
 //! MRCLAM dataset 6, robot 1, replayed through the landmark EKF-SLAM with the built-in
 //! settings (`host-sim/configs/mrclam.toml`). Bounds are the figures measured when the
-//! settings were chosen, plus a small margin (see README, "Landmark SLAM on real data").
+//! settings were chosen, plus a small margin (see docs/results.md).
 
 use host_sim::cli::{AssociationMode, Precision};
 use host_sim::config::Settings;
