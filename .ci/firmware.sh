@@ -13,7 +13,9 @@ cd "$(dirname "$0")/.."
 step() { printf '\n==> %s\n' "$*"; }
 TARGET=thumbv7em-none-eabihf
 PROFILE=firmware
-OUT=target/firmware-elf
+# Cargo's target directory: $CARGO_TARGET_DIR when set.
+TARGET_DIR="${CARGO_TARGET_DIR:-target}"
+OUT="$TARGET_DIR/firmware-elf"
 BUDGET=firmware-example/budget.txt
 TOLERANCE_PERCENT=2
 mkdir -p "$OUT"
@@ -35,13 +37,13 @@ cargo clippy -p microslam --locked --target "$TARGET" --features wire,defmt -- -
 
 step "build: stm32f411"
 cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --no-default-features --features stm32f411
-cp "target/$TARGET/$PROFILE/firmware-example" "$OUT/stm32f411.elf"
+cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/stm32f411.elf"
 
 step "build: qemu (firmware and cost binaries)"
 cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --bins
-cp "target/$TARGET/$PROFILE/firmware-example" "$OUT/qemu.elf"
-cp "target/$TARGET/$PROFILE/cost" "$OUT/cost.elf"
-cp "target/$TARGET/$PROFILE/cost_grid" "$OUT/cost_grid.elf"
+cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/qemu.elf"
+cp "$TARGET_DIR/$TARGET/$PROFILE/cost" "$OUT/cost.elf"
+cp "$TARGET_DIR/$TARGET/$PROFILE/cost_grid" "$OUT/cost_grid.elf"
 
 measured="$OUT/measured.txt"
 : >"$measured"
@@ -54,7 +56,7 @@ done
 
 step "QEMU: firmware equals the host bit for bit (EKF and grid drives, MRCLAM 6)"
 log="$OUT/hil.log"
-FIRMWARE_ELF="$PWD/$OUT/qemu.elf" cargo test -p microslam-replay-tests --locked \
+FIRMWARE_ELF="$(cd "$OUT" && pwd)/qemu.elf" cargo test -p microslam-replay-tests --locked \
     --test firmware_qemu -- --ignored --nocapture 2>&1 | tee "$log"
 # The high-water mark of each QEMU run (EKF drive, grid drive): the larger one.
 stack=$(sed -n 's/^firmware stack peak\( with grid\)\{0,1\}: \([0-9]*\) bytes$/\2/p' "$log" | sort -n | tail -1)

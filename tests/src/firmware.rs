@@ -17,13 +17,30 @@ pub fn workspace_root() -> PathBuf {
         .unwrap_or_default()
 }
 
-/// The firmware ELF: `$FIRMWARE_ELF`, else the `firmware` profile build in the workspace's
-/// target directory (`.ci/firmware.sh` builds it).
+/// The firmware ELF: `$FIRMWARE_ELF`, else the `firmware` profile build in the target
+/// directory (`$CARGO_TARGET_DIR`, default `<workspace>/target`; `.ci/firmware.sh` builds it).
 pub fn firmware_elf() -> PathBuf {
-    std::env::var_os("FIRMWARE_ELF").map_or_else(
-        || workspace_root().join("target/thumbv7em-none-eabihf/firmware/firmware-example"),
-        PathBuf::from,
+    firmware_elf_from(
+        std::env::var_os("FIRMWARE_ELF"),
+        std::env::var_os("CARGO_TARGET_DIR"),
     )
+}
+
+/// [`firmware_elf`] given the values of `$FIRMWARE_ELF` and `$CARGO_TARGET_DIR` (a
+/// relative target directory is relative to the workspace root, as for cargo run there).
+pub fn firmware_elf_from(
+    firmware_elf: Option<std::ffi::OsString>,
+    target_dir: Option<std::ffi::OsString>,
+) -> PathBuf {
+    if let Some(elf) = firmware_elf.filter(|v| !v.is_empty()) {
+        return PathBuf::from(elf);
+    }
+    let target = target_dir
+        .filter(|v| !v.is_empty())
+        .map_or_else(|| PathBuf::from("target"), PathBuf::from);
+    workspace_root()
+        .join(target)
+        .join("thumbv7em-none-eabihf/firmware/firmware-example")
 }
 
 pub use host_sim::hil::{LinkRun as QemuRun, encode_all, host_replies};
