@@ -1,8 +1,8 @@
 //! Sensor events: one time-stamped sample from one sensor.
 //!
 //! Readers (dataset files on the host, the wire decoder on the firmware) turn their input
-//! into a time-ordered stream of [`Event`]s; estimators consume events and never read
-//! files or ports. The set of sensor kinds is open ([`EventKind`] is `#[non_exhaustive]`).
+//! into a time-ordered stream of [`Event`]s; [`crate::feed::EventFeed`] turns the stream
+//! into estimator steps, so estimators never read files or ports. The set of sensor kinds is open ([`EventKind`] is `#[non_exhaustive]`).
 //!
 //! **Lidar scans are not events.** They travel beside this stream as a
 //! [`LidarScan`](crate::sensors::lidar::LidarScan) that borrows its ranges, handed straight

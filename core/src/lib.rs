@@ -39,6 +39,10 @@
 //! # Ok::<(), microslam::EkfError>(())
 //! ```
 //!
+//! Runnable examples are in `core/examples/` (`cargo run -p microslam --example NAME`):
+//! `ekf_events` (EKF-SLAM with known ids from an event stream), `grid_slam`, `localizer`
+//! (on a map in flash) and `statics` (every estimator in a `static`).
+//!
 //! ## Features
 //! - `std`: build against the standard library (host tools). Off by default.
 //! - `defmt`: `defmt::Format` for public types and log lines through defmt.
