@@ -8,7 +8,9 @@
 //! translational `|Δxy|` (m) and absolute rotational `|wrap(Δθ)|` (degrees). Reported as
 //! mean and (population) standard deviation over the used relations.
 
+use crate::drivers::grid::GridRun;
 use std::io::BufRead;
+use std::path::{Path, PathBuf};
 
 /// One relation: the pose of the scan at `t2` seen from the scan at `t1`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -137,6 +139,31 @@ pub fn evaluate(trajectory: &[(f64, [f64; 3])], relations: &[Relation], tol: f64
         rot_mean_deg: rm,
         rot_std_deg: rs,
     }
+}
+
+/// The relation error of a run's trajectory (stamps matched within 1 ms).
+pub fn relation_error(run: &GridRun, rels: &[Relation]) -> RelationError {
+    let traj: Vec<(f64, [f64; 3])> = run
+        .trajectory
+        .iter()
+        .map(|(t, p)| (*t, [f64::from(p.x), f64::from(p.y), f64::from(p.theta)]))
+        .collect();
+    evaluate(&traj, rels, 1e-3)
+}
+
+/// The relations file to use: the one given, else a single `*.relations` file next to
+/// the log, else none.
+pub fn find_relations(log_path: &Path, given: Option<&Path>) -> Option<PathBuf> {
+    if let Some(g) = given {
+        return Some(g.to_path_buf());
+    }
+    let dir = log_path.parent()?;
+    let mut found = std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "relations"));
+    let first = found.next()?;
+    found.next().is_none().then_some(first)
 }
 
 #[cfg(test)]

@@ -110,7 +110,8 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
     }
 
     let first = events.first().map(|e| e.stamp);
-    let initial_pose = first.and_then(|t| crate::metrics::interpolate_pose(&ground_truth, t));
+    let initial_pose =
+        first.and_then(|t| crate::domain::recording::interpolate_pose(&ground_truth, t));
     let name = format!(
         "mrclam/{}/robot{robot}",
         dir.file_name()

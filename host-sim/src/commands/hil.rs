@@ -26,8 +26,8 @@ use microslam::wire::{
 };
 use serde::Serialize;
 
-use crate::cli::HilArgs;
-use crate::readers::Recording;
+use crate::domain::recording::Recording;
+use crate::inputs::readers::DatasetSpec;
 
 /// Landmarks of the firmware's EKF (`firmware_example::config::EKF_LANDMARKS`).
 pub const FIRMWARE_LANDMARKS: usize = 32;
@@ -371,13 +371,17 @@ pub fn tum(replies: &[ToHost]) -> String {
 
 /// ATE (SE(2) alignment) of the estimates in `replies` against `truth`, and over how many
 /// estimates (those inside the truth's time span).
-pub fn device_ate(replies: &[ToHost], truth: &[crate::readers::TruePose]) -> (Option<f64>, usize) {
+pub fn device_ate(
+    replies: &[ToHost],
+    truth: &[crate::domain::recording::TruePose],
+) -> (Option<f64>, usize) {
     let (est, gt): (Vec<Pose2<f64>>, Vec<Pose2<f64>>) = replies
         .iter()
         .filter_map(|r| match r {
             ToHost::Estimate(e) => {
                 let [x, y, th] = e.pose.map(f64::from);
-                let g = crate::metrics::interpolate_pose(truth, e.stamp_us as f64 * 1e-6)?;
+                let g =
+                    crate::domain::recording::interpolate_pose(truth, e.stamp_us as f64 * 1e-6)?;
                 Some((Pose2::new(x, y, th), g))
             }
             _ => None,
@@ -388,12 +392,40 @@ pub fn device_ate(replies: &[ToHost], truth: &[crate::readers::TruePose]) -> (Op
     (ate, est.len())
 }
 
+/// Options of `host-sim hil`: exactly one of `qemu` and `serial`.
+#[derive(Debug, Clone)]
+pub struct HilOptions {
+    /// Run this firmware ELF under `qemu-system-arm` (mps2-an386).
+    pub qemu: Option<PathBuf>,
+    /// Talk to a board on this serial port (e.g. /dev/ttyACM0).
+    pub serial: Option<String>,
+    /// Baud rate of the serial port.
+    pub baud: u32,
+    /// Dataset: `mrclam:<dir>`.
+    pub dataset: DatasetSpec,
+    /// Robot whose log is streamed.
+    pub robot: u8,
+    /// Output folder: hil.json (the comparison) and firmware.tum (the device's trajectory).
+    pub out: PathBuf,
+    /// Give up waiting for replies after this many seconds.
+    pub timeout_s: u64,
+    /// Fraction of the frames sent corrupted (one byte each).
+    pub corrupt_frames: f64,
+    /// Seed of the frame corruption.
+    pub corrupt_seed: u64,
+    /// Send the dataset's tuned EKF settings to the device first (`ConfigureEkf`).
+    pub dataset_settings: bool,
+    /// EKF settings (TOML) laid over the dataset's defaults, with `dataset_settings`.
+    pub config: Option<PathBuf>,
+}
+
 /// `host-sim hil`.
-pub fn run_cli(args: &HilArgs, quiet: bool) -> Result<()> {
-    let recording = crate::readers::read(&args.dataset, args.robot)?;
+pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
+    let recording = crate::inputs::readers::read(&args.dataset, args.robot)?;
     let settings = if args.dataset_settings {
         let family = args.dataset.family();
-        let tuned = crate::config::Settings::load_for(family, args.config.as_deref(), None)?;
+        let tuned =
+            crate::domain::config::Settings::load_for(family, args.config.as_deref(), None)?;
         Some(EkfSettings::from_config(&tuned.ekf_config::<f32>()))
     } else {
         None

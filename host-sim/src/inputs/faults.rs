@@ -16,7 +16,7 @@
 //! # Ok::<(), anyhow::Error>(())
 //! ```
 
-use crate::readers::carmen::LaserMessage;
+use crate::inputs::readers::carmen::LaserMessage;
 use anyhow::{Context, Result, bail};
 use microslam::event::{Event, EventKind};
 use rand_core::SeedableRng;
