@@ -5,7 +5,7 @@
 //! [`inject_scans`] on the laser messages of a CARMEN log.
 //!
 //! ```
-//! use host_sim::faults::{inject, FaultRates};
+//! use host_sim::inputs::faults::{inject, FaultRates};
 //! use microslam::event::{Event, EventKind};
 //!
 //! let events: Vec<Event<f64>> =
