@@ -23,12 +23,12 @@ mod assignment;
 pub mod grid;
 pub mod relations;
 
-pub use alignment::{Rigid, apply, first_pose, se2_least_squares, wrap};
+pub use alignment::{Rigid, apply, first_pose, se2_least_squares};
 pub use assignment::{max_gain, min_cost};
 
 use crate::domain::recording::{Recording, TruthCursor};
 use crate::drivers::ekf::ReplayRun;
-use microslam::geometry::Pose2;
+use microslam::geometry::{Pose2, wrap_near};
 use nalgebra::{Matrix3, Vector2, Vector3};
 use serde::Serialize;
 
@@ -216,7 +216,7 @@ fn yaw_rmse_deg(t: &Pose2<f64>, est: &[Pose2<f64>], gt: &[Pose2<f64>]) -> Option
     let sq: Vec<f64> = est
         .iter()
         .zip(gt)
-        .map(|(e, g)| wrap(r.apply(e).theta - g.theta).powi(2))
+        .map(|(e, g)| wrap_near(r.apply(e).theta - g.theta).powi(2))
         .collect();
     mean(&sq).map(|v| v.sqrt().to_degrees())
 }
@@ -229,7 +229,7 @@ pub fn pose_nees(est: &Pose2<f64>, truth: &Pose2<f64>, p: &[[f64; 3]; 3]) -> Opt
     let e = Vector3::new(
         truth.x - est.x,
         truth.y - est.y,
-        wrap(truth.theta - est.theta),
+        wrap_near(truth.theta - est.theta),
     );
     let v = (e.transpose() * inv * e)[(0, 0)];
     v.is_finite().then_some(v)

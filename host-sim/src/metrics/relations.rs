@@ -9,6 +9,7 @@
 //! mean and (population) standard deviation over the used relations.
 
 use crate::drivers::grid::GridRun;
+use microslam::geometry::{Pose2, wrap_angle};
 use std::io::BufRead;
 use std::path::{Path, PathBuf};
 
@@ -78,16 +79,6 @@ pub struct RelationError {
     pub rot_std_deg: f64,
 }
 
-fn wrap(a: f64) -> f64 {
-    a.sin().atan2(a.cos())
-}
-
-fn between(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    let (s, c) = a[2].sin_cos();
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    [c * dx + s * dy, -s * dx + c * dy, wrap(b[2] - a[2])]
-}
-
 fn mean_std(v: &[f64]) -> (f64, f64) {
     if v.is_empty() {
         return (f64::NAN, f64::NAN);
@@ -126,9 +117,11 @@ pub fn evaluate(trajectory: &[(f64, [f64; 3])], relations: &[Relation], tol: f64
         let (Some(i), Some(j)) = (nearest(&sorted, r.t1, tol), nearest(&sorted, r.t2, tol)) else {
             continue;
         };
-        let est = between(trajectory[i].1, trajectory[j].1);
-        et.push((est[0] - r.pose[0]).hypot(est[1] - r.pose[1]));
-        er.push(wrap(est[2] - r.pose[2]).abs().to_degrees());
+        let [a, b] =
+            [trajectory[i].1, trajectory[j].1].map(|[x, y, theta]| Pose2::new(x, y, theta));
+        let est = a.between(&b);
+        et.push((est.x - r.pose[0]).hypot(est.y - r.pose[1]));
+        er.push(wrap_angle(est.theta - r.pose[2]).abs().to_degrees());
     }
     let (tm, ts) = mean_std(&et);
     let (rm, rs) = mean_std(&er);
