@@ -1,4 +1,4 @@
-//! Hardware-in-the-loop under QEMU, through `host_sim::commands::hil`: the firmware ELF on
+//! Hardware-in-the-loop under QEMU, through `host_sim::drivers::hil`: the firmware ELF on
 //! `mps2-an386`, its UART0 on the child's stdin/stdout, semihosting (defmt) on a file so
 //! it never mixes with the frames; plus the synthetic drive of the equality test.
 
@@ -26,12 +26,12 @@ pub fn firmware_elf() -> PathBuf {
     )
 }
 
-pub use host_sim::commands::hil::{LinkRun as QemuRun, encode_all, host_replies};
+pub use host_sim::drivers::hil::{LinkRun as QemuRun, encode_all, host_replies};
 
 /// Runs `elf` under QEMU, writes `bytes` to its UART without waiting, and reads replies
 /// until `expected` have arrived (or `timeout` passes: then fewer are returned).
 pub fn run_in_qemu(elf: &Path, bytes: Vec<u8>, expected: usize, timeout: Duration) -> QemuRun {
-    host_sim::commands::hil::run_qemu(elf, bytes, expected, timeout).expect("qemu-system-arm runs")
+    host_sim::drivers::hil::run_qemu(elf, bytes, expected, timeout).expect("qemu-system-arm runs")
 }
 
 /// A deterministic drive: a robot circling twice through a ring of 12 landmarks, velocity

@@ -4,9 +4,10 @@
 //! figures (README, "Reliability") plus a small margin.
 
 use host_sim::domain::config::Settings;
+use host_sim::domain::recording::Recording;
 use host_sim::domain::{AssociationMode, Precision};
 use host_sim::inputs::faults::{FaultRates, inject};
-use host_sim::inputs::readers::{self, DatasetSpec, Recording};
+use host_sim::inputs::readers::{self, DatasetSpec};
 use host_sim::metrics::{Metrics, evaluate};
 
 fn run_with(rates: &str) -> (Metrics, host_sim::inputs::faults::FaultCounts) {

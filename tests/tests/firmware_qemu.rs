@@ -96,8 +96,8 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_a_synthetic_drive() {
 fn firmware_in_qemu_equals_host_bit_for_bit_on_mrclam_dataset6() {
     let dir = host_sim::domain::datasets::resolve("mrclam", "dataset6").expect("MRCLAM dataset 6");
     let recording = host_sim::inputs::readers::mrclam::read(&dir, 1).expect("robot 1 reads");
-    let messages = host_sim::commands::hil::messages_for(&recording, None);
-    let (bytes, corrupted) = host_sim::commands::hil::encode_all_corrupted(&messages, 0.01, 1);
+    let messages = host_sim::drivers::hil::messages_for(&recording, None);
+    let (bytes, corrupted) = host_sim::drivers::hil::encode_all_corrupted(&messages, 0.01, 1);
     assert!(corrupted > 500, "{corrupted} frames corrupted");
     let expected = host_replies(&bytes);
     assert_eq!(
@@ -128,7 +128,7 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_mrclam_dataset6() {
     );
     assert_eq!(run.bad_frames, 0);
     assert_eq!(run.replies.len(), expected.len(), "every message answered");
-    let comparison = host_sim::commands::hil::compare(messages.len(), &run, &expected);
+    let comparison = host_sim::drivers::hil::compare(messages.len(), &run, &expected);
     assert_eq!(
         comparison.identical,
         expected.len(),
@@ -308,11 +308,11 @@ fn dataset_ekf_settings_travel_over_the_wire() {
     let recording = host_sim::inputs::readers::mrclam::read(&dir, 1).expect("robot 1 reads");
     let tuned = Settings::load_for("mrclam", None, None).expect("mrclam settings");
     let settings = EkfSettings::from_config(&tuned.ekf_config::<f32>());
-    let with = host_sim::commands::hil::messages_for(&recording, Some(settings));
-    let without = host_sim::commands::hil::messages_for(&recording, None);
+    let with = host_sim::drivers::hil::messages_for(&recording, Some(settings));
+    let without = host_sim::drivers::hil::messages_for(&recording, None);
     assert_eq!(with.len(), without.len() + 1);
-    let a = host_replies(&host_sim::commands::hil::encode_all(&with));
-    let b = host_replies(&host_sim::commands::hil::encode_all(&without));
+    let a = host_replies(&host_sim::drivers::hil::encode_all(&with));
+    let b = host_replies(&host_sim::drivers::hil::encode_all(&without));
     assert_eq!(a.len(), with.len());
     match &a[0] {
         ToHost::Status { seq: 0, status, .. } => assert_eq!(status.rejected, 0),

@@ -3,8 +3,9 @@
 //! settings were chosen, plus a small margin (see README, "Landmark SLAM on real data").
 
 use host_sim::domain::config::Settings;
+use host_sim::domain::recording::Recording;
 use host_sim::domain::{AssociationMode, Precision};
-use host_sim::inputs::readers::{self, DatasetSpec, Recording};
+use host_sim::inputs::readers::{self, DatasetSpec};
 use host_sim::metrics::{Metrics, evaluate};
 use std::sync::OnceLock;
 

@@ -16,10 +16,10 @@
 //! landmark of its true sign (the landmark most of whose sightings came from that sign).
 
 use crate::domain::config::Settings;
+use crate::domain::recording::Recording;
 use crate::domain::{AssociationMode, Precision};
 use crate::drivers::ekf::{AssociationCounts, MapLandmark, PoseSample, ReplayRun};
 use crate::inputs::camera::world::{Sign, SimCamera};
-use crate::inputs::readers::Recording;
 use anyhow::{Result, bail};
 use microslam::association::{Candidates, KnownIds, LabelCheck, LandmarkLabels, Pairing};
 use microslam::ekf::{EkfSlam, UpdateOutcome, state_dim};

@@ -5,9 +5,12 @@
 //! - [`grid`]: lidar scans with odometry → grid SLAM or the grid localizer (the one grid
 //!   drive loop of `replay`, `localize` and `sim`).
 //! - [`detections`]: sign detections → range/bearing → EKF-SLAM with class hints.
+//! - [`hil`]: the host's side of hardware in the loop: the wire frames of a recording,
+//!   the QEMU and serial links, the bit-for-bit comparison of the replies.
 //! - [`texture`]: RGB-D frames + poses → the coloured floor map.
 
 pub mod detections;
 pub mod ekf;
 pub mod grid;
+pub mod hil;
 pub mod texture;

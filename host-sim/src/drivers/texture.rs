@@ -8,9 +8,9 @@
 //! 25 cm of every wall into the border cells of the floor map (the seed's Kinect looked at
 //! a floor bounded by obstacles it did not need to colour). Both are options.
 
+use crate::domain::recording::TruePose;
 use crate::domain::recording::interpolate_pose;
 use crate::inputs::camera::world::{Room, SimCamera, floor_colour, render};
-use crate::inputs::readers::TruePose;
 use microslam::geometry::Pose2;
 use microslam::sensors::camera::Camera;
 use rand_core::SeedableRng;

@@ -10,7 +10,7 @@ pub mod thor;
 
 pub use text::ReadError;
 
-pub use crate::domain::recording::{Recording, TrueLandmark, TruePose};
+use crate::domain::recording::Recording;
 
 use anyhow::{Result, bail};
 use microslam::event::Event;

@@ -21,8 +21,6 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 
 pub mod lidar_world;
 
-pub use crate::domain::config::Scenario;
-
 /// Simulates the scenario of `settings` with noise seed `seed`.
 pub fn simulate(settings: &Settings, seed: u64) -> Result<Recording> {
     let sc = settings
