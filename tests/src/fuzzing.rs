@@ -387,6 +387,35 @@ pub fn npz_reader(data: &[u8]) {
     let _ = host_sim::inputs::readers::thor::dead_reckoning(dir.path(), 20);
 }
 
+/// Fuzzes the saved-map reader of `host-sim localize`: the input up to the first `0xFF`
+/// is written as `map.yaml`, the rest as the PGM it names (`image: map.pgm` is put first
+/// so that most inputs reach the PGM parser). No panic; an error names `map.yaml` or
+/// `map.pgm`; a map read has `width · height` cells.
+pub fn map_reader(data: &[u8]) {
+    let dir = tempfile::tempdir().expect("temporary folder");
+    let cut = data.iter().position(|&b| b == 0xFF).unwrap_or(data.len());
+    let (yaml, pgm) = data.split_at(cut);
+    let mut text = b"image: map.pgm\n".to_vec();
+    text.extend_from_slice(yaml);
+    std::fs::write(dir.path().join("map.yaml"), text).expect("write fuzz file");
+    std::fs::write(dir.path().join("map.pgm"), pgm.get(1..).unwrap_or(&[]))
+        .expect("write fuzz file");
+    let log_odds = microslam::grid::LogOdds::SEED;
+    match host_sim::output::grid_map::read_map(&dir.path().join("map.yaml"), &log_odds) {
+        Ok((cells, geometry)) => {
+            assert_eq!(cells.len(), geometry.width * geometry.height);
+            assert!(geometry.resolution.is_finite() && geometry.resolution > 0.0);
+        }
+        Err(e) => {
+            let text = format!("{e:#}");
+            assert!(
+                text.contains("map.yaml") || text.contains("map.pgm"),
+                "error without a file name: {text}"
+            );
+        }
+    }
+}
+
 /// A fuzz target's check: panics when an invariant breaks.
 pub type FuzzCheck = fn(&[u8]);
 
@@ -397,6 +426,7 @@ pub const TARGETS: &[(&str, FuzzCheck)] = &[
     ("relations_reader", relations_reader),
     ("mrclam_reader", mrclam_reader),
     ("npz_reader", npz_reader),
+    ("map_reader", map_reader),
     ("ekf_steps", ekf_steps),
     ("wire_session", wire_session),
     ("wire_decoder", wire_decoder),
