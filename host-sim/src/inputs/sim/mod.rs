@@ -14,7 +14,8 @@ use anyhow::{Context, Result, bail};
 use microslam::event::{Event, EventKind, Identity, Sighting};
 use microslam::geometry::{Pose2, wrap_angle};
 use microslam::motion::integrate_velocity;
-use microslam::sensors::range_bearing::RangeBearing;
+use microslam::sensors::range_bearing::{RangeBearing, RangeBearingSensor};
+use nalgebra::Vector2;
 use rand_core::SeedableRng;
 use rand_distr::{Distribution, Normal, Uniform};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -63,6 +64,8 @@ pub fn simulate(settings: &Settings, seed: u64) -> Result<Recording> {
     let frame_every = (sc.odometry_rate_hz / sc.sighting_rate_hz).round().max(1.0) as usize;
     let steps = (sc.duration_s * sc.odometry_rate_hz).round() as usize;
     let half_fov = sc.fov_deg.to_radians() / 2.0;
+    // Sightings are taken from the sensor's mount, as the filter models them.
+    let sensor = RangeBearingSensor::new(Pose2::new(s.mount[0], s.mount[1], s.mount[2]));
     let mut pose = Pose2::new(sc.loop_radius_m, 0.0, std::f64::consts::FRAC_PI_2);
     let mut events = Vec::with_capacity(steps * 2);
     let mut truth = Vec::with_capacity(steps);
@@ -88,9 +91,11 @@ pub fn simulate(settings: &Settings, seed: u64) -> Result<Recording> {
         ));
         if k % frame_every == 0 {
             for l in &landmarks {
-                let (dx, dy) = (l.position[0] - pose.x, l.position[1] - pose.y);
-                let range = dx.hypot(dy);
-                let bearing = wrap_angle(dy.atan2(dx) - pose.theta);
+                let landmark = Vector2::new(l.position[0], l.position[1]);
+                let Some(seen) = sensor.predict(&pose, &landmark) else {
+                    continue;
+                };
+                let (range, bearing) = (seen.z.range, seen.z.bearing);
                 if range > sc.max_range_m || range < s.min_range || bearing.abs() > half_fov {
                     continue;
                 }
@@ -143,5 +148,48 @@ mod tests {
             .count();
         assert!(sightings > 1000, "{sightings}");
         assert_eq!(a.landmarks.len(), 24);
+    }
+
+    #[test]
+    fn sightings_are_taken_from_the_sensor_mount() {
+        let mut s = Settings::load("sim", None).unwrap();
+        s.sighting.mount = [0.3, -0.1, 0.25];
+        s.sighting.range_std = 0.0;
+        s.sighting.bearing_std = 0.0;
+        let run = simulate(&s, 3).unwrap();
+        let sensor = RangeBearingSensor::new(Pose2::new(0.3, -0.1, 0.25));
+        let mut checked = 0;
+        for e in &run.events {
+            let EventKind::Sighting(sighting) = e.kind else {
+                continue;
+            };
+            let Identity::Unique(id) = sighting.identity else {
+                panic!("the simulator gives unique ids");
+            };
+            let truth = run
+                .ground_truth
+                .iter()
+                .find(|p| p.stamp == e.stamp)
+                .expect("a true pose at every sighting stamp");
+            let l = run
+                .landmarks
+                .iter()
+                .find(|l| l.id == id)
+                .expect("a known landmark");
+            let expected = sensor
+                .predict(&truth.pose, &Vector2::new(l.position[0], l.position[1]))
+                .expect("not at the sensor")
+                .z;
+            assert!(
+                (sighting.z.range - expected.range).abs() < 1e-9,
+                "{sighting:?} vs {expected:?}"
+            );
+            assert!(
+                (sighting.z.bearing - expected.bearing).abs() < 1e-9,
+                "{sighting:?} vs {expected:?}"
+            );
+            checked += 1;
+        }
+        assert!(checked > 1000, "{checked}");
     }
 }
