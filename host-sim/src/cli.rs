@@ -9,7 +9,7 @@ use crate::commands::replay::ReplayOptions;
 use crate::commands::sim::SimOptions;
 use crate::commands::texture::TextureOptions;
 use crate::commands::{detections, hil, localize, replay, sim, texture};
-use crate::domain::grid::GridOptions;
+use crate::domain::grid::{GridOptions, SUPPORTED_PARTICLES};
 use crate::domain::{AssociationMode, FilterKind, Precision};
 use crate::inputs::faults::FaultRates;
 use crate::inputs::readers::DatasetSpec;
@@ -35,8 +35,9 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Replay a recorded dataset through the landmark EKF-SLAM and score it against
-    /// ground truth.
+    /// Replay a recorded dataset and score it against ground truth: MRCLAM through the
+    /// landmark EKF-SLAM, CARMEN lidar logs through grid SLAM, THOR encoders + IMU as
+    /// dead reckoning.
     Replay(ReplayArgs),
     /// Run the built-in deterministic simulator: a landmark field through the landmark
     /// EKF-SLAM, and a world of walls with a lidar through grid SLAM and the grid
@@ -56,19 +57,40 @@ pub enum Command {
     Detections(DetectionsArgs),
 }
 
+/// A particle count the grid filters are compiled for ([`SUPPORTED_PARTICLES`]).
+fn particle_count(text: &str) -> Result<usize, String> {
+    let n: usize = text.parse().map_err(|e| format!("{e}"))?;
+    if SUPPORTED_PARTICLES.contains(&n) {
+        Ok(n)
+    } else {
+        Err(format!(
+            "{n} particles are not compiled in; use one of {SUPPORTED_PARTICLES:?}"
+        ))
+    }
+}
+
+/// [`particle_count`], or 0 for none.
+fn particle_count_or_none(text: &str) -> Result<usize, String> {
+    if text.trim() == "0" {
+        return Ok(0);
+    }
+    particle_count(text)
+}
+
 /// Options of the grid particle filter shared by `replay` and `localize`.
 #[derive(Debug, Clone, Args)]
 pub struct GridArgs {
-    /// Particles (grid filter).
-    #[arg(long, default_value_t = 200)]
+    /// Particles of the grid filter: 8, 16, 32, 64, 100, 128, 200 or 400.
+    #[arg(long, default_value_t = 200, value_parser = particle_count)]
     pub particles: usize,
     /// Half-width k of the (2k+1)² shift window, cells (default 4: 9 × 9).
     #[arg(long)]
     pub window: Option<u8>,
-    /// Beams used per scan (decimated from the log's; default all).
+    /// Beams used per scan, 1 up to the log's (every n-th beam is kept; default all).
     #[arg(long)]
     pub beams: Option<usize>,
-    /// Benchmark relations file (default: a `*.relations` file next to the log).
+    /// Benchmark relations file (default: the `*.relations` file next to the log; without
+    /// one, a note says the relation error is not computed).
     #[arg(long)]
     pub relations: Option<PathBuf>,
 }
@@ -79,10 +101,12 @@ pub struct LocalizeArgs {
     /// The map: `map.yaml` (ROS map_server) next to its PGM.
     #[arg(long)]
     pub map: PathBuf,
-    /// Dataset: `carmen:<file>`.
+    /// Dataset: `carmen:<log>` (a CARMEN log file, or a path under `$SLAM_DATASETS/carmen`,
+    /// e.g. `carmen:intel/intel-raw-part.clf`).
     #[arg(long, short)]
     pub dataset: DatasetSpec,
-    /// Grid filter settings (TOML, see `grid_replay::GridToml`).
+    /// Grid filter settings (TOML): `base = "default" | "seed" | "microcontroller"` and any
+    /// field to override, e.g. `shift_window_cells = 3` (see docs/guide.md).
     #[arg(long, short)]
     pub config: Option<PathBuf>,
     /// Grid filter options.
@@ -96,8 +120,9 @@ pub struct LocalizeArgs {
 /// Options of `host-sim replay`.
 #[derive(Debug, Clone, Args)]
 pub struct ReplayArgs {
-    /// Dataset: `mrclam:<dir>` (a folder, or a name under `$SLAM_DATASETS/mrclam`, e.g.
-    /// `mrclam:dataset6`).
+    /// Dataset: `mrclam:<dir>` (landmarks), `carmen:<log>` (lidar) or `thor:<dir>`
+    /// (encoders + IMU): a path, or a name under `$SLAM_DATASETS/<family>`, e.g.
+    /// `mrclam:dataset6`, `carmen:intel/intel-raw-part.clf`, `thor:thor`.
     #[arg(long, short)]
     pub dataset: DatasetSpec,
     /// Robot whose log is replayed.
@@ -162,9 +187,9 @@ pub struct SimArgs {
     /// Skip the PNG pictures.
     #[arg(long)]
     pub no_plots: bool,
-    /// Particles of the grid filters in the lidar world (16, 32, 64 or 200; 0 skips the
-    /// grid scenario).
-    #[arg(long, default_value_t = 200)]
+    /// Particles of the grid filters in the lidar world: 8, 16, 32, 64, 100, 128, 200 or
+    /// 400; 0 skips the grid scenario.
+    #[arg(long, default_value_t = 200, value_parser = particle_count_or_none)]
     pub grid_particles: usize,
 }
 

@@ -118,3 +118,91 @@ fn sim_writes_every_output() {
     assert_eq!(tum.lines().filter(|l| !l.starts_with('#')).count(), 400);
     assert_eq!(tum.lines().nth(1).unwrap().split(' ').count(), 8);
 }
+
+#[test]
+fn hil_with_a_missing_or_wrong_elf_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = dir.path().join("qemu.elf");
+    std::fs::write(&text, "not a firmware").unwrap();
+    for (elf, expected) in [
+        (dir.path().join("missing.elf"), "not found"),
+        (text, "is not an ELF file"),
+    ] {
+        let out = host_sim()
+            .args([
+                "hil",
+                "--dataset",
+                "mrclam:dataset6",
+                "--timeout-s",
+                "5",
+                "--qemu",
+            ])
+            .arg(&elf)
+            .arg("--out")
+            .arg(dir.path())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success());
+        assert!(err.contains(expected) && !err.contains("differ"), "{err}");
+    }
+}
+
+/// `--help` of `args`.
+fn help(args: &[&str]) -> String {
+    let out = host_sim().args(args).arg("--help").output().unwrap();
+    assert!(out.status.success());
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+#[test]
+fn help_names_every_estimator_dataset_family_and_particle_count() {
+    let top = help(&[]);
+    assert!(
+        top.contains("EKF-SLAM") && top.contains("grid SLAM"),
+        "{top}"
+    );
+
+    let replay = help(&["replay"]);
+    for family in ["mrclam:<dir>", "carmen:<log>", "thor:<dir>"] {
+        assert!(
+            replay.contains(family),
+            "`--dataset` help without {family}: {replay}"
+        );
+    }
+    // The counts the grid filters are compiled for, in both commands that take one.
+    let counts = host_sim::domain::grid::SUPPORTED_PARTICLES;
+    let (last, rest) = counts.split_last().unwrap();
+    let list = format!(
+        "{} or {last}",
+        rest.iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    assert!(
+        replay.contains(&list),
+        "replay --particles help without {list}: {replay}"
+    );
+    assert!(
+        help(&["sim"]).contains(&list),
+        "sim --grid-particles help without {list}"
+    );
+
+    let localize = help(&["localize"]);
+    assert!(
+        !localize.contains("GridToml") && localize.contains("base ="),
+        "{localize}"
+    );
+}
+
+#[test]
+fn particle_counts_that_are_not_compiled_in_are_refused_with_the_list() {
+    let out = host_sim()
+        .args(["replay", "--dataset", "carmen:x.clf", "--particles", "7"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("[8, 16, 32, 64, 100, 128, 200, 400]"), "{err}");
+}

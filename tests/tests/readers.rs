@@ -77,6 +77,22 @@ fn truncated_last_line_names_file_and_line() {
 }
 
 #[test]
+fn empty_odometry_is_an_error_naming_the_file() {
+    // The header comments only: no sample.
+    let dir = damaged("Robot1_Odometry.dat", |t| {
+        t.lines()
+            .filter(|l| l.starts_with('#'))
+            .map(|l| format!("{l}\n"))
+            .collect()
+    });
+    let e = error_of(dir.path());
+    assert!(
+        e.contains("Robot1_Odometry.dat") && e.contains("no odometry samples"),
+        "{e}"
+    );
+}
+
+#[test]
 fn corrupt_number_names_file_line_and_field() {
     let dir = damaged("Robot1_Measurement.dat", |t| {
         let mut lines: Vec<String> = t.lines().map(str::to_owned).collect();

@@ -78,6 +78,9 @@ pub struct HilOptions {
 
 /// `host-sim hil`.
 pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
+    if let Some(elf) = &args.qemu {
+        check_firmware_elf(elf)?;
+    }
     let recording = crate::inputs::readers::read(&args.dataset, args.robot)?;
     let settings = if args.dataset_settings {
         let family = args.dataset.family();
@@ -140,6 +143,18 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
             comparison.device_frames_bad
         );
     }
+    if comparison.received == 0 && comparison.expected > 0 {
+        let device = match (&args.qemu, &args.serial) {
+            (Some(elf), _) => format!("QEMU could not load or run {}", elf.display()),
+            (_, Some(port)) => format!("the board on {port} did not answer"),
+            _ => "the device did not answer".to_string(),
+        };
+        bail!(
+            "no reply from the device in {} s: {device} (0 of {} replies)",
+            args.timeout_s,
+            comparison.expected
+        );
+    }
     if comparison.received != comparison.expected || comparison.identical != comparison.expected {
         bail!(
             "the device's estimates differ from the host's ({} of {} identical)",
@@ -150,8 +165,103 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
     Ok(())
 }
 
-/// Where `cargo build -p firmware-example --profile firmware` puts the QEMU ELF.
+/// Where `cargo build -p firmware-example --target thumbv7em-none-eabihf --profile
+/// firmware` puts the QEMU ELF: under `$CARGO_TARGET_DIR` when set (relative to the
+/// workspace), else the workspace's `target/`.
 pub fn default_firmware_elf() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../target/thumbv7em-none-eabihf/firmware/firmware-example")
+    let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .filter(|v| !v.is_empty())
+        .map_or_else(|| PathBuf::from("target"), PathBuf::from);
+    workspace
+        .join(target)
+        .join("thumbv7em-none-eabihf/firmware/firmware-example")
+}
+
+/// `EM_ARM`, the ELF machine of a Cortex-M binary.
+const ELF_MACHINE_ARM: u16 = 40;
+
+/// Checks that `elf` is a 32-bit little-endian ARM ELF file before QEMU is asked to run
+/// it: a missing or wrong file is reported as such, with how to build the firmware.
+pub fn check_firmware_elf(elf: &Path) -> Result<()> {
+    let build = format!(
+        "build it with `bash .ci/firmware.sh` (then {}) or `cargo build -p firmware-example \
+         --target thumbv7em-none-eabihf --profile firmware` (then {})",
+        Path::new("target/firmware-elf/qemu.elf").display(),
+        default_firmware_elf().display()
+    );
+    let mut header = [0u8; 20];
+    let read = std::fs::File::open(elf).and_then(|mut f| {
+        use std::io::Read;
+        f.read_exact(&mut header)
+    });
+    match read {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            bail!("firmware ELF {} not found: {build}", elf.display())
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => {
+            bail!("{} is not an ELF file (too short)", elf.display())
+        }
+        Err(e) => return Err(e).with_context(|| format!("reading {}", elf.display())),
+        Ok(()) => {}
+    }
+    if header[..4] != *b"\x7fELF" {
+        bail!("{} is not an ELF file: {build}", elf.display());
+    }
+    // e_ident[EI_CLASS] = 1 (32-bit), [EI_DATA] = 1 (little-endian); e_machine at 18.
+    let machine = u16::from_le_bytes([header[18], header[19]]);
+    if header[4] != 1 || header[5] != 1 || machine != ELF_MACHINE_ARM {
+        bail!(
+            "{} is not a 32-bit ARM ELF (class {}, data {}, machine {machine}): not a \
+             Cortex-M firmware; {build}",
+            elf.display(),
+            header[4],
+            header[5]
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn error(path: &Path) -> String {
+        format!("{:#}", check_firmware_elf(path).expect_err("refused"))
+    }
+
+    #[test]
+    fn a_missing_or_wrong_elf_is_named_as_such() {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let missing = dir.path().join("qemu.elf");
+        assert!(error(&missing).contains("not found"), "{}", error(&missing));
+        assert!(error(&missing).contains(".ci/firmware.sh"));
+
+        let text = dir.path().join("notes.txt");
+        std::fs::write(&text, "not a firmware, just text").expect("write");
+        assert!(
+            error(&text).contains("is not an ELF file"),
+            "{}",
+            error(&text)
+        );
+
+        let short = dir.path().join("short.elf");
+        std::fs::write(&short, b"\x7fELF").expect("write");
+        assert!(error(&short).contains("too short"), "{}", error(&short));
+
+        // This test binary: an ELF, but for the host, not a Cortex-M.
+        let host = std::env::current_exe().expect("the test binary");
+        assert!(
+            error(&host).contains("not a 32-bit ARM ELF"),
+            "{}",
+            error(&host)
+        );
+
+        let mut arm = vec![0u8; 52];
+        arm[..6].copy_from_slice(b"\x7fELF\x01\x01");
+        arm[18..20].copy_from_slice(&ELF_MACHINE_ARM.to_le_bytes());
+        let arm_path = dir.path().join("arm.elf");
+        std::fs::write(&arm_path, &arm).expect("write");
+        check_firmware_elf(&arm_path).expect("an ARM ELF header passes");
+    }
 }

@@ -6,7 +6,6 @@ use crate::domain::grid::GridOptions;
 use crate::drivers::grid::{carmen_inputs, run_localizer};
 use crate::inputs::readers::DatasetSpec;
 use crate::inputs::readers::carmen::{front_scans, read_log, resolve_log};
-use crate::metrics::relations::{self, find_relations, relation_error};
 use crate::output::grid_map::{read_map, write_outputs};
 use anyhow::{Result, bail};
 use microslam::geometry::Pose2;
@@ -58,10 +57,7 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
         }
     })?;
     pb.finish_and_clear();
-    let rel = match find_relations(&path, args.grid.relations.as_deref()) {
-        Some(r) => Some(relation_error(&run, &relations::read(&r)?)),
-        None => None,
-    };
+    let rel = super::relation_error_for(&path, args.grid.relations.as_deref(), &run)?;
     let name = path
         .file_name()
         .map_or_else(|| file.clone(), |n| n.to_string_lossy().to_string());

@@ -9,7 +9,9 @@ pub mod replay;
 pub mod sim;
 pub mod texture;
 
+use crate::drivers::grid::GridRun;
 use crate::metrics::Metrics;
+use crate::metrics::relations::{self, RelationError, find_relations, relation_error};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::Path;
 
@@ -45,4 +47,20 @@ pub fn summary(m: &Metrics, out: &Path) -> String {
         m.wall_time_s * 1e3,
         out.display()
     )
+}
+
+/// The relation error of a grid run on the log at `log`, with the relations file given or
+/// found next to the log; when there is none, a note on stderr says why and `None`.
+pub(crate) fn relation_error_for(
+    log: &Path,
+    given: Option<&Path>,
+    run: &GridRun,
+) -> anyhow::Result<Option<RelationError>> {
+    match find_relations(log, given) {
+        Ok(file) => Ok(Some(relation_error(run, &relations::read(&file)?))),
+        Err(why) => {
+            eprintln!("note: {why}");
+            Ok(None)
+        }
+    }
 }

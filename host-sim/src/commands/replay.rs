@@ -13,7 +13,7 @@ use crate::inputs::readers::carmen::{
     CarmenLog, LaserMessage, beam_count, front_scans, read_log, resolve_log,
 };
 use crate::inputs::readers::{DatasetSpec, thor};
-use crate::metrics::relations::{self, RelationError, find_relations, relation_error};
+use crate::metrics::relations::RelationError;
 use crate::output::grid_map::{write_outputs, write_tum};
 use anyhow::{Result, bail};
 use microslam::geometry::Pose2;
@@ -149,8 +149,8 @@ pub(crate) fn options_from(
         c.filter.shift_window_cells = k;
     }
     let n = beam_count(log);
-    if grid.beams.is_some() {
-        c.beam_decimation = decimation_for(n, grid.beams);
+    if let Some(beams) = grid.beams {
+        c.beam_decimation = decimation_for(n, beams)?;
     }
     if !c.is_valid() {
         bail!(
@@ -270,10 +270,7 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
         }
     })?;
     pb.finish_and_clear();
-    let rel = match find_relations(&path, args.grid.relations.as_deref()) {
-        Some(r) => Some(relation_error(&run, &relations::read(&r)?)),
-        None => None,
-    };
+    let rel = super::relation_error_for(&path, args.grid.relations.as_deref(), &run)?;
     let name = path
         .file_name()
         .map_or_else(|| file.clone(), |n| n.to_string_lossy().to_string());

@@ -98,12 +98,16 @@ pub fn carmen_lidar(beams: usize) -> LidarGeometry {
     }
 }
 
-/// `beams` wanted → decimation of an `n`-beam scan.
-pub fn decimation_for(n: usize, beams: Option<usize>) -> usize {
-    match beams {
-        Some(b) if b > 0 => n.div_ceil(b).max(1),
-        _ => 1,
+/// `beams` wanted → decimation of an `n`-beam scan: every `d`-th beam, so that
+/// `⌈n / d⌉ ≤ beams`. Refused: no beam at all, or more beams than a scan has.
+pub fn decimation_for(n: usize, beams: usize) -> anyhow::Result<usize> {
+    if beams == 0 {
+        anyhow::bail!("--beams 0: a scan needs at least one beam (1 ..= {n})");
     }
+    if beams > n {
+        anyhow::bail!("--beams {beams}: the log's scans have {n} beams (1 ..= {n})");
+    }
+    Ok(n.div_ceil(beams))
 }
 
 /// Options of the grid particle filter shared by `replay` and `localize`.
@@ -117,4 +121,31 @@ pub struct GridOptions {
     pub beams: Option<usize>,
     /// Benchmark relations file (default: a `*.relations` file next to the log).
     pub relations: Option<std::path::PathBuf>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn beams_outside_one_to_all_are_refused() {
+        assert_eq!(decimation_for(180, 180).unwrap(), 1);
+        assert_eq!(decimation_for(180, 90).unwrap(), 2);
+        assert_eq!(
+            decimation_for(180, 100).unwrap(),
+            2,
+            "⌈180 / 2⌉ = 90 ≤ 100 beams"
+        );
+        assert_eq!(decimation_for(180, 1).unwrap(), 180);
+        let zero = decimation_for(180, 0).unwrap_err().to_string();
+        assert!(
+            zero.contains("--beams 0") && zero.contains("1 ..= 180"),
+            "{zero}"
+        );
+        let many = decimation_for(180, 1000).unwrap_err().to_string();
+        assert!(
+            many.contains("--beams 1000") && many.contains("180 beams"),
+            "{many}"
+        );
+    }
 }

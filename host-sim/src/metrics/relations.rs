@@ -144,24 +144,72 @@ pub fn relation_error(run: &GridRun, rels: &[Relation]) -> RelationError {
     evaluate(&traj, rels, 1e-3)
 }
 
-/// The relations file to use: the one given, else a single `*.relations` file next to
-/// the log, else none.
-pub fn find_relations(log_path: &Path, given: Option<&Path>) -> Option<PathBuf> {
+/// The relations file to use: the one given, else the single `*.relations` file next to
+/// the log. `Err` says why there is none (no such file, or several to choose from).
+pub fn find_relations(log_path: &Path, given: Option<&Path>) -> Result<PathBuf, String> {
     if let Some(g) = given {
-        return Some(g.to_path_buf());
+        return Ok(g.to_path_buf());
     }
-    let dir = log_path.parent()?;
-    let mut found = std::fs::read_dir(dir)
-        .ok()?
+    let dir = log_path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let mut found: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| format!("cannot list {} for a relations file: {e}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|e| e == "relations"));
-    let first = found.next()?;
-    found.next().is_none().then_some(first)
+        .filter(|p| p.extension().is_some_and(|e| e == "relations"))
+        .collect();
+    found.sort();
+    match found.len() {
+        1 => Ok(found.swap_remove(0)),
+        0 => Err(format!(
+            "no *.relations file next to {}: the relation error is not computed (give one \
+             with --relations FILE)",
+            log_path.display()
+        )),
+        n => Err(format!(
+            "{n} *.relations files next to {} ({}): give one with --relations FILE",
+            log_path.display(),
+            found
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )),
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_missing_or_ambiguous_relations_file_is_explained() {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let log = dir.path().join("run.clf");
+        std::fs::write(&log, "").expect("write");
+        let none = find_relations(&log, None).expect_err("no relations file");
+        assert!(
+            none.contains("no *.relations file") && none.contains("run.clf"),
+            "{none}"
+        );
+
+        std::fs::write(dir.path().join("a.relations"), "").expect("write");
+        assert_eq!(
+            find_relations(&log, None),
+            Ok(dir.path().join("a.relations"))
+        );
+
+        std::fs::write(dir.path().join("b.relations"), "").expect("write");
+        let two = find_relations(&log, None).expect_err("two relations files");
+        assert!(
+            two.contains("2 *.relations files") && two.contains("b.relations"),
+            "{two}"
+        );
+
+        let given = dir.path().join("given.txt");
+        assert_eq!(find_relations(&log, Some(&given)), Ok(given));
+    }
 
     #[test]
     fn metric_on_a_known_trajectory() {

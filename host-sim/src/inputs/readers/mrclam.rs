@@ -70,6 +70,12 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
         ))
     })?;
     let (mut events, measurements, mut ground_truth) = (odometry?, measurements?, ground_truth?);
+    if events.is_empty() {
+        anyhow::bail!(
+            "{}: no odometry samples (only comments or nothing): nothing to replay",
+            odo_path.display()
+        );
+    }
     events.reserve(measurements.len());
     let mut dropped = 0;
     for row in &measurements {
