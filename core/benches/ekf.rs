@@ -8,7 +8,7 @@ use microslam::sensors::range_bearing::RangeBearing;
 use std::hint::black_box;
 
 /// A filter holding `L` landmarks on a circle, correlated by a few predict/update rounds.
-fn filled<T: Real, const N: usize>(config: EkfConfig<T>) -> Box<EkfSlam<T, N>> {
+fn filled<T: Real, const N: usize>(config: EkfConfig<T>) -> Box<EkfSlam<T, N, P>> {
     let mut slam = Box::new(EkfSlam::<T, N>::new(config));
     let l = EkfSlam::<T, N>::MAX_LANDMARKS;
     for i in 0..l {

@@ -1,6 +1,6 @@
 //! Estimator settings of the firmware; the host reference uses the same values.
 
-use microslam::ekf::{CovarianceUpdate, EkfConfig, EkfSlam, state_dim};
+use microslam::ekf::{CovarianceUpdate, EkfConfig, EkfSlam, factor_len, state_dim};
 use microslam::gate::ChiSquareGate;
 use microslam::geometry::Pose2;
 use microslam::grid::{OccupancyGrid, occupancy_bytes};
@@ -13,7 +13,7 @@ use microslam::wire::GridSetup;
 pub const EKF_LANDMARKS: usize = 32;
 
 /// The EKF of the firmware: `f32`, 32 landmarks (18 KB).
-pub type Ekf = EkfSlam<f32, { state_dim(EKF_LANDMARKS) }>;
+pub type Ekf = EkfSlam<f32, { state_dim(EKF_LANDMARKS) }, { factor_len(EKF_LANDMARKS) }>;
 
 /// The settings the EKF runs with (the session re-initialises the filter with them): the
 /// generic defaults with the cheaper optimal-gain covariance update.

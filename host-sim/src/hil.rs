@@ -16,7 +16,7 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
-use microslam::ekf::{EkfConfig, EkfSlam, state_dim};
+use microslam::ekf::{EkfConfig, EkfSlam, factor_len, state_dim};
 use microslam::geometry::Pose2;
 use microslam::grid::{OccupancyGrid, occupancy_bytes};
 use microslam::pf::{GridPfConfig, GridSlam};
@@ -129,7 +129,7 @@ pub fn encode_all_corrupted(messages: &[ToDevice], rate: f64, seed: u64) -> (Vec
 /// The replies of the host reference: the firmware's [`Session`], with the firmware's EKF
 /// and grid estimator (sizes and configurations), fed the same bytes.
 pub fn host_replies(bytes: &[u8]) -> Vec<ToHost> {
-    let mut ekf = Box::new(EkfSlam::<f32, { state_dim(FIRMWARE_LANDMARKS) }>::new(
+    let mut ekf = Box::new(EkfSlam::<f32, { state_dim(FIRMWARE_LANDMARKS) }, { factor_len(FIRMWARE_LANDMARKS) }>::new(
         EkfConfig::MICROCONTROLLER,
     ));
     let config = GridPfConfig::MICROCONTROLLER;
@@ -137,7 +137,7 @@ pub fn host_replies(bytes: &[u8]) -> Vec<ToHost> {
     let Ok(mut slam) = FirmwareGridSlam::new(&mut grid, config, Pose2::new(0.0, 0.0, 0.0)) else {
         unreachable!("the firmware's grid configuration is valid")
     };
-    let mut session = Session::<_, FIRMWARE_LANDMARKS>::with_grid(
+    let mut session = Session::<_, _, FIRMWARE_LANDMARKS>::with_grid(
         &mut ekf,
         EkfConfig::MICROCONTROLLER,
         &mut slam,

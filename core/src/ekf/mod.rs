@@ -109,6 +109,16 @@ pub const fn state_dim(max_landmarks: usize) -> usize {
     3 + 2 * max_landmarks
 }
 
+/// Cap on the robot's heading variance, rad² (π²: beyond it the heading is unknown and
+/// the linearisation meaningless).
+pub const MAX_HEADING_VARIANCE: f64 = core::f64::consts::PI * core::f64::consts::PI;
+
+/// Cap on the robot's and a new landmark's x and y variances, m² (a standard deviation of
+/// 100 m). A robot or landmark that uncertain is lost: without the cap a sighting could
+/// move it by thousands of kilometres, beyond [`MAX_COORDINATE`], and `f32` variances
+/// could overflow. Positive semi-definiteness does not depend on it.
+pub const MAX_POSITION_VARIANCE: f64 = 1.0e4;
+
 /// Largest |x| or |y| of the robot and of landmarks, metres. Beyond it an `f32`
 /// coordinate is coarser than 8 mm, so landmark − robot differences lose the precision
 /// the observation model needs; predictions and new landmarks that would go further are
@@ -534,8 +544,9 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
 
     /// Adds the positive semi-definite `added` to the robot pose covariance, `P_RR`,
     /// leaving the mean and every other covariance entry as they are: a prediction with
-    /// `F = I` and noise `added` (O(1): only the robot's own block of the factor changes).
-    /// For recovery logic that declares the robot lost.
+    /// `F = I` and noise `added` (O(n), like a prediction). For recovery logic that
+    /// declares the robot lost. The robot's variances stay within
+    /// [`MAX_POSITION_VARIANCE`] and [`MAX_HEADING_VARIANCE`] as after any prediction.
     ///
     /// Errors (state unchanged): [`EkfError::NonFiniteInput`] for a non-finite `added`,
     /// [`EkfError::InvalidNoise`] when it is not symmetric positive semi-definite (its
@@ -560,34 +571,56 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         let Some((la, da)) = ldl(added) else {
             return self.reject(EkfError::InvalidNoise);
         };
-        let (lrr, dr) = self.robot_block();
-        let mut w = [[T::ZERO; 6]; 3];
-        let mut weights = [T::ZERO; 6];
-        for a in 0..3 {
-            for c in 0..3 {
-                w[a][c] = lrr[a][c];
-                w[a][3 + c] = la[a][c];
-            }
-            weights[a] = dr[a];
-            weights[3 + a] = da[a];
+        let g = Matrix3::from_fn(|i, j| la[i][j]);
+        match self.robot_map(&Matrix3::identity(), &g, &da) {
+            Ok(()) => Ok(()),
+            Err(e) => self.reject(e),
         }
-        let (l, d) = mwgs(w, &weights);
-        if !all_finite(&l, &d) {
-            return self.reject(EkfError::NumericalFailure);
-        }
-        self.set_robot_block(&l, &d);
-        Ok(())
     }
 
-    /// `P' = F P Fᵀ + G Q Gᵀ` on the factor, mean ← new pose: the robot's coupling rows
-    /// `L_rm ← F L_rm`, and its own block re-factored from `[F L_rr | G]` with weights
-    /// `(D_r, Q)` (diagonal `Q`, padded with zeros to three inputs).
+    /// `P' = F P Fᵀ + G Q Gᵀ` for a motion step, mean ← new pose.
     fn apply_motion<const U: usize>(
         &mut self,
         step: &MotionStep<T, U>,
         q: &[T; U],
     ) -> Result<(), EkfError> {
-        let f = &step.wrt_pose;
+        let far = T::lit(MAX_COORDINATE);
+        let inside = step.pose.x.abs() <= far && step.pose.y.abs() <= far;
+        if !inside || !step.pose.is_finite() {
+            return self.reject(EkfError::NumericalFailure);
+        }
+        // Inputs padded to three (zero weight).
+        let mut g = Matrix3::zeros();
+        let mut weights = [T::ZERO; 3];
+        for (u, &qu) in q.iter().enumerate().take(3) {
+            g.set_column(u, &step.wrt_input.column(u));
+            weights[u] = qu;
+        }
+        if let Err(e) = self.robot_map(&step.wrt_pose, &g, &weights) {
+            return self.reject(e);
+        }
+        self.mean[0] = step.pose.x;
+        self.mean[1] = step.pose.y;
+        self.mean[2] = step.pose.theta;
+        self.counters.predictions = self.counters.predictions.saturating_add(1);
+        Ok(())
+    }
+
+    /// `P' = F P Fᵀ + G diag(q) Gᵀ` with `F`, `G` acting on the robot only, on the factor:
+    /// the robot's coupling rows `L_rm ← S F L_rm`, and its own block re-factored from
+    /// `S [F L_rr | G]` with weights `(D_r, q)`. `S` is the diagonal congruence that
+    /// caps the robot's variances (see [`MAX_POSITION_VARIANCE`]); it is the identity
+    /// unless a cap is exceeded. Checks everything before writing.
+    fn robot_map(&mut self, f: &Matrix3<T>, g: &Matrix3<T>, q: &[T; 3]) -> Result<(), EkfError> {
+        let p_rr = self.pose_covariance();
+        let new_rr = f * p_rr * f.transpose() + g * Matrix3::from_diagonal(&(*q).into()) * g.transpose();
+        let scale = capped([
+            (new_rr[(0, 0)], MAX_POSITION_VARIANCE),
+            (new_rr[(1, 1)], MAX_POSITION_VARIANCE),
+            (new_rr[(2, 2)], MAX_HEADING_VARIANCE),
+        ]);
+        let s = Matrix3::from_diagonal(&scale.into());
+        let (f, g) = (s * f, s * g);
         let (lrr, dr) = self.robot_block();
         let flrr = f * Matrix3::from_fn(|i, j| lrr[i][j]);
         let mut w = [[T::ZERO; 6]; 3];
@@ -595,25 +628,21 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         for a in 0..3 {
             for c in 0..3 {
                 w[a][c] = flrr[(a, c)];
-            }
-            for (u, &qu) in q.iter().enumerate().take(3) {
-                w[a][3 + u] = step.wrt_input[(a, u)];
-                weights[3 + u] = qu;
+                w[a][3 + c] = g[(a, c)];
             }
             weights[a] = dr[a];
+            weights[3 + a] = q[a];
         }
         let (l, d) = mwgs(w, &weights);
         // |F L_rm| ≤ 3 · max|F| · max|L_rm|.
         let coupling_bound = T::lit(3.0) * max_abs(f.iter().copied()) * self.robot_coupling_max();
-        let far = T::lit(MAX_COORDINATE);
-        let inside = step.pose.x.abs() <= far && step.pose.y.abs() <= far;
-        if !inside || !step.pose.is_finite() || !all_finite(&l, &d) || !coupling_bound.finite() {
-            return self.reject(EkfError::NumericalFailure);
+        if !new_rr.iter().all(|v| v.finite()) || !all_finite(&l, &d) || !coupling_bound.finite() {
+            return Err(EkfError::NumericalFailure);
         }
         let r0 = self.active_dim() - 3;
         let starts = [0, 1, 2].map(|a| row_start(r0 + a));
         for c in 0..r0 {
-            let col = [0, 1, 2].map(|a| self.factor.get(starts[a] + c).copied().unwrap_or(T::ZERO));
+            let col = starts.map(|s| self.factor.get(s + c).copied().unwrap_or(T::ZERO));
             for (a, start) in starts.iter().enumerate() {
                 let v = f[(a, 0)] * col[0] + f[(a, 1)] * col[1] + f[(a, 2)] * col[2];
                 if let Some(slot) = self.factor.get_mut(start + c) {
@@ -622,10 +651,6 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             }
         }
         self.set_robot_block(&l, &d);
-        self.mean[0] = step.pose.x;
-        self.mean[1] = step.pose.y;
-        self.mean[2] = step.pose.theta;
-        self.counters.predictions = self.counters.predictions.saturating_add(1);
         Ok(())
     }
 
@@ -991,7 +1016,15 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             return self.reject(EkfError::MapFull);
         }
         let g = self.config.sensor.landmark_from(&self.pose(), z);
-        let (gr, gz) = (g.wrt_robot, g.wrt_measurement);
+        // Last-resort cap, as for the robot: scale the new rows (a congruence).
+        let p_ll = g.wrt_robot * self.pose_covariance() * g.wrt_robot.transpose()
+            + g.wrt_measurement * r * g.wrt_measurement.transpose();
+        let scale = capped([
+            (p_ll[(0, 0)], MAX_POSITION_VARIANCE),
+            (p_ll[(1, 1)], MAX_POSITION_VARIANCE),
+        ]);
+        let s = Matrix2::from_diagonal(&scale.into());
+        let (gr, gz) = (s * g.wrt_robot, s * g.wrt_measurement);
         let (lr, dr_meas) = Self::decorrelate(&r);
         let gz_lr = gz * Matrix2::new(T::ONE, T::ZERO, lr, T::ONE);
         let (lrr, dr) = self.robot_block();
@@ -1014,6 +1047,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         let inside = g.landmark.iter().all(|c| c.abs() <= far);
         if !inside
             || !g.landmark.iter().all(|v| v.finite())
+            || !p_ll.iter().all(|v| v.finite())
             || !all_finite(&l5, &d5)
             || !coupling_bound.finite()
         {
@@ -1063,6 +1097,15 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
 #[inline(always)]
 fn internal_to_public(i: usize, k: usize) -> usize {
     if i + 3 >= k { i + 3 - k } else { i + 3 }
+}
+
+/// Per-variance scale factors `√(cap / v)` for the variances `v` above their cap, 1 for
+/// the others.
+fn capped<T: Real, const R: usize>(variances: [(T, f64); R]) -> [T; R] {
+    variances.map(|(v, cap)| {
+        let cap = T::lit(cap);
+        if v > cap { (cap / v).sqrt() } else { T::ONE }
+    })
 }
 
 /// `true` when every entry of a small factor (`L`, `D`) is finite.

@@ -16,12 +16,12 @@ use core::fmt::Write;
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use firmware_example::board::{self, Serial};
 use firmware_example::cost::{Ticks, thousand_nops};
-use microslam::ekf::{CovarianceUpdate, EkfConfig, EkfSlam, UpdateOutcome, state_dim};
+use microslam::ekf::{CovarianceUpdate, EkfConfig, EkfSlam, UpdateOutcome, factor_len, state_dim};
 use microslam::sensors::range_bearing::RangeBearing;
 use panic_probe as _;
 use static_cell::ConstStaticCell;
 
-type Ekf<const N: usize> = EkfSlam<f32, N>;
+type Ekf<const N: usize> = EkfSlam<f32, N, P>;
 const ZEROED: EkfConfig<f32> = firmware_example::config::ZEROED_EKF_CONFIG;
 
 static EKF16: ConstStaticCell<Ekf<{ state_dim(16) }>> = ConstStaticCell::new(Ekf::new(ZEROED));
