@@ -30,7 +30,7 @@ use crate::cli::HilArgs;
 use crate::readers::Recording;
 
 /// Landmarks of the firmware's EKF (`firmware_example::config::EKF_LANDMARKS`).
-pub const FIRMWARE_LANDMARKS: usize = 32;
+pub const FIRMWARE_LANDMARKS: usize = 64;
 
 /// Bytes of the firmware grid's occupied-cell bitmap (`firmware_example::config::GRID_BITMAP`).
 pub const FIRMWARE_GRID_BITMAP: usize = occupancy_bytes(256, 256);

@@ -420,8 +420,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
 
     /// Covariance of the robot pose, `P_RR` (O(n)).
     pub fn pose_covariance(&self) -> Matrix3<T> {
-        let r0 = self.active_dim() - 3;
-        Matrix3::from_fn(|i, j| internal_entry(&self.factor, r0 + i, r0 + j))
+        self.robot_summary().0
     }
 
     /// Position of landmark `index`, or `None` when there is no such landmark.
@@ -498,14 +497,46 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         }
     }
 
-    /// The largest |L_rc| of the robot rows over the landmark columns `c < 2n`.
-    fn robot_coupling_max(&self) -> T {
+    /// `P_RR` and the largest |L_rc| of the robot rows over the landmark columns `c < 2n`,
+    /// in one pass over the robot's three rows.
+    fn robot_summary(&self) -> (Matrix3<T>, T) {
         let r0 = self.active_dim() - 3;
-        let rows = (0..3).flat_map(|a| {
+        let (lrr, dr) = self.robot_block();
+        let rows = [0, 1, 2].map(|a| {
             let row = strict_row(&self.factor, r0 + a);
-            row.get(..r0).unwrap_or(&[]).iter().copied()
+            row.get(..r0).unwrap_or(&[])
         });
-        max_abs(rows)
+        let mut acc = [T::ZERO; 6];
+        let mut largest = T::ZERO;
+        let mut diag = 0;
+        for (c, ((&a, &b), &e)) in rows[0].iter().zip(rows[1]).zip(rows[2]).enumerate() {
+            let d = self.factor.get(diag).copied().unwrap_or(T::ZERO);
+            diag += c + 2;
+            let (da, db, de) = (d * a, d * b, d * e);
+            acc[0] += da * a;
+            acc[1] += da * b;
+            acc[2] += da * e;
+            acc[3] += db * b;
+            acc[4] += db * e;
+            acc[5] += de * e;
+            largest = max_abs([largest, a, b, e].into_iter());
+        }
+        let own = Matrix3::from_fn(|i, j| lrr[i][j]);
+        let own = own * Matrix3::from_diagonal(&dr.into()) * own.transpose();
+        let coupled = Matrix3::new(
+            acc[0], acc[1], acc[2], acc[1], acc[3], acc[4], acc[2], acc[4], acc[5],
+        );
+        (coupled + own, largest)
+    }
+
+    /// The robot's three rows over the landmark columns `c < 2n` (`L_rm`), mutable.
+    fn robot_coupling_mut(&mut self) -> Option<[&mut [T]; 3]> {
+        let r0 = self.active_dim() - 3;
+        let s0 = row_start(r0);
+        let all = self.factor.get_mut(s0..row_start(r0 + 3))?;
+        let (a, rest) = all.split_at_mut(r0 + 1);
+        let (b, c) = rest.split_at_mut(r0 + 2);
+        Some([a.get_mut(..r0)?, b.get_mut(..r0)?, c.get_mut(..r0)?])
     }
 
     /// Prediction with an odometry increment `(dx, dy, dθ)` in the previous robot frame
@@ -612,7 +643,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// caps the robot's variances (see [`MAX_POSITION_VARIANCE`]); it is the identity
     /// unless a cap is exceeded. Checks everything before writing.
     fn robot_map(&mut self, f: &Matrix3<T>, g: &Matrix3<T>, q: &[T; 3]) -> Result<(), EkfError> {
-        let p_rr = self.pose_covariance();
+        let (p_rr, coupling) = self.robot_summary();
         let new_rr = f * p_rr * f.transpose() + g * Matrix3::from_diagonal(&(*q).into()) * g.transpose();
         let scale = capped([
             (new_rr[(0, 0)], MAX_POSITION_VARIANCE),
@@ -635,19 +666,16 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         }
         let (l, d) = mwgs(w, &weights);
         // |F L_rm| ≤ 3 · max|F| · max|L_rm|.
-        let coupling_bound = T::lit(3.0) * max_abs(f.iter().copied()) * self.robot_coupling_max();
+        let coupling_bound = T::lit(3.0) * max_abs(f.iter().copied()) * coupling;
         if !new_rr.iter().all(|v| v.finite()) || !all_finite(&l, &d) || !coupling_bound.finite() {
             return Err(EkfError::NumericalFailure);
         }
-        let r0 = self.active_dim() - 3;
-        let starts = [0, 1, 2].map(|a| row_start(r0 + a));
-        for c in 0..r0 {
-            let col = starts.map(|s| self.factor.get(s + c).copied().unwrap_or(T::ZERO));
-            for (a, start) in starts.iter().enumerate() {
-                let v = f[(a, 0)] * col[0] + f[(a, 1)] * col[1] + f[(a, 2)] * col[2];
-                if let Some(slot) = self.factor.get_mut(start + c) {
-                    *slot = v;
-                }
+        if let Some([ra, rb, rc]) = self.robot_coupling_mut() {
+            for ((a, b), c) in ra.iter_mut().zip(rb.iter_mut()).zip(rc.iter_mut()) {
+                let (x, y, z) = (*a, *b, *c);
+                *a = f[(0, 0)] * x + f[(0, 1)] * y + f[(0, 2)] * z;
+                *b = f[(1, 0)] * x + f[(1, 1)] * y + f[(1, 2)] * z;
+                *c = f[(2, 0)] * x + f[(2, 1)] * y + f[(2, 2)] * z;
             }
         }
         self.set_robot_block(&l, &d);
@@ -683,22 +711,16 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         }
     }
 
-    /// `Σ_c a_c D_c b_c` over the active states.
-    fn weighted_dot(&self, a: &[T], b: &[T]) -> T {
-        let mut acc = T::ZERO;
-        for (c, (&x, &y)) in a.iter().zip(b).enumerate() {
-            acc += x * pivot(&self.factor, c) * y;
-        }
-        acc
-    }
-
     /// The innovation of sighting `z` (covariance `r`) against landmark `index`, without
-    /// changing anything: `S = H P Hᵀ + R` with `H P Hᵀ = (Lᵀ Hᵀ)ᵀ D (Lᵀ Hᵀ)` (O(n)).
-    fn innovation_with(
+    /// changing anything: `S = H P Hᵀ + R` with `H P Hᵀ = Fᵀ D F`, `F = Lᵀ Hᵀ` (O(n)).
+    /// `f0`, `f1` (at least the active dimension long) receive the two columns of `F`.
+    fn innovation_into(
         &self,
         index: usize,
         z: &RangeBearing<T>,
         r: &Matrix2<T>,
+        f0: &mut [T],
+        f1: &mut [T],
     ) -> Result<Innovation<T>, EkfError> {
         if index >= self.landmark_count() {
             return Err(EkfError::UnknownLandmark);
@@ -712,19 +734,23 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         let (hr, hl) = (pred.wrt_robot, pred.wrt_landmark);
         let [h0, h1] = self.sparse_rows(index, &hr, &hl);
         let k = self.active_dim();
-        let (mut f0, mut f1) = ([T::ZERO; N], [T::ZERO; N]);
         let (Some(f0), Some(f1)) = (f0.get_mut(..k), f1.get_mut(..k)) else {
             return Err(EkfError::NumericalFailure);
         };
         self.project(&h0, f0);
         self.project(&h1, f1);
-        let off = self.weighted_dot(f0, f1) + (r[(0, 1)] + r[(1, 0)]) * T::lit(0.5);
-        let s = Matrix2::new(
-            self.weighted_dot(f0, f0) + r[(0, 0)],
-            off,
-            off,
-            self.weighted_dot(f1, f1) + r[(1, 1)],
-        );
+        let (mut s00, mut s01, mut s11) = (T::ZERO, T::ZERO, T::ZERO);
+        let mut diag = 0;
+        for (c, (&a, &b)) in f0.iter().zip(f1.iter()).enumerate() {
+            let d = self.factor.get(diag).copied().unwrap_or(T::ZERO);
+            diag += c + 2;
+            let (da, db) = (d * a, d * b);
+            s00 += da * a;
+            s01 += da * b;
+            s11 += db * b;
+        }
+        let off = s01 + (r[(0, 1)] + r[(1, 0)]) * T::lit(0.5);
+        let s = Matrix2::new(s00 + r[(0, 0)], off, off, s11 + r[(1, 1)]);
         let det = s[(0, 0)] * s[(1, 1)] - off * off;
         if !is_positive(det) || !is_positive(s[(0, 0)]) || !det.finite() {
             return Err(EkfError::SingularInnovation);
@@ -746,6 +772,17 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             jacobian_robot: hr,
             jacobian_landmark: hl,
         })
+    }
+
+    /// [`EkfSlam::innovation_into`] with its own scratch.
+    fn innovation_with(
+        &self,
+        index: usize,
+        z: &RangeBearing<T>,
+        r: &Matrix2<T>,
+    ) -> Result<Innovation<T>, EkfError> {
+        let (mut f0, mut f1) = ([T::ZERO; N], [T::ZERO; N]);
+        self.innovation_into(index, z, r, &mut f0, &mut f1)
     }
 
     /// Checks a sighting and its covariance; returns the covariance to use.
@@ -839,7 +876,9 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             Ok(r) => r,
             Err(e) => return self.reject(e),
         };
-        let inn = match self.innovation_with(index, z, &r) {
+        // f0, f1: the columns of Lᵀ Hᵀ; later f0 holds the new pivots.
+        let (mut f0, mut f1) = ([T::ZERO; N], [T::ZERO; N]);
+        let inn = match self.innovation_into(index, z, &r, &mut f0, &mut f1) {
             Ok(found) => found,
             Err(e) => return self.reject(e),
         };
@@ -848,135 +887,138 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             self.counters.gated = self.counters.gated.saturating_add(1);
             return Ok(UpdateOutcome::Gated { nis });
         }
-        let [h0, mut h1] = self.sparse_rows(index, &inn.jacobian_robot, &inn.jacobian_landmark);
-        // Decorrelate: z̃ = L_R⁻¹ z has covariance diag(d); the second row becomes
-        // h₁ − l h₀, its innovation ν₁ − l ν₀.
-        let (l, d) = Self::decorrelate(&r);
-        for (e1, e0) in h1.iter_mut().zip(&h0) {
-            e1.1 -= l * e0.1;
-        }
-        let mut gain = [T::ZERO; N];
-        if let Err(e) = self.scalar_update(&h0, d[0], inn.nu[0], &mut gain) {
-            return self.reject(e);
-        }
-        // Both rows are linearised at the prior: the second innovation accounts for the
-        // correction the first made, h̃₁ · (K₀ ν₀).
-        let moved: T = h1
-            .iter()
-            .map(|&(s, hs)| hs * gain.get(s).copied().unwrap_or(T::ZERO))
-            .fold(T::ZERO, |a, b| a + b);
-        let nu1 = inn.nu[1] - l * inn.nu[0] - moved * inn.nu[0];
-        if let Err(e) = self.scalar_update(&h1, d[1], nu1, &mut gain) {
-            return self.reject(e);
+        let mut terms = [[T::ZERO; 4]; N];
+        let plan = match self.plan_update(&r, &inn.nu, &mut f0, &f1, &mut terms) {
+            Ok(plan) => plan,
+            Err(e) => return self.reject(e),
+        };
+        if self.apply_update(&plan, &f0, &terms).is_err() {
+            return self.reject(EkfError::NumericalFailure);
         }
         self.counters.updates = self.counters.updates.saturating_add(1);
         Ok(UpdateOutcome::Accepted { nis })
     }
 
-    /// Bierman's scalar measurement update of the factor and the mean, for the sparse
-    /// row `h`, measurement variance `r ≥ 0` and innovation `nu`; `gain` receives the
-    /// gain `K = P hᵀ / (h P hᵀ + r)` in the factor's order.
+    /// Everything of an update but the O(n²) pass, in O(n), checked before anything is
+    /// written: two scalar (Bierman) updates, range then bearing, both linearised at the
+    /// prior, with `r` decorrelated first (`R = L_R D_R L_Rᵀ`, second row `h₁ − l h₀`).
     ///
-    /// With `f = Lᵀ hᵀ`, `vⱼ = Dⱼ fⱼ` and `α` running from `r` over `j = k−1 … 0`
-    /// (`αⱼ = αⱼ₊₁ + vⱼ fⱼ`, starting from `r`), the new pivots are
-    /// `Dⱼ' = Dⱼ α_before / α_after ≥ 0` and row `i` of `L` becomes, from its last
-    /// entry to its first, `L_ij' = L_ij + bᵢ pⱼ`, `bᵢ ← bᵢ + L_ij vⱼ` with `bᵢ = vᵢ` at
-    /// the start and `pⱼ = −fⱼ / α_before`. Row by row, so the pass reads and writes each
-    /// row of the packed factor once, in order. The O(n) quantities are checked before
-    /// anything is written.
-    fn scalar_update(
-        &mut self,
-        h: &SparseRow<T>,
-        r: T,
-        nu: T,
-        gain: &mut [T; N],
-    ) -> Result<(), EkfError> {
+    /// Scalar update `s` with `f = Lᵀ hᵀ`, `vⱼ = Dⱼ fⱼ` and `α` running from `r` over
+    /// `j = k−1 … 0` (`α ← α + vⱼ fⱼ`) sets `Dⱼ' = Dⱼ α_before / α_after ≥ 0` and, row by
+    /// row from the last entry to the first, `L_ij' = L_ij + bᵢ pⱼ`, `bᵢ ← bᵢ + L_ij vⱼ`,
+    /// with `bᵢ = vᵢ` at the start and `pⱼ = −fⱼ / α_before`; `bᵢ` ends as `(P hᵀ)ᵢ`, so
+    /// the gain is `b / α_total`. The second update's `f` after the first is
+    /// `f₂ⱼ = f̃₁ⱼ + p₁ⱼ Σ_{t>j} v₁ₜ f̃₁ₜ` (no pass over `L` needed), so both run in one
+    /// pass. On return `f0` holds the final pivots and `terms[j] = [p₁ⱼ, v₁ⱼ, p₂ⱼ, v₂ⱼ]`.
+    fn plan_update(
+        &self,
+        r: &Matrix2<T>,
+        nu: &Vector2<T>,
+        f0: &mut [T; N],
+        f1: &[T; N],
+        terms: &mut [[T; 4]; N],
+    ) -> Result<UpdatePlan<T>, EkfError> {
         let k = self.active_dim();
-        let mut fp = [T::ZERO; N];
-        let mut v = [T::ZERO; N];
-        let (Some(fp), Some(v), Some(gain)) = (fp.get_mut(..k), v.get_mut(..k), gain.get_mut(..k))
+        let (l, d) = Self::decorrelate(r);
+        let (Some(f0), Some(f1), Some(terms)) = (f0.get_mut(..k), f1.get(..k), terms.get_mut(..k))
         else {
             return Err(EkfError::NumericalFailure);
         };
-        self.project(h, fp);
+        // First scalar: v₁ = D f₀.
         let mut hph = T::ZERO;
-        for (c, (vc, &fc)) in v.iter_mut().zip(fp.iter()).enumerate() {
-            *vc = pivot(&self.factor, c) * fc;
-            hph += *vc * fc;
+        let mut diag = 0;
+        for (c, (t, &fc)) in terms.iter_mut().zip(f0.iter()).enumerate() {
+            let dc = self.factor.get(diag).copied().unwrap_or(T::ZERO);
+            diag += c + 2;
+            t[1] = dc * fc;
+            hph += t[1] * fc;
         }
-        // No sighting is more precise than the rounding of h P hᵀ: keeps α > 0, the gain
-        // finite (D' ≥ 0 does not depend on it).
-        let floor = T::default_epsilon() * hph;
-        let r = if r > floor { r } else { floor };
-        let total = hph + r;
-        if !total.finite() || !nu.finite() {
-            return Err(EkfError::NumericalFailure);
-        }
-        if total <= T::ZERO {
-            // h P hᵀ = 0 and r = 0: the sighting says nothing the state does not know.
-            gain.fill(T::ZERO);
-            return Ok(());
-        }
-        // Pivots and column factors, from the last state to the first; written after the
-        // check below, so the pivots go to a scratch (the gain buffer) first.
-        let mut alpha = r;
-        let mut poison = T::ZERO;
+        let r0 = sighting_floor(d[0], hph);
+        let total0 = hph + r0;
+        // Descending: D', p₁, and f₂ = f̃₁ + p₁ β with β the suffix sum of v₁ f̃₁.
+        let mut alpha = r0;
+        let mut beta = T::ZERO;
+        let mut hph = T::ZERO;
         for c in (0..k).rev() {
-            let (Some(fc), Some(&vc), Some(dc)) = (fp.get_mut(c), v.get(c), gain.get_mut(c)) else {
+            let (Some(t), Some(fc), Some(&g)) = (terms.get_mut(c), f0.get_mut(c), f1.get(c)) else {
                 return Err(EkfError::NumericalFailure);
             };
-            let next = alpha + vc * *fc;
-            let old = pivot(&self.factor, c);
-            if alpha > T::ZERO {
-                *dc = old * (alpha / next);
-                *fc = -*fc / alpha;
-            } else {
-                // Nothing before this state carried information: its variance is fully
-                // explained by the sighting.
-                *dc = T::ZERO;
-                *fc = T::ZERO;
-            }
-            poison += (*dc + *fc) * T::ZERO;
+            let g = g - l * *fc;
+            let next = alpha + t[1] * *fc;
+            let dc = pivot(&self.factor, c);
+            let (new_d, p) = bierman_step(dc, *fc, alpha, next);
+            t[0] = p;
+            let f2 = g + p * beta;
+            beta += t[1] * g;
+            t[3] = new_d * f2;
+            hph += t[3] * f2;
+            // f0 now carries f₂ until the second chain below.
+            *fc = f2;
+            // The first update's pivot, kept in t[2] until the second chain.
+            t[2] = new_d;
             alpha = next;
         }
+        let r1 = sighting_floor(d[1], hph);
+        let total1 = hph + r1;
+        let mut alpha = r1;
+        let mut poison = T::ZERO;
+        for c in (0..k).rev() {
+            let (Some(t), Some(fc)) = (terms.get_mut(c), f0.get_mut(c)) else {
+                return Err(EkfError::NumericalFailure);
+            };
+            let next = alpha + t[3] * *fc;
+            let (new_d, p) = bierman_step(t[2], *fc, alpha, next);
+            t[2] = p;
+            *fc = new_d;
+            poison += (t[0] + t[1] + t[2] + t[3] + new_d) * T::ZERO;
+            alpha = next;
+        }
+        // ν̃₁ = ν₁ − l ν₀, minus what the first correction explains: h̃₁ K₀ ν₀.
+        let scale0 = if total0 > T::ZERO { nu[0] / total0 } else { T::ZERO };
+        let nu1 = nu[1] - l * nu[0] - beta * scale0;
+        let scale1 = if total1 > T::ZERO { nu1 / total1 } else { T::ZERO };
+        poison += (total0 + total1 + scale0 + scale1) * T::ZERO;
         if poison != T::ZERO {
             return Err(EkfError::NumericalFailure);
         }
-        // The pass: row i gets its new pivot and entries; bᵢ ends as (P hᵀ)ᵢ.
-        let inv_total = T::ONE / total;
+        Ok(UpdatePlan { scale0, scale1 })
+    }
+
+    /// The O(n²) pass of an update planned by [`EkfSlam::plan_update`]: each row of `L`
+    /// once, both scalar updates per entry, and `x ← x + K₀ ν₀ + K₁ ν̃₁` (heading wrapped).
+    /// `Err` when the result is not finite (the state is then no longer what it was).
+    fn apply_update(
+        &mut self,
+        plan: &UpdatePlan<T>,
+        pivots: &[T; N],
+        terms: &[[T; 4]; N],
+    ) -> Result<(), ()> {
+        let k = self.active_dim();
         let mut poison = T::ZERO;
+        let mut start = 0;
         for i in 0..k {
-            let start = row_start(i);
-            let (Some(row), Some(gi)) = (self.factor.get_mut(start..=start + i), gain.get_mut(i))
-            else {
-                break;
+            let (Some(row), Some(&[_, v1, _, v2]), Some(&pi), Some(coefs)) = (
+                self.factor.get_mut(start..=start + i),
+                terms.get(i),
+                pivots.get(i),
+                terms.get(..i),
+            ) else {
+                return Err(());
             };
+            start += i + 1;
             let Some((diag, row)) = row.split_last_mut() else {
-                break;
+                return Err(());
             };
-            *diag = *gi;
-            let mut b = v.get(i).copied().unwrap_or(T::ZERO);
-            for ((lij, &pj), &vj) in row.iter_mut().zip(fp.iter()).zip(v.iter()).rev() {
-                let old = *lij;
-                *lij = old + b * pj;
-                b += old * vj;
-            }
-            let ki = b * inv_total;
-            *gi = ki;
-            poison += ki * T::ZERO;
-        }
-        // x ← x + K ν, heading wrapped.
-        for (i, &ki) in gain.iter().enumerate() {
+            *diag = pi;
+            let (b0, b1) = bierman_row(row, coefs, v1, v2);
+            let dx = b0 * plan.scale0 + b1 * plan.scale1;
             if let Some(x) = self.mean.as_mut_slice().get_mut(internal_to_public(i, k)) {
-                *x += ki * nu;
-                poison += *x * T::ZERO;
+                *x += dx;
             }
+            poison += dx * T::ZERO;
         }
         self.mean[2] = wrap_near(self.mean[2]);
-        if poison != T::ZERO {
-            return Err(EkfError::NumericalFailure);
-        }
-        Ok(())
+        if poison != T::ZERO { Err(()) } else { Ok(()) }
     }
 
     /// Adds a landmark seen at `z`, with the configured measurement noise. See
@@ -1017,7 +1059,8 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         }
         let g = self.config.sensor.landmark_from(&self.pose(), z);
         // Last-resort cap, as for the robot: scale the new rows (a congruence).
-        let p_ll = g.wrt_robot * self.pose_covariance() * g.wrt_robot.transpose()
+        let (p_rr, coupling) = self.robot_summary();
+        let p_ll = g.wrt_robot * p_rr * g.wrt_robot.transpose()
             + g.wrt_measurement * r * g.wrt_measurement.transpose();
         let scale = capped([
             (p_ll[(0, 0)], MAX_POSITION_VARIANCE),
@@ -1042,7 +1085,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         }
         let weights = [dr[0], dr[1], dr[2], dr_meas[0], dr_meas[1]];
         let (l5, d5) = mwgs(w, &weights);
-        let coupling_bound = T::lit(3.0) * max_abs(gr.iter().copied()) * self.robot_coupling_max();
+        let coupling_bound = T::lit(3.0) * max_abs(gr.iter().copied()) * coupling;
         let far = T::lit(MAX_COORDINATE);
         let inside = g.landmark.iter().all(|c| c.abs() <= far);
         if !inside
@@ -1090,6 +1133,51 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         self.landmarks += 1;
         Ok(index)
     }
+}
+
+/// The O(n) results of [`EkfSlam::plan_update`]: the mean moves by
+/// `b₀ · scale0 + b₁ · scale1` per state (`K ν` of the two scalar updates).
+struct UpdatePlan<T> {
+    scale0: T,
+    scale1: T,
+}
+
+/// The measurement variance a scalar update uses: `r`, but at least `ε · h P hᵀ` (no
+/// sighting is more precise than the rounding of its prediction; keeps the gain finite).
+#[inline(always)]
+fn sighting_floor<T: Real>(r: T, hph: T) -> T {
+    let floor = T::default_epsilon() * hph;
+    if r > floor { r } else { floor }
+}
+
+/// One step of Bierman's chain: the new pivot `D α / α_next` and the column factor
+/// `−f / α` (both zero when nothing before carried information; `D` kept when the
+/// state does not enter the measurement).
+#[inline(always)]
+fn bierman_step<T: Real>(d: T, f: T, alpha: T, next: T) -> (T, T) {
+    if next <= T::ZERO {
+        (d, T::ZERO)
+    } else if alpha <= T::ZERO {
+        (T::ZERO, T::ZERO)
+    } else {
+        (d * (alpha / next), -f / alpha)
+    }
+}
+
+/// Both scalar updates on one row of `L` (its strict part), from its last entry to its
+/// first: returns `(b₀, b₁)`, row `i` of `P h₀ᵀ` and of `P' h̃₁ᵀ`. The hot loop of the
+/// update; not inlined, so the row and the terms keep their no-alias guarantees.
+#[inline(never)]
+fn bierman_row<T: Real>(row: &mut [T], terms: &[[T; 4]], v1: T, v2: T) -> (T, T) {
+    let (mut b0, mut b1) = (v1, v2);
+    for (l, &[p1, w1, p2, w2]) in row.iter_mut().zip(terms).rev() {
+        let old = *l;
+        let once = old + b0 * p1;
+        b0 += old * w1;
+        *l = once + b1 * p2;
+        b1 += once * w2;
+    }
+    (b0, b1)
 }
 
 /// Public state index (robot first) of index `i` inside the factor (robot last), for an
