@@ -995,27 +995,46 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     ) -> Result<(), ()> {
         let k = self.active_dim();
         let mut poison = T::ZERO;
-        let mut start = 0;
-        for i in 0..k {
-            let (Some(row), Some(&[_, v1, _, v2]), Some(&pi), Some(coefs)) = (
-                self.factor.get_mut(start..=start + i),
-                terms.get(i),
-                pivots.get(i),
+        // Rows two at a time: rows i and i + 1 share the terms of columns 0..i, loaded once.
+        let mut i = 0;
+        while i < k {
+            let pair = i + 1 < k;
+            let len = if pair { 2 * i + 3 } else { i + 1 };
+            let start = row_start(i);
+            let (Some(rows), Some(head), Some(&[_, va, _, vb])) = (
+                self.factor.get_mut(start..start + len),
                 terms.get(..i),
+                terms.get(i),
             ) else {
                 return Err(());
             };
-            start += i + 1;
-            let Some((diag, row)) = row.split_last_mut() else {
+            let (row_a, rest) = rows.split_at_mut(i + 1);
+            let Some((diag_a, row_a)) = row_a.split_last_mut() else {
                 return Err(());
             };
-            *diag = pi;
-            let (b0, b1) = bierman_row(row, coefs, v1, v2);
-            let dx = b0 * plan.scale0 + b1 * plan.scale1;
-            if let Some(x) = self.mean.as_mut_slice().get_mut(internal_to_public(i, k)) {
-                *x += dx;
+            *diag_a = pivots.get(i).copied().unwrap_or(T::ZERO);
+            let (ba, bb) = if let Some((diag_b, row_b)) = rest.split_last_mut() {
+                *diag_b = pivots.get(i + 1).copied().unwrap_or(T::ZERO);
+                let Some((last_b, row_b)) = row_b.split_last_mut() else {
+                    return Err(());
+                };
+                let (Some(&[_, wa, _, wb]), Some(own)) = (terms.get(i + 1), terms.get(i..=i)) else {
+                    return Err(());
+                };
+                // Row i + 1's entry in column i first (its last), then both rows together.
+                let b = bierman_row(core::slice::from_mut(last_b), own, wa, wb);
+                bierman_rows(row_a, row_b, head, (va, vb), b)
+            } else {
+                (bierman_row(row_a, head, va, vb), (T::ZERO, T::ZERO))
+            };
+            for (r, (b0, b1)) in [(i, ba), (i + 1, bb)].into_iter().take(if pair { 2 } else { 1 }) {
+                let dx = b0 * plan.scale0 + b1 * plan.scale1;
+                if let Some(x) = self.mean.as_mut_slice().get_mut(internal_to_public(r, k)) {
+                    *x += dx;
+                }
+                poison += dx * T::ZERO;
             }
-            poison += dx * T::ZERO;
+            i += 2;
         }
         self.mean[2] = wrap_near(self.mean[2]);
         if poison != T::ZERO { Err(()) } else { Ok(()) }
@@ -1170,7 +1189,7 @@ fn bierman_step<T: Real>(d: T, f: T, alpha: T, next: T) -> (T, T) {
 #[inline(never)]
 fn bierman_row<T: Real>(row: &mut [T], terms: &[[T; 4]], v1: T, v2: T) -> (T, T) {
     let (mut b0, mut b1) = (v1, v2);
-    for (l, &[p1, w1, p2, w2]) in row.iter_mut().zip(terms).rev() {
+    for (l, &[p1, w1, p2, w2]) in row.iter_mut().rev().zip(terms.iter().rev()) {
         let old = *l;
         let once = old + b0 * p1;
         b0 += old * w1;
@@ -1178,6 +1197,33 @@ fn bierman_row<T: Real>(row: &mut [T], terms: &[[T; 4]], v1: T, v2: T) -> (T, T)
         b1 += once * w2;
     }
     (b0, b1)
+}
+
+/// [`bierman_row`] on two rows at once over the same columns (each column's terms loaded
+/// once for both): `a` and `b` are the rows' running `(b₀, b₁)` at the start; returns
+/// both at the end.
+#[inline(never)]
+fn bierman_rows<T: Real>(
+    row_a: &mut [T],
+    row_b: &mut [T],
+    terms: &[[T; 4]],
+    a: (T, T),
+    b: (T, T),
+) -> ((T, T), (T, T)) {
+    let ((mut a0, mut a1), (mut b0, mut b1)) = (a, b);
+    let rows = row_a.iter_mut().zip(row_b.iter_mut());
+    for ((la, lb), &[p1, w1, p2, w2]) in rows.zip(terms).rev() {
+        let (old_a, old_b) = (*la, *lb);
+        let once_a = old_a + a0 * p1;
+        let once_b = old_b + b0 * p1;
+        a0 += old_a * w1;
+        b0 += old_b * w1;
+        *la = once_a + a1 * p2;
+        *lb = once_b + b1 * p2;
+        a1 += once_a * w2;
+        b1 += once_b * w2;
+    }
+    ((a0, a1), (b0, b1))
 }
 
 /// Public state index (robot first) of index `i` inside the factor (robot last), for an
