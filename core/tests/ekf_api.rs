@@ -2,7 +2,9 @@
 //! refusal of bad input without side effects.
 
 use microslam::EkfError;
-use microslam::ekf::{EKF_OVERHEAD_BYTES_F32, EkfConfig, EkfSlam, UpdateOutcome, factor_len, state_dim};
+use microslam::ekf::{
+    EKF_OVERHEAD_BYTES_F32, EkfConfig, EkfSlam, UpdateOutcome, factor_len, state_dim,
+};
 use microslam::gate::ChiSquareGate;
 use microslam::geometry::Pose2;
 use microslam::sensors::range_bearing::RangeBearing;
@@ -35,13 +37,17 @@ fn size_matches_the_documented_formula() {
 }
 
 /// A `static` built by the `const fn` constructor: no stack copy of the covariance.
-static STATIC_FILTER: EkfSlam<f32, { state_dim(64) }, { factor_len(64) }> = EkfSlam::new(EkfConfig::DEFAULT_F32);
+static STATIC_FILTER: EkfSlam<f32, { state_dim(64) }, { factor_len(64) }> =
+    EkfSlam::new(EkfConfig::DEFAULT_F32);
 
 #[test]
 fn const_constructor_builds_a_static() {
     assert_eq!(STATIC_FILTER.landmark_count(), 0);
     assert_eq!(STATIC_FILTER.pose(), Pose2::IDENTITY);
-    assert_eq!(<EkfSlam<f32, { state_dim(64) }, { factor_len(64) }>>::MAX_LANDMARKS, 64);
+    assert_eq!(
+        <EkfSlam<f32, { state_dim(64) }, { factor_len(64) }>>::MAX_LANDMARKS,
+        64
+    );
 }
 
 type Slam = EkfSlam<f64, { state_dim(4) }, { factor_len(4) }>;
@@ -214,8 +220,16 @@ fn robot_variances_are_capped_without_breaking_positive_definiteness() {
         .unwrap();
     let view = slam.active_covariance();
     let p = nalgebra::DMatrix::from_fn(view.dim(), view.dim(), |i, j| view.get(i, j).unwrap());
-    assert!(p[(2, 2)] <= MAX_HEADING_VARIANCE * (1.0 + 1e-12), "{}", p[(2, 2)]);
-    assert!(p[(0, 0)] <= MAX_POSITION_VARIANCE * (1.0 + 1e-12), "{}", p[(0, 0)]);
+    assert!(
+        p[(2, 2)] <= MAX_HEADING_VARIANCE * (1.0 + 1e-12),
+        "{}",
+        p[(2, 2)]
+    );
+    assert!(
+        p[(0, 0)] <= MAX_POSITION_VARIANCE * (1.0 + 1e-12),
+        "{}",
+        p[(0, 0)]
+    );
     assert!(
         (p[(2, 2)] - MAX_HEADING_VARIANCE).abs() < 1e-6,
         "the cap is reached, not undershot"
@@ -247,8 +261,17 @@ fn pose_inflation_adds_to_the_robot_block_only() {
     // Refused, with nothing changed: non-finite, indefinite.
     let snapshot: Vec<f64> = slam.active_covariance().iter().collect();
     let nan = nalgebra::Matrix3::from_diagonal_element(f64::NAN);
-    assert_eq!(slam.inflate_pose_covariance(&nan), Err(EkfError::NonFiniteInput));
+    assert_eq!(
+        slam.inflate_pose_covariance(&nan),
+        Err(EkfError::NonFiniteInput)
+    );
     let indefinite = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::new(1.0, -0.1, 1.0));
-    assert_eq!(slam.inflate_pose_covariance(&indefinite), Err(EkfError::InvalidNoise));
-    assert_eq!(slam.active_covariance().iter().collect::<Vec<_>>(), snapshot);
+    assert_eq!(
+        slam.inflate_pose_covariance(&indefinite),
+        Err(EkfError::InvalidNoise)
+    );
+    assert_eq!(
+        slam.active_covariance().iter().collect::<Vec<_>>(),
+        snapshot
+    );
 }

@@ -53,7 +53,7 @@ fn with_lost_robot() -> impl Strategy<Value = Op> {
 /// What a step did to the filter.
 enum Done {
     Nothing,
-    Predicted(MotionStep<f64, 3>, SMatrix<f64, 3, 3>),
+    Predicted(Box<(MotionStep<f64, 3>, SMatrix<f64, 3, 3>)>),
     Added(RangeBearing<f64>),
     Updated(usize, RangeBearing<f64>),
 }
@@ -73,9 +73,15 @@ fn apply<T: Real>(ekf: &mut Slam<T>, op: &Op) -> (bool, Done) {
             }
             let (v, w, dt) = (v.to_f64(), w.to_f64(), dt.to_f64());
             let step = integrate_velocity(&pose64, v, w, dt);
-            let q = step.wrt_input * cfg.velocity_noise.covariance(v, w, dt) * step.wrt_input.transpose();
-            let step = MotionStep { pose: step.pose, wrt_pose: step.wrt_pose, wrt_input: SMatrix::<f64, 3, 3>::zeros() };
-            (false, Done::Predicted(step, q))
+            let q = step.wrt_input
+                * cfg.velocity_noise.covariance(v, w, dt)
+                * step.wrt_input.transpose();
+            let step = MotionStep {
+                pose: step.pose,
+                wrt_pose: step.wrt_pose,
+                wrt_input: SMatrix::<f64, 3, 3>::zeros(),
+            };
+            (false, Done::Predicted(Box::new((step, q))))
         }
         Op::Increment(x, y, th) => {
             let inc = Pose2::new(t(x), t(y), t(th));
@@ -84,8 +90,9 @@ fn apply<T: Real>(ekf: &mut Slam<T>, op: &Op) -> (bool, Done) {
             }
             let inc = Pose2::new(inc.x.to_f64(), inc.y.to_f64(), inc.theta.to_f64());
             let step = compose_increment(&pose64, &inc);
-            let q = step.wrt_input * cfg.increment_noise.covariance(&inc) * step.wrt_input.transpose();
-            (false, Done::Predicted(step, q))
+            let q =
+                step.wrt_input * cfg.increment_noise.covariance(&inc) * step.wrt_input.transpose();
+            (false, Done::Predicted(Box::new((step, q))))
         }
         Op::Update(i, dr, db) => {
             let n = ekf.landmark_count();
@@ -111,7 +118,10 @@ fn apply<T: Real>(ekf: &mut Slam<T>, op: &Op) -> (bool, Done) {
         Op::Add(r, b) => {
             let z = RangeBearing::new(t(r), t(b));
             match ekf.add_landmark(&z) {
-                Ok(_) => (false, Done::Added(RangeBearing::new(z.range.to_f64(), z.bearing.to_f64()))),
+                Ok(_) => (
+                    false,
+                    Done::Added(RangeBearing::new(z.range.to_f64(), z.bearing.to_f64())),
+                ),
                 Err(_) => (false, Done::Nothing),
             }
         }
@@ -141,7 +151,11 @@ struct Dense {
 
 impl Dense {
     fn new(config: EkfConfig<f64>) -> Self {
-        Self { x: DVector::zeros(3), p: DMatrix::zeros(3, 3), config }
+        Self {
+            x: DVector::zeros(3),
+            p: DMatrix::zeros(3, 3),
+            config,
+        }
     }
 
     fn pose(&self) -> Pose2<f64> {
@@ -168,7 +182,9 @@ impl Dense {
         j.view_mut((0, 0), (k, k)).fill_with_identity();
         j.view_mut((k, 0), (2, 3)).copy_from(&g.wrt_robot);
         let mut r = DMatrix::zeros(k + 2, k + 2);
-        let gz = g.wrt_measurement * self.config.measurement_covariance() * g.wrt_measurement.transpose();
+        let gz = g.wrt_measurement
+            * self.config.measurement_covariance()
+            * g.wrt_measurement.transpose();
         r.view_mut((k, k), (2, 2)).copy_from(&gz);
         self.p = &j * &self.p * j.transpose() + r;
         self.x = self.x.clone().insert_rows(k, 2, 0.0);
@@ -188,7 +204,10 @@ impl Dense {
         let r = DMatrix::from_fn(2, 2, |i, j| r[(i, j)]);
         let s = &h * &self.p * h.transpose() + &r;
         let gain = &self.p * h.transpose() * s.try_inverse().unwrap();
-        let nu = DVector::from_vec(vec![z.range - pred.z.range, wrap_near(z.bearing - pred.z.bearing)]);
+        let nu = DVector::from_vec(vec![
+            z.range - pred.z.range,
+            wrap_near(z.bearing - pred.z.bearing),
+        ]);
         self.x += &gain * nu;
         self.x[2] = wrap_near(self.x[2]);
         let a = DMatrix::identity(k, k) - &gain * &h;
@@ -245,11 +264,19 @@ fn check_invariants<T: Real>(ekf: &Slam<T>) -> Result<(), TestCaseError> {
     // rounding of the product and the eigen-solver.
     let view = ekf.active_covariance();
     for i in 0..k {
-        prop_assert!(view.factor_row(i).unwrap().0 >= T::ZERO, "negative pivot at {}", i);
+        prop_assert!(
+            view.factor_row(i).unwrap().0 >= T::ZERO,
+            "negative pivot at {}",
+            i
+        );
     }
     let exact = factor_product(ekf);
     let min_exact = exact.clone().symmetric_eigen().eigenvalues.min();
-    prop_assert!(min_exact >= -((k + 1) as f64) * f64::EPSILON * exact.trace(), "L D Lᵀ: {}", min_exact);
+    prop_assert!(
+        min_exact >= -((k + 1) as f64) * f64::EPSILON * exact.trace(),
+        "L D Lᵀ: {}",
+        min_exact
+    );
     let th = ekf.pose().theta.to_f64();
     prop_assert!(th > -core::f64::consts::PI - 1e-6 && th <= core::f64::consts::PI + 1e-6);
     prop_assert!(ekf.active_mean().iter().all(|v| v.finite()));
@@ -309,7 +336,7 @@ proptest! {
         for op in &ops {
             match apply(&mut ekf, op).1 {
                 Done::Nothing => {}
-                Done::Predicted(step, q) => dense.predict(&step, &q),
+                Done::Predicted(p) => dense.predict(&p.0, &p.1),
                 Done::Added(z) => dense.add(&z),
                 Done::Updated(idx, z) => dense.update(idx, &z),
             }
@@ -353,6 +380,10 @@ fn a_lost_robot_seeing_one_landmark_again_stays_psd() {
         let p = active_as_f64(&ekf);
         let min_eig = p.clone().symmetric_eigen().eigenvalues.min();
         let bound = -6.0 * f64::from(f32::EPSILON) * p.trace();
-        assert!(min_eig >= bound, "step {step}: min eigenvalue {min_eig}, trace {}", p.trace());
+        assert!(
+            min_eig >= bound,
+            "step {step}: min eigenvalue {min_eig}, trace {}",
+            p.trace()
+        );
     }
 }

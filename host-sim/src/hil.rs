@@ -129,9 +129,11 @@ pub fn encode_all_corrupted(messages: &[ToDevice], rate: f64, seed: u64) -> (Vec
 /// The replies of the host reference: the firmware's [`Session`], with the firmware's EKF
 /// and grid estimator (sizes and configurations), fed the same bytes.
 pub fn host_replies(bytes: &[u8]) -> Vec<ToHost> {
-    let mut ekf = Box::new(EkfSlam::<f32, { state_dim(FIRMWARE_LANDMARKS) }, { factor_len(FIRMWARE_LANDMARKS) }>::new(
-        EkfConfig::MICROCONTROLLER,
-    ));
+    let mut ekf = Box::new(EkfSlam::<
+        f32,
+        { state_dim(FIRMWARE_LANDMARKS) },
+        { factor_len(FIRMWARE_LANDMARKS) },
+    >::new(EkfConfig::MICROCONTROLLER));
     let config = GridPfConfig::MICROCONTROLLER;
     let mut grid = Box::new(FirmwareGrid::centred(config.resolution, config.log_odds));
     let Ok(mut slam) = FirmwareGridSlam::new(&mut grid, config, Pose2::new(0.0, 0.0, 0.0)) else {

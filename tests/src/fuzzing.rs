@@ -57,7 +57,10 @@ pub fn assert_ekf_sane<const N: usize, const P: usize>(ekf: &EkfSlam<f32, N, P>)
     for i in 0..k {
         let (d, row) = view.factor_row(i).unwrap_or((f32::NAN, &[]));
         assert!(d >= 0.0, "negative pivot {d} at {i}");
-        assert!(row.iter().all(|v| v.is_finite()), "non-finite factor row {i}");
+        assert!(
+            row.iter().all(|v| v.is_finite()),
+            "non-finite factor row {i}"
+        );
     }
     let storage = ekf.factor_storage();
     let active = k * (k + 1) / 2;

@@ -42,7 +42,8 @@ mod tests {
 
     #[test]
     fn nearest_compatible_new_and_ambiguous() {
-        let mut slam = EkfSlam::<f64, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F64);
+        let mut slam =
+            EkfSlam::<f64, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F64);
         // Landmarks at (2, 0) and (2, 1).
         slam.add_landmark(&RangeBearing::new(2.0, 0.0)).unwrap();
         slam.add_landmark(&RangeBearing::new(5f64.sqrt(), 0.5f64.atan()))

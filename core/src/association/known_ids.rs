@@ -133,7 +133,8 @@ mod tests {
 
     #[test]
     fn full_filter_drops_new_ids_and_keeps_going() {
-        let mut slam = EkfSlam::<f64, { state_dim(2) }, { factor_len(2) }>::new(EkfConfig::DEFAULT_F64);
+        let mut slam =
+            EkfSlam::<f64, { state_dim(2) }, { factor_len(2) }>::new(EkfConfig::DEFAULT_F64);
         let mut ids = KnownIds::<4>::new();
         let z = RangeBearing::new(2.0, 0.3);
         assert_eq!(

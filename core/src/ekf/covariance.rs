@@ -174,7 +174,11 @@ pub struct CovarianceView<'a, T: Real> {
 impl<'a, T: Real> CovarianceView<'a, T> {
     pub(crate) fn new(factor: &'a [T], dim: usize) -> Self {
         // The active factor must be stored whole; otherwise the view is empty.
-        let dim = if row_start(dim) <= factor.len() { dim } else { 0 };
+        let dim = if row_start(dim) <= factor.len() {
+            dim
+        } else {
+            0
+        };
         Self { factor, dim }
     }
 
@@ -224,6 +228,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn mwgs_reproduces_the_weighted_gram_matrix() {
         let w = [
             [1.0, 0.5, -2.0, 0.3, 0.0],
@@ -233,7 +238,8 @@ mod tests {
         let q = [0.5, 2.0, 0.1, 1.0, 0.0];
         let (l, d) = mwgs(w, &q);
         let wm = DMatrix::from_fn(3, 5, |i, j| w[i][j]);
-        let expected = &wm * DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&q))
+        let expected = &wm
+            * DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&q))
             * wm.transpose();
         assert!((dense(&l, &d) - expected).abs().max() < 1e-12);
         assert!(d.iter().all(|&v| v >= 0.0));
@@ -262,14 +268,33 @@ mod tests {
         let got = dense(&l, &d);
         assert!((got - DMatrix::from_fn(3, 3, |i, j| a[(i, j)])).abs().max() < 1e-12);
         // Singular but PSD (a zero row and column) is accepted.
-        assert!(ldl(&Matrix3::from_diagonal(&nalgebra::Vector3::new(1.0, 0.0, 2.0))).is_some());
+        assert!(
+            ldl(&Matrix3::from_diagonal(&nalgebra::Vector3::new(
+                1.0, 0.0, 2.0
+            )))
+            .is_some()
+        );
         // Indefinite ones are refused: a negative pivot, a zero pivot with a nonzero column.
         assert!(ldl(&Matrix3::new(1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0)).is_none());
         assert!(ldl(&Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)).is_none());
-        assert!(ldl(&Matrix3::new(f64::NAN, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)).is_none());
+        assert!(
+            ldl(&Matrix3::new(
+                f64::NAN,
+                0.0,
+                0.0,
+                0.0,
+                1.0,
+                0.0,
+                0.0,
+                0.0,
+                1.0
+            ))
+            .is_none()
+        );
     }
 
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn entries_and_the_view_follow_the_factor() {
         // k = 5: one landmark (factor rows 0, 1), robot (rows 2, 3, 4).
         let l = [

@@ -55,14 +55,14 @@
 //!
 //! | landmarks | N | P | bytes |
 //! | --- | --- | --- | --- |
-//! | 16 | 35 | 630 | 2 748 |
-//! | 32 | 67 | 2 278 | 9 468 |
-//! | 64 | 131 | 8 646 | 35 196 |
+//! | 16 | 35 | 630 | 2 744 |
+//! | 32 | 67 | 2 278 | 9 464 |
+//! | 64 | 131 | 8 646 | 35 192 |
 //!
 //! Such a filter belongs in a `static` on a microcontroller: [`EkfSlam::new`] is a
 //! `const fn`, so `static`s are laid out by the linker (`.bss`/`.data`) and never pass
 //! through the stack; [`EkfSlam::init`] re-initialises in place. An update uses
-//! `5 · N · size_of::<T>()` bytes of stack for its per-state terms.
+//! `6 · N · size_of::<T>()` bytes of stack for its per-state terms.
 //!
 //! The two const parameters are the state dimension and the packed factor length; write
 //! them with [`state_dim`] and [`factor_len`] (stable Rust cannot compute one from the
@@ -468,6 +468,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     }
 
     /// The robot's own block of the factor: `L_rr` (unit lower) and `D_r`.
+    #[allow(clippy::needless_range_loop)] // matrix indices read best as indices
     fn robot_block(&self) -> ([[T; 3]; 3], [T; 3]) {
         let r0 = self.active_dim() - 3;
         let mut l = [[T::ZERO; 3]; 3];
@@ -644,7 +645,8 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// unless a cap is exceeded. Checks everything before writing.
     fn robot_map(&mut self, f: &Matrix3<T>, g: &Matrix3<T>, q: &[T; 3]) -> Result<(), EkfError> {
         let (p_rr, coupling) = self.robot_summary();
-        let new_rr = f * p_rr * f.transpose() + g * Matrix3::from_diagonal(&(*q).into()) * g.transpose();
+        let new_rr =
+            f * p_rr * f.transpose() + g * Matrix3::from_diagonal(&(*q).into()) * g.transpose();
         let scale = capped([
             (new_rr[(0, 0)], MAX_POSITION_VARIANCE),
             (new_rr[(1, 1)], MAX_POSITION_VARIANCE),
@@ -974,9 +976,17 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             alpha = next;
         }
         // ν̃₁ = ν₁ − l ν₀, minus what the first correction explains: h̃₁ K₀ ν₀.
-        let scale0 = if total0 > T::ZERO { nu[0] / total0 } else { T::ZERO };
+        let scale0 = if total0 > T::ZERO {
+            nu[0] / total0
+        } else {
+            T::ZERO
+        };
         let nu1 = nu[1] - l * nu[0] - beta * scale0;
-        let scale1 = if total1 > T::ZERO { nu1 / total1 } else { T::ZERO };
+        let scale1 = if total1 > T::ZERO {
+            nu1 / total1
+        } else {
+            T::ZERO
+        };
         poison += (total0 + total1 + scale0 + scale1) * T::ZERO;
         if poison != T::ZERO {
             return Err(EkfError::NumericalFailure);
@@ -1018,7 +1028,8 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
                 let Some((last_b, row_b)) = row_b.split_last_mut() else {
                     return Err(());
                 };
-                let (Some(&[_, wa, _, wb]), Some(own)) = (terms.get(i + 1), terms.get(i..=i)) else {
+                let (Some(&[_, wa, _, wb]), Some(own)) = (terms.get(i + 1), terms.get(i..=i))
+                else {
                     return Err(());
                 };
                 // Row i + 1's entry in column i first (its last), then both rows together.
@@ -1027,7 +1038,10 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             } else {
                 (bierman_row(row_a, head, va, vb), (T::ZERO, T::ZERO))
             };
-            for (r, (b0, b1)) in [(i, ba), (i + 1, bb)].into_iter().take(if pair { 2 } else { 1 }) {
+            for (r, (b0, b1)) in [(i, ba), (i + 1, bb)]
+                .into_iter()
+                .take(if pair { 2 } else { 1 })
+            {
                 let dx = b0 * plan.scale0 + b1 * plan.scale1;
                 if let Some(x) = self.mean.as_mut_slice().get_mut(internal_to_public(r, k)) {
                     *x += dx;
@@ -1130,7 +1144,12 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         // The landmark rows r0, r0 + 1: G_R L_rm, then l5's own block.
         let new_robot = [0, 1, 2].map(|a| row_start(r0 + 2 + a));
         for c in 0..r0 {
-            let col = [0, 1, 2].map(|a| self.factor.get(new_robot[a] + c).copied().unwrap_or(T::ZERO));
+            let col = [0, 1, 2].map(|a| {
+                self.factor
+                    .get(new_robot[a] + c)
+                    .copied()
+                    .unwrap_or(T::ZERO)
+            });
             for a in 0..2 {
                 let v = gr[(a, 0)] * col[0] + gr[(a, 1)] * col[1] + gr[(a, 2)] * col[2];
                 if let Some(slot) = self.factor.get_mut(row_start(r0 + a) + c) {

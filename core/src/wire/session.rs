@@ -494,13 +494,15 @@ mod tests {
             sighting(6, 41, 2.9, -0.52),
             sighting(7, 40, f32::NAN, 0.0),
         ];
-        let mut ekf = EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut ekf =
+            EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
         let mut session = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
         let mut replies = std::vec::Vec::new();
         for b in frames(&msgs) {
             replies.extend(session.receive(b));
         }
-        let mut direct = EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut direct =
+            EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
         let a = direct.add_landmark(&RangeBearing::new(2.0, 0.3)).unwrap();
         direct.predict_velocity(0.5, 0.1, 0.1).unwrap();
         direct.update(a, &RangeBearing::new(1.95, 0.33)).unwrap();
@@ -547,7 +549,8 @@ mod tests {
 
     #[test]
     fn ekf_settings_from_the_wire_replace_the_configuration() {
-        let mut ekf = EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut ekf =
+            EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
         let mut session = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
         let mut wanted = EkfConfig::MICROCONTROLLER;
         wanted.range_std = 0.123;
@@ -594,7 +597,8 @@ mod tests {
 
     #[test]
     fn bad_frames_are_counted_and_commands_answered_with_status() {
-        let mut ekf = EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut ekf =
+            EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
         let mut session = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
         let mut bytes = frames(&[sighting(1, 7, 2.0, 0.0)]);
         bytes.extend_from_slice(&[1, 2, 3, 0, 0xff, 0xfe, 0]);
@@ -713,7 +717,8 @@ mod tests {
             chunk(10, 4, 0),
             chunk(11, 4, 32),
         ];
-        let mut ekf = EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut ekf =
+            EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
         let mut grid = std::boxed::Box::new(OccupancyGrid::<64, 64>::centred(
             config.resolution,
             config.log_odds,

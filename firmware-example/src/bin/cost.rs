@@ -36,7 +36,11 @@ const REPEAT: u32 = 8;
 
 /// Range and bearing of landmark `i` as the filter predicts it (so updates pass the gate),
 /// slightly perturbed.
-fn predicted<const N: usize, const P: usize>(slam: &Ekf<N, P>, i: usize, k: u32) -> Option<RangeBearing<f32>> {
+fn predicted<const N: usize, const P: usize>(
+    slam: &Ekf<N, P>,
+    i: usize,
+    k: u32,
+) -> Option<RangeBearing<f32>> {
     let p = slam.pose();
     let l = slam.landmark(i)?;
     let (dx, dy) = (l[0] - p.x, l[1] - p.y);
@@ -76,7 +80,8 @@ fn measure<const N: usize, const P: usize>(
             return writeln!(out, "error ekf n={n} map");
         }
         let mut outcome = None;
-        add += ticks.instructions(|| outcome = Some(slam.add_landmark(&RangeBearing::new(2.5, 0.7))));
+        add +=
+            ticks.instructions(|| outcome = Some(slam.add_landmark(&RangeBearing::new(2.5, 0.7))));
         if !matches!(outcome, Some(Ok(_))) {
             return writeln!(out, "error ekf n={n} add");
         }
