@@ -1,16 +1,16 @@
-//! Time per EKF step with 16, 32 and 64 active landmarks, in f32 and f64, for both
-//! covariance update forms. `cargo bench -p microslam --bench ekf`.
+//! Time per EKF step with 16, 32 and 64 active landmarks, in f32 and f64.
+//! `cargo bench -p microslam --bench ekf`.
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use microslam::Real;
-use microslam::ekf::{CovarianceUpdate, EkfConfig, EkfSlam};
+use microslam::ekf::{EkfConfig, EkfSlam, factor_len, state_dim};
 use microslam::sensors::range_bearing::RangeBearing;
 use std::hint::black_box;
 
 /// A filter holding `L` landmarks on a circle, correlated by a few predict/update rounds.
-fn filled<T: Real, const N: usize>(config: EkfConfig<T>) -> Box<EkfSlam<T, N>> {
-    let mut slam = Box::new(EkfSlam::<T, N>::new(config));
-    let l = EkfSlam::<T, N>::MAX_LANDMARKS;
+fn filled<T: Real, const N: usize, const P: usize>(config: EkfConfig<T>) -> Box<EkfSlam<T, N, P>> {
+    let mut slam = Box::new(EkfSlam::<T, N, P>::new(config));
+    let l = EkfSlam::<T, N, P>::MAX_LANDMARKS;
     for i in 0..l {
         let b = T::lit(-3.0 + 6.0 * i as f64 / l as f64);
         slam.add_landmark(&RangeBearing::new(T::lit(3.0), b))
@@ -21,10 +21,10 @@ fn filled<T: Real, const N: usize>(config: EkfConfig<T>) -> Box<EkfSlam<T, N>> {
     slam
 }
 
-fn bench_size<T: Real, const N: usize>(c: &mut Criterion, scalar: &str) {
-    let l = EkfSlam::<T, N>::MAX_LANDMARKS;
+fn bench_size<T: Real, const N: usize, const P: usize>(c: &mut Criterion, scalar: &str) {
+    let l = EkfSlam::<T, N, P>::MAX_LANDMARKS;
     let mut group = c.benchmark_group(format!("ekf_{scalar}"));
-    let mut slam = filled::<T, N>(EkfConfig::DEFAULT_F64.cast());
+    let mut slam = filled::<T, N, P>(EkfConfig::DEFAULT_F64.cast());
     group.bench_function(BenchmarkId::new("predict", l), |b| {
         b.iter(|| {
             slam.predict_velocity(
@@ -34,14 +34,8 @@ fn bench_size<T: Real, const N: usize>(c: &mut Criterion, scalar: &str) {
             )
         })
     });
-    for (name, form) in [
-        ("update_joseph", CovarianceUpdate::Joseph),
-        ("update_symmetric", CovarianceUpdate::Symmetric),
-    ] {
-        let mut slam = filled::<T, N>(EkfConfig {
-            covariance_update: form,
-            ..EkfConfig::DEFAULT_F64.cast()
-        });
+    {
+        let mut slam = filled::<T, N, P>(EkfConfig::DEFAULT_F64.cast());
         // The predicted sightings: updating with them leaves the mean where it is, so every
         // timed update is accepted and costs the same.
         let sightings: Vec<RangeBearing<T>> = (0..l)
@@ -55,7 +49,7 @@ fn bench_size<T: Real, const N: usize>(c: &mut Criterion, scalar: &str) {
             })
             .collect();
         let mut i = 0;
-        group.bench_function(BenchmarkId::new(name, l), |b| {
+        group.bench_function(BenchmarkId::new("update", l), |b| {
             b.iter(|| {
                 i = (i + 1) % l;
                 slam.update(i, black_box(&sightings[i]))
@@ -66,12 +60,12 @@ fn bench_size<T: Real, const N: usize>(c: &mut Criterion, scalar: &str) {
 }
 
 fn ekf(c: &mut Criterion) {
-    bench_size::<f32, 35>(c, "f32");
-    bench_size::<f32, 67>(c, "f32");
-    bench_size::<f32, 131>(c, "f32");
-    bench_size::<f64, 35>(c, "f64");
-    bench_size::<f64, 67>(c, "f64");
-    bench_size::<f64, 131>(c, "f64");
+    bench_size::<f32, { state_dim(16) }, { factor_len(16) }>(c, "f32");
+    bench_size::<f32, { state_dim(32) }, { factor_len(32) }>(c, "f32");
+    bench_size::<f32, { state_dim(64) }, { factor_len(64) }>(c, "f32");
+    bench_size::<f64, { state_dim(16) }, { factor_len(16) }>(c, "f64");
+    bench_size::<f64, { state_dim(32) }, { factor_len(32) }>(c, "f64");
+    bench_size::<f64, { state_dim(64) }, { factor_len(64) }>(c, "f64");
 }
 
 criterion_group!(benches, ekf);

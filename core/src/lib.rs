@@ -25,11 +25,11 @@
 //!
 //! ```
 //! use microslam::association::{observe_known, KnownIds};
-//! use microslam::ekf::{state_dim, EkfConfig, EkfSlam};
+//! use microslam::ekf::{factor_len, state_dim, EkfConfig, EkfSlam};
 //! use microslam::sensors::range_bearing::RangeBearing;
 //!
 //! // Up to 32 landmarks: 18 KB in f32, usually a `static` on the target.
-//! let mut slam = EkfSlam::<f32, { state_dim(32) }>::new(EkfConfig::DEFAULT_F32);
+//! let mut slam = EkfSlam::<f32, { state_dim(32) }, { factor_len(32) }>::new(EkfConfig::DEFAULT_F32);
 //! let mut ids = KnownIds::<32>::new();
 //!
 //! slam.predict_velocity(0.2, 0.05, 0.1)?; // v [m/s], ω [rad/s], dt [s]

@@ -4,7 +4,7 @@
 //! pose must lie inside the two-sided 95 % χ² band, and the map must converge.
 
 use microslam::association::{KnownIds, observe_known};
-use microslam::ekf::{EkfConfig, EkfSlam, state_dim};
+use microslam::ekf::{EkfConfig, EkfSlam, factor_len, state_dim};
 use microslam::gate::{ChiSquareGate, chi_square_quantile};
 use microslam::geometry::{Pose2, wrap_angle};
 use microslam::motion::{VelocityNoise, integrate_velocity};
@@ -49,7 +49,7 @@ fn run(seed: u64, config: &EkfConfig<f64>) -> RunResult {
     let sb = Normal::new(0.0, config.bearing_std).unwrap();
     let world = landmarks();
     let mut truth = Pose2::new(0.0, 0.0, 0.0);
-    let mut slam = EkfSlam::<f64, { state_dim(L) }>::new(*config);
+    let mut slam = EkfSlam::<f64, { state_dim(L) }, { factor_len(L) }>::new(*config);
     let mut ids = KnownIds::<L>::new();
     let mut nees = Vec::with_capacity(STEPS);
     for step in 1..=STEPS {

@@ -2,7 +2,9 @@
 //! refusal of bad input without side effects.
 
 use microslam::EkfError;
-use microslam::ekf::{EKF_OVERHEAD_BYTES_F32, EkfConfig, EkfSlam, UpdateOutcome, state_dim};
+use microslam::ekf::{
+    EKF_OVERHEAD_BYTES_F32, EkfConfig, EkfSlam, UpdateOutcome, factor_len, state_dim,
+};
 use microslam::gate::ChiSquareGate;
 use microslam::geometry::Pose2;
 use microslam::sensors::range_bearing::RangeBearing;
@@ -10,40 +12,45 @@ use nalgebra::Matrix2;
 
 fn documented_bytes_f32(landmarks: usize) -> usize {
     let n = state_dim(landmarks);
-    (n * n + n) * 4 + EKF_OVERHEAD_BYTES_F32
+    (n + factor_len(landmarks)) * 4 + EKF_OVERHEAD_BYTES_F32
 }
 
 #[test]
 fn size_matches_the_documented_formula() {
     assert_eq!(
-        size_of::<EkfSlam<f32, { state_dim(16) }>>(),
+        size_of::<EkfSlam<f32, { state_dim(16) }, { factor_len(16) }>>(),
         documented_bytes_f32(16)
     );
     assert_eq!(
-        size_of::<EkfSlam<f32, { state_dim(32) }>>(),
+        size_of::<EkfSlam<f32, { state_dim(32) }, { factor_len(32) }>>(),
         documented_bytes_f32(32)
     );
     assert_eq!(
-        size_of::<EkfSlam<f32, { state_dim(64) }>>(),
+        size_of::<EkfSlam<f32, { state_dim(64) }, { factor_len(64) }>>(),
         documented_bytes_f32(64)
     );
-    // The figures printed in the crate documentation and the README.
-    assert_eq!(documented_bytes_f32(16), 5_128);
-    assert_eq!(documented_bytes_f32(32), 18_312);
-    assert_eq!(documented_bytes_f32(64), 69_256);
+    // The figures printed in the crate documentation and docs/ekf-covariance.md.
+    assert_eq!(factor_len(64), 131 * 132 / 2);
+    assert_eq!(documented_bytes_f32(16), 2_744);
+    assert_eq!(documented_bytes_f32(32), 9_464);
+    assert_eq!(documented_bytes_f32(64), 35_192);
 }
 
 /// A `static` built by the `const fn` constructor: no stack copy of the covariance.
-static STATIC_FILTER: EkfSlam<f32, { state_dim(64) }> = EkfSlam::new(EkfConfig::DEFAULT_F32);
+static STATIC_FILTER: EkfSlam<f32, { state_dim(64) }, { factor_len(64) }> =
+    EkfSlam::new(EkfConfig::DEFAULT_F32);
 
 #[test]
 fn const_constructor_builds_a_static() {
     assert_eq!(STATIC_FILTER.landmark_count(), 0);
     assert_eq!(STATIC_FILTER.pose(), Pose2::IDENTITY);
-    assert_eq!(<EkfSlam<f32, { state_dim(64) }>>::MAX_LANDMARKS, 64);
+    assert_eq!(
+        <EkfSlam<f32, { state_dim(64) }, { factor_len(64) }>>::MAX_LANDMARKS,
+        64
+    );
 }
 
-type Slam = EkfSlam<f64, { state_dim(4) }>;
+type Slam = EkfSlam<f64, { state_dim(4) }, { factor_len(4) }>;
 
 #[test]
 fn adding_a_landmark_places_it_by_the_inverse_model() {
@@ -191,7 +198,7 @@ fn init_clears_the_previous_run() {
     slam.init(EkfConfig::DEFAULT_F64, Pose2::new(5.0, 0.0, 7.0))
         .unwrap();
     assert_eq!(slam.landmark_count(), 0);
-    assert!(slam.covariance_storage().iter().all(|v| *v == 0.0));
+    assert!(slam.factor_storage().iter().all(|v| *v == 0.0));
     assert!(
         (slam.pose().theta - (7.0 - core::f64::consts::TAU)).abs() < 1e-12,
         "heading wrapped"
@@ -229,5 +236,42 @@ fn robot_variances_are_capped_without_breaking_positive_definiteness() {
     );
     let trace = p.trace();
     let min_eig = p.symmetric_eigen().eigenvalues.min();
-    assert!(min_eig >= -1e-9 * trace, "{min_eig}");
+    assert!(min_eig >= -1e-12 * trace, "{min_eig}");
+}
+
+#[test]
+fn pose_inflation_adds_to_the_robot_block_only() {
+    let mut slam = Slam::new(EkfConfig::DEFAULT_F64);
+    slam.predict_velocity(0.5, 0.2, 1.0).unwrap();
+    slam.add_landmark(&RangeBearing::new(2.0, 0.5)).unwrap();
+    slam.predict_velocity(0.5, 0.2, 1.0).unwrap();
+    let before = slam.active_covariance();
+    let k = before.dim();
+    let old = nalgebra::DMatrix::from_fn(k, k, |i, j| before.get(i, j).unwrap());
+    let added = nalgebra::Matrix3::new(0.5, 0.1, 0.0, 0.1, 0.2, 0.0, 0.0, 0.0, 0.3);
+    slam.inflate_pose_covariance(&added).unwrap();
+    let after = slam.active_covariance();
+    for i in 0..k {
+        for j in 0..k {
+            let plus = if i < 3 && j < 3 { added[(i, j)] } else { 0.0 };
+            let got = after.get(i, j).unwrap();
+            assert!((got - old[(i, j)] - plus).abs() < 1e-12, "({i}, {j})");
+        }
+    }
+    // Refused, with nothing changed: non-finite, indefinite.
+    let snapshot: Vec<f64> = slam.active_covariance().iter().collect();
+    let nan = nalgebra::Matrix3::from_diagonal_element(f64::NAN);
+    assert_eq!(
+        slam.inflate_pose_covariance(&nan),
+        Err(EkfError::NonFiniteInput)
+    );
+    let indefinite = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::new(1.0, -0.1, 1.0));
+    assert_eq!(
+        slam.inflate_pose_covariance(&indefinite),
+        Err(EkfError::InvalidNoise)
+    );
+    assert_eq!(
+        slam.active_covariance().iter().collect::<Vec<_>>(),
+        snapshot
+    );
 }

@@ -1,6 +1,6 @@
 //! Estimator settings of the firmware; the host reference uses the same values.
 
-use microslam::ekf::{CovarianceUpdate, EkfConfig, EkfSlam, state_dim};
+use microslam::ekf::{EkfConfig, EkfSlam, factor_len, state_dim};
 use microslam::gate::ChiSquareGate;
 use microslam::geometry::Pose2;
 use microslam::grid::{OccupancyGrid, occupancy_bytes};
@@ -10,17 +10,18 @@ use microslam::sensors::range_bearing::RangeBearingSensor;
 use microslam::wire::GridSetup;
 
 /// Landmarks the EKF holds.
-pub const EKF_LANDMARKS: usize = 32;
+pub const EKF_LANDMARKS: usize = 64;
 
-/// The EKF of the firmware: `f32`, 32 landmarks (18 KB).
-pub type Ekf = EkfSlam<f32, { state_dim(EKF_LANDMARKS) }>;
+/// The EKF of the firmware: `f32`, 64 landmarks (35 KB: the covariance is kept as a
+/// packed triangular factor, see `docs/ekf-covariance.md`).
+pub type Ekf = EkfSlam<f32, { state_dim(EKF_LANDMARKS) }, { factor_len(EKF_LANDMARKS) }>;
 
 /// The settings the EKF runs with (the session re-initialises the filter with them): the
-/// generic defaults with the cheaper optimal-gain covariance update.
+/// generic defaults.
 pub const EKF_CONFIG: EkfConfig<f32> = EkfConfig::MICROCONTROLLER;
 
 /// A configuration of all-zero bytes, used only to build the filter in a `static`: a
-/// value of zero bytes lands in `.bss`, so the 18 KB filter costs no flash for initial
+/// value of zero bytes lands in `.bss`, so the 35 KB filter costs no flash for initial
 /// values. [`microslam::wire::Session::new`] then sets [`EKF_CONFIG`] in place.
 pub const ZEROED_EKF_CONFIG: EkfConfig<f32> = EkfConfig {
     increment_noise: IncrementNoise {
@@ -41,7 +42,6 @@ pub const ZEROED_EKF_CONFIG: EkfConfig<f32> = EkfConfig {
     bearing_std: 0.0,
     sensor: RangeBearingSensor::new(Pose2::new(0.0, 0.0, 0.0)),
     gate: ChiSquareGate::from_threshold(0.0),
-    covariance_update: CovarianceUpdate::Joseph,
 };
 
 /// Particles of the grid estimator.

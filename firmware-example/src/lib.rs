@@ -35,8 +35,8 @@ pub const HEARTBEAT_EVENTS: u32 = 64;
 ///
 /// Nothing waits for the host: replies are written as soon as a frame is complete, and
 /// the host streams frames without waiting for them.
-pub fn serve<S, L, const N: usize, const IDS: usize>(
-    session: &mut Session<'_, N, IDS>,
+pub fn serve<S, L, const N: usize, const P: usize, const IDS: usize>(
+    session: &mut Session<'_, N, P, IDS>,
     serial: &mut S,
     led: &mut L,
     stack_peak_bytes: impl Fn() -> u32,

@@ -41,7 +41,7 @@ fn main() -> ! {
         board::halt(4)
     };
     let slam = GRID_SLAM.init(slam);
-    let mut session = Session::<_, EKF_LANDMARKS>::with_grid(ekf, EKF_CONFIG, slam, GRID_SETUP);
+    let mut session = Session::<_, _, EKF_LANDMARKS>::with_grid(ekf, EKF_CONFIG, slam, GRID_SETUP);
     defmt::info!("grid estimator: {} particles", GRID_PARTICLES);
     defmt::info!(
         "microslam firmware: EKF with {} landmarks, waiting for frames",

@@ -89,8 +89,8 @@ impl<T: Real, const K: usize> Candidates<T, K> {
     /// Landmarks the sighting cannot be compared with (on the sensor, singular
     /// innovation) are skipped. An invalid sighting (NaN, non-positive range) has no
     /// candidates.
-    pub fn of<const N: usize>(
-        slam: &EkfSlam<T, N>,
+    pub fn of<const N: usize, const P: usize>(
+        slam: &EkfSlam<T, N, P>,
         z: &RangeBearing<T>,
         gate: &ChiSquareGate<T>,
     ) -> Self {

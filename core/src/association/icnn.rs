@@ -15,8 +15,8 @@ use crate::scalar::Real;
 use crate::sensors::range_bearing::RangeBearing;
 
 /// ICNN for one sighting `z` against the landmarks of `slam`. O(n); no state change.
-pub fn icnn<T: Real, const N: usize>(
-    slam: &EkfSlam<T, N>,
+pub fn icnn<T: Real, const N: usize, const P: usize>(
+    slam: &EkfSlam<T, N, P>,
     z: &RangeBearing<T>,
     config: &AssociationConfig<T>,
 ) -> Pairing {
@@ -34,7 +34,7 @@ pub fn icnn<T: Real, const N: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ekf::{EkfConfig, state_dim};
+    use crate::ekf::{EkfConfig, factor_len, state_dim};
 
     fn cfg() -> AssociationConfig<f64> {
         AssociationConfig::default_gates()
@@ -42,7 +42,8 @@ mod tests {
 
     #[test]
     fn nearest_compatible_new_and_ambiguous() {
-        let mut slam = EkfSlam::<f64, { state_dim(4) }>::new(EkfConfig::DEFAULT_F64);
+        let mut slam =
+            EkfSlam::<f64, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F64);
         // Landmarks at (2, 0) and (2, 1).
         slam.add_landmark(&RangeBearing::new(2.0, 0.0)).unwrap();
         slam.add_landmark(&RangeBearing::new(5f64.sqrt(), 0.5f64.atan()))

@@ -97,9 +97,9 @@ impl<T: Real, const B: usize, const K: usize> Jcbb<T, B, K> {
     /// Unpaired sightings are [`Pairing::New`] when far from every landmark, otherwise
     /// [`Pairing::Ambiguous`]; invalid ones [`Pairing::Invalid`]. A batch larger than `B`
     /// (or than `pairings`) is refused with nothing written.
-    pub fn associate<const N: usize>(
+    pub fn associate<const N: usize, const P: usize>(
         &self,
-        slam: &EkfSlam<T, N>,
+        slam: &EkfSlam<T, N, P>,
         sightings: &[RangeBearing<T>],
         pairings: &mut [Pairing],
     ) -> Result<JcbbOutcome<T>, BatchTooLarge> {
@@ -115,7 +115,7 @@ impl<T: Real, const B: usize, const K: usize> Jcbb<T, B, K> {
             *c = Candidates::of(slam, z, &self.config.individual_gate);
         }
         let candidates = candidates.get(..m).unwrap_or(&[]);
-        let mut search = Search::<T, N, B, K> {
+        let mut search = Search::<T, B, K> {
             covariance: slam.active_covariance(),
             candidates,
             thresholds: &self.joint_thresholds,
@@ -167,8 +167,8 @@ impl<T: Real, const B: usize, const K: usize> Jcbb<T, B, K> {
 }
 
 /// State of one branch-and-bound search.
-struct Search<'a, T: Real, const N: usize, const B: usize, const K: usize> {
-    covariance: CovarianceView<'a, T, N>,
+struct Search<'a, T: Real, const B: usize, const K: usize> {
+    covariance: CovarianceView<'a, T>,
     candidates: &'a [Candidates<T, K>],
     thresholds: &'a [T; B],
     /// The current hypothesis: (sighting, candidate index) for each of `depth` pairings.
@@ -191,7 +191,7 @@ struct Search<'a, T: Real, const N: usize, const B: usize, const K: usize> {
     truncated: bool,
 }
 
-impl<T: Real, const N: usize, const B: usize, const K: usize> Search<'_, T, N, B, K> {
+impl<T: Real, const B: usize, const K: usize> Search<'_, T, B, K> {
     fn explore(&mut self, sighting: usize) {
         if self.nodes >= self.max_nodes {
             self.truncated = true;
@@ -354,11 +354,11 @@ fn lower_inverse<T: Real>(l: &Matrix2<T>) -> Option<Matrix2<T>> {
 mod tests {
     use super::*;
     use crate::association::icnn::icnn;
-    use crate::ekf::{EkfConfig, state_dim};
+    use crate::ekf::{EkfConfig, factor_len, state_dim};
     use crate::geometry::Pose2;
     use crate::motion::IncrementNoise;
 
-    type Slam = EkfSlam<f64, { state_dim(8) }>;
+    type Slam = EkfSlam<f64, { state_dim(8) }, { factor_len(8) }>;
 
     fn sighting(robot: Pose2<f64>, x: f64, y: f64) -> RangeBearing<f64> {
         let (dx, dy) = (x - robot.x, y - robot.y);
@@ -545,7 +545,7 @@ mod tests {
         let mut config = EkfConfig::DEFAULT_F32;
         config.range_std = 0.02;
         config.bearing_std = 0.01;
-        let mut slam = EkfSlam::<f32, { state_dim(8) }>::new(config);
+        let mut slam = EkfSlam::<f32, { state_dim(8) }, { factor_len(8) }>::new(config);
         // Same state as the f64 filter, built the same way.
         let origin = Pose2::new(0.0f32, 0.0, 0.0);
         let to32 = |z: &RangeBearing<f64>| RangeBearing::new(z.range as f32, z.bearing as f32);

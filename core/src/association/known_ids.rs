@@ -95,8 +95,8 @@ pub enum Observed<T> {
 ///
 /// When the filter or the table is full, the sighting is dropped with
 /// [`EkfError::MapFull`]; the filter goes on with the landmarks it has.
-pub fn observe_known<T: Real, const N: usize, const L: usize>(
-    slam: &mut EkfSlam<T, N>,
+pub fn observe_known<T: Real, const N: usize, const P: usize, const L: usize>(
+    slam: &mut EkfSlam<T, N, P>,
     ids: &mut KnownIds<L>,
     id: u32,
     z: &RangeBearing<T>,
@@ -117,7 +117,7 @@ pub fn observe_known<T: Real, const N: usize, const L: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ekf::{EkfConfig, state_dim};
+    use crate::ekf::{EkfConfig, factor_len, state_dim};
 
     #[test]
     fn table_hands_back_ids_when_full() {
@@ -133,7 +133,8 @@ mod tests {
 
     #[test]
     fn full_filter_drops_new_ids_and_keeps_going() {
-        let mut slam = EkfSlam::<f64, { state_dim(2) }>::new(EkfConfig::DEFAULT_F64);
+        let mut slam =
+            EkfSlam::<f64, { state_dim(2) }, { factor_len(2) }>::new(EkfConfig::DEFAULT_F64);
         let mut ids = KnownIds::<4>::new();
         let z = RangeBearing::new(2.0, 0.3);
         assert_eq!(

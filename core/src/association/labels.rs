@@ -69,12 +69,13 @@ impl<const L: usize> LandmarkLabels<L> {
 mod tests {
     use super::*;
     use crate::association::{AssociationConfig, Pairing, icnn};
-    use crate::ekf::{EkfConfig, EkfSlam, state_dim};
+    use crate::ekf::{EkfConfig, EkfSlam, factor_len, state_dim};
     use crate::sensors::range_bearing::RangeBearing;
 
     #[test]
     fn geometry_overrides_a_wrong_class() {
-        let mut slam = EkfSlam::<f64, { state_dim(4) }>::new(EkfConfig::DEFAULT_F64);
+        let mut slam =
+            EkfSlam::<f64, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F64);
         let mut labels = LandmarkLabels::<4>::new();
         let stop = slam.add_landmark(&RangeBearing::new(2.0, 0.5)).unwrap();
         labels.set(stop, Identity::Class(1)); // "stop"

@@ -1,158 +1,162 @@
-//! The covariance of [`EkfSlam`](super::EkfSlam), kept as its upper triangle.
+//! The covariance of [`EkfSlam`](super::EkfSlam), kept as a factorisation `P = L D Lᵀ`.
 //!
-//! The storage is a column-major `N × N` array. Entry `(i, j)` with `i ≤ j` lives in
-//! column `j`, row `i`, so the upper part of each column (rows `0..=j`) is one contiguous
-//! run of memory. The strict lower triangle is never written: it stays zero. Compared with
-//! keeping both halves this halves the work of the O(n²) update and removes its strided
-//! mirror writes; the matrix is symmetric by construction.
+//! `L` is unit lower triangular and `D` diagonal with `D ≥ 0`, so `P` is positive
+//! semi-definite whatever rounding does to the entries of `L` and `D`: every step keeps
+//! `D ≥ 0` by how it computes it (weighted sums of squares, or products and quotients of
+//! non-negative numbers), never by a check after the fact.
 //!
-//! Everything that reads the covariance goes through [`CovarianceView`] (or the crate's
-//! internal equivalents), which fold `(i, j)` onto the upper triangle.
+//! # Storage
+//!
+//! The factor is stored packed, row by row: row `i` of `L` (entries `0..i`) followed by
+//! `Dᵢ` in place of the unit diagonal, at offset `i (i + 1) / 2`. A state of dimension `N`
+//! takes `N (N + 1) / 2` scalars ([`factor_len`]).
+//!
+//! Inside the factor the state is ordered `[landmark 1, …, landmark n, robot]`: the
+//! robot comes last and a new landmark is inserted just before it. With that order
+//! - a prediction (which moves the robot only) changes only the robot's three rows;
+//! - a new landmark adds two rows and moves the robot's three rows two slots down;
+//! - nothing else ever moves.
+//!
+//! The public API keeps the robot-first order `[x, y, θ, x₁, y₁, …]`; [`CovarianceView`]
+//! reads entries of `P` in that order, at O(n) each (`P_ij = Σ_c L_ic D_c L_jc`).
 
 use crate::scalar::Real;
 use nalgebra::SMatrix;
 
-/// Entry `(i, j)` of the symmetric matrix stored as the upper triangle of `p`; zero
-/// outside `N × N`.
-#[inline]
-pub(crate) fn entry<T: Real, const N: usize>(p: &SMatrix<T, N, N>, i: usize, j: usize) -> T {
-    let (row, col) = if i <= j { (i, j) } else { (j, i) };
-    p.as_slice().get(col * N + row).copied().unwrap_or(T::ZERO)
-}
-
-/// The `R × C` block at `(i, j)` of the symmetric matrix stored as the upper triangle of
-/// `p` (zero outside `N × N`).
-pub(crate) fn block<T: Real, const N: usize, const R: usize, const C: usize>(
-    p: &SMatrix<T, N, N>,
-    i: usize,
-    j: usize,
-) -> SMatrix<T, R, C> {
-    SMatrix::from_fn(|r, c| entry(p, i + r, j + c))
-}
-
-/// Writes the entries of the symmetric `R × R` block `value` at `(i, i)` that lie on or
-/// above the diagonal; the rest of `value` is ignored.
-pub(crate) fn set_diagonal_block<T: Real, const N: usize, const R: usize>(
-    p: &mut SMatrix<T, N, N>,
-    i: usize,
-    value: &SMatrix<T, R, R>,
-) {
-    let data = p.as_mut_slice();
-    for c in 0..R {
-        for r in 0..=c {
-            if let Some(slot) = data.get_mut((i + c) * N + i + r) {
-                *slot = value[(r, c)];
-            }
-        }
-    }
-}
-
-/// Adds `scale · dᵢ` to variance `i` of `p` for each `dᵢ` of `d`: a diagonal loading,
-/// positive semi-definite when `scale` and the `dᵢ` are non-negative.
-pub(crate) fn load_diagonal<T: Real, const N: usize>(p: &mut SMatrix<T, N, N>, d: &[T], scale: T) {
-    for (v, d) in p.as_mut_slice().iter_mut().step_by(N + 1).zip(d) {
-        *v += scale * *d;
-    }
-}
-
-/// Per-row terms of one EKF update, for row (and column) `i` of the active block.
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct UpdateRow<T> {
-    /// Row `i` of `M = P Hᵀ`.
-    pub m: [T; 2],
-    /// Row `i` of the gain `K = M S⁻¹`.
-    pub k: [T; 2],
-    /// Row `i` of `K S` (optimal-gain form) or of the Joseph form's `D`.
-    pub a: [T; 2],
-}
-
-/// New value of entry `(i, j)` in the optimal-gain form `P − (K S) Kᵀ`.
+/// Packed length of the covariance factor for a maximum of `max_landmarks` landmarks:
+/// `N (N + 1) / 2` with `N = 3 + 2 · max_landmarks` (the second const parameter of
+/// [`EkfSlam`](super::EkfSlam)).
 ///
-/// Two chained multiply-subtracts (`VMLS` on a Cortex-M4F, the same rounding as a
-/// separate multiply and subtract on every target).
-#[inline(always)]
-pub(crate) fn symmetric_entry<T: Real>(p: T, row: &UpdateRow<T>, col: &UpdateRow<T>) -> T {
-    (p - row.a[0] * col.k[0]) - row.a[1] * col.k[1]
+/// ```
+/// use microslam::ekf::{factor_len, state_dim};
+/// assert_eq!(state_dim(64), 131);
+/// assert_eq!(factor_len(64), 131 * 132 / 2);
+/// ```
+pub const fn factor_len(max_landmarks: usize) -> usize {
+    let n = super::state_dim(max_landmarks);
+    n * (n + 1) / 2
 }
 
-/// New value of entry `(i, j)` in the Joseph form `P + D Kᵀ − K Mᵀ`.
+/// Offset of row `i` in the packed factor.
 #[inline(always)]
-pub(crate) fn joseph_entry<T: Real>(p: T, row: &UpdateRow<T>, col: &UpdateRow<T>) -> T {
-    (((p + row.a[0] * col.k[0]) + row.a[1] * col.k[1]) - row.k[0] * col.m[0]) - row.k[1] * col.m[1]
+pub(crate) const fn row_start(i: usize) -> usize {
+    i * (i + 1) / 2
 }
 
-/// Sets entry `(i, j)`, `i ≤ j < k`, of the upper triangle of the active `k × k` block
-/// to `f(p_ij, rows[i], rows[j])`, with `k = rows.len()`.
+/// Index inside the factor of public state index `s` (robot first) when the active
+/// dimension is `k` (robot last inside the factor).
+#[inline(always)]
+pub(crate) const fn internal(s: usize, k: usize) -> usize {
+    if s < 3 { k - 3 + s } else { s - 3 }
+}
+
+/// `Dᵢ`, zero outside `factor`.
+#[inline(always)]
+pub(crate) fn pivot<T: Real>(factor: &[T], i: usize) -> T {
+    factor.get(row_start(i) + i).copied().unwrap_or(T::ZERO)
+}
+
+/// Row `i` of `L` without its unit diagonal (`L_i0 … L_i,i−1`), empty outside `factor`.
+#[inline(always)]
+pub(crate) fn strict_row<T: Real>(factor: &[T], i: usize) -> &[T] {
+    factor.get(row_start(i)..row_start(i) + i).unwrap_or(&[])
+}
+
+/// Entry `(i, j)` of `P = L D Lᵀ` in the factor's own order: `Σ_{c ≤ min(i,j)} L_ic D_c L_jc`.
+pub(crate) fn internal_entry<T: Real>(factor: &[T], i: usize, j: usize) -> T {
+    let (hi, lo) = if i >= j { (i, j) } else { (j, i) };
+    let (row_hi, row_lo) = (strict_row(factor, hi), strict_row(factor, lo));
+    let mut acc = T::ZERO;
+    for (c, (&a, &b)) in row_hi.iter().zip(row_lo).enumerate() {
+        acc += a * pivot(factor, c) * b;
+    }
+    let l_hi_lo = if hi == lo {
+        T::ONE
+    } else {
+        row_hi.get(lo).copied().unwrap_or(T::ZERO)
+    };
+    acc + l_hi_lo * pivot(factor, lo)
+}
+
+/// Modified weighted Gram–Schmidt (Thornton): the unit lower triangular `L` and the
+/// diagonal `D ≥ 0` with `L diag(D) Lᵀ = W diag(w) Wᵀ`, for weights `w ≥ 0`.
 ///
-/// The hot loop of the EKF update. Columns go four at a time, so each row's terms are
-/// loaded once for four entries (the last `k mod 4` columns one at a time). The entries
-/// are computed by the same `f` in any order, so the result does not depend on the
-/// blocking. Not inlined: as a function of its own its arguments keep their no-alias
-/// guarantees, so the row and column terms are loaded once rather than after every
-/// store to `p`.
-#[inline(never)]
-pub(crate) fn update_upper<T: Real, const N: usize, R: Copy>(
-    p: &mut SMatrix<T, N, N>,
-    rows: &[R],
-    f: impl Fn(T, &R, &R) -> T,
-) {
-    let k = rows.len().min(N);
-    let data = p.as_mut_slice();
-    let mut j = 0;
-    while j + 4 <= k {
-        let (Some(block), Some([c0, c1, c2, c3]), Some(head)) = (
-            data.get_mut(j * N..(j + 4) * N),
-            rows.get(j..j + 4),
-            rows.get(..=j),
-        ) else {
-            return;
-        };
-        // Copies, so that the column terms stay in registers.
-        let (c0, c1, c2, c3) = (*c0, *c1, *c2, *c3);
-        let (p0, rest) = block.split_at_mut(N);
-        let (p1, rest) = rest.split_at_mut(N);
-        let (p2, p3) = rest.split_at_mut(N);
-        // Rows 0..=j are above the diagonal in all four columns.
-        let columns = p0
-            .iter_mut()
-            .zip(p1.iter_mut())
-            .zip(p2.iter_mut().zip(p3.iter_mut()));
-        for (((x0, x1), (x2, x3)), &r) in columns.zip(head) {
-            *x0 = f(*x0, &r, &c0);
-            *x1 = f(*x1, &r, &c1);
-            *x2 = f(*x2, &r, &c2);
-            *x3 = f(*x3, &r, &c3);
+/// Row `i` of `W` is made `w`-orthogonal to the rows before it; `Dᵢ` is the weighted
+/// squared norm of what is left, a sum of non-negative terms. A zero `Dᵢ` leaves column
+/// `i` of `L` zero (that direction carries no variance).
+pub(crate) fn mwgs<T: Real, const R: usize, const C: usize>(
+    mut w: [[T; C]; R],
+    weights: &[T; C],
+) -> ([[T; R]; R], [T; R]) {
+    let mut l = [[T::ZERO; R]; R];
+    let mut d = [T::ZERO; R];
+    for i in 0..R {
+        l[i][i] = T::ONE;
+        let vi = w[i];
+        let mut di = T::ZERO;
+        for (&v, &q) in vi.iter().zip(weights) {
+            di += v * v * q;
         }
-        // The corner: rows j+1..=j+c of column j+c.
-        for (c, (column, col)) in [(p1, c1), (p2, c2), (p3, c3)].into_iter().enumerate() {
-            let corner = j + 1..j + 2 + c;
-            if let (Some(xs), Some(rs)) = (column.get_mut(corner.clone()), rows.get(corner)) {
-                for (x, r) in xs.iter_mut().zip(rs) {
-                    *x = f(*x, r, &col);
+        d[i] = di;
+        if di > T::ZERO {
+            for k in i + 1..R {
+                let mut dot = T::ZERO;
+                for ((&a, &q), &v) in w[k].iter().zip(weights).zip(&vi) {
+                    dot += a * q * v;
+                }
+                let lki = dot / di;
+                l[k][i] = lki;
+                for (a, &v) in w[k].iter_mut().zip(&vi) {
+                    *a -= lki * v;
                 }
             }
         }
-        j += 4;
     }
-    while j < k {
-        let (Some(column), Some(&col)) = (data.get_mut(j * N..=j * N + j), rows.get(j)) else {
-            return;
-        };
-        for (x, r) in column.iter_mut().zip(rows) {
-            *x = f(*x, r, &col);
-        }
-        j += 1;
-    }
+    (l, d)
 }
 
-/// A read-only view of the active block of an EKF covariance (symmetric; see the
-/// [module docs](self)).
+/// `A = L diag(D) Lᵀ` for a symmetric `R × R` matrix given by its lower triangle (the
+/// mean of the two triangles is used), or `None` when `A` is not finite or not positive
+/// semi-definite (a negative pivot, or a zero pivot whose column is not zero).
+pub(crate) fn ldl<T: Real, const R: usize>(a: &SMatrix<T, R, R>) -> Option<([[T; R]; R], [T; R])> {
+    let mut l = [[T::ZERO; R]; R];
+    let mut d = [T::ZERO; R];
+    if !a.iter().all(|v| v.finite()) {
+        return None;
+    }
+    for j in 0..R {
+        l[j][j] = T::ONE;
+        let mut dj = a[(j, j)];
+        for c in 0..j {
+            dj -= l[j][c] * l[j][c] * d[c];
+        }
+        if dj < T::ZERO || !dj.finite() {
+            return None;
+        }
+        d[j] = dj;
+        for i in j + 1..R {
+            let mut aij = (a[(i, j)] + a[(j, i)]) * T::lit(0.5);
+            for c in 0..j {
+                aij -= l[i][c] * l[j][c] * d[c];
+            }
+            if dj > T::ZERO {
+                l[i][j] = aij / dj;
+            } else if aij != T::ZERO {
+                return None;
+            }
+        }
+    }
+    Some((l, d))
+}
+
+/// A read-only view of the active block of an EKF covariance, in the public order
+/// (robot first). Entries are computed from the factor (O(n) each); nothing is copied.
 ///
 /// ```
-/// use microslam::ekf::{state_dim, EkfConfig, EkfSlam};
+/// use microslam::ekf::{factor_len, state_dim, EkfConfig, EkfSlam};
 /// use microslam::sensors::range_bearing::RangeBearing;
 ///
-/// let mut slam = EkfSlam::<f64, { state_dim(4) }>::new(EkfConfig::DEFAULT_F64);
+/// let mut slam = EkfSlam::<f64, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F64);
 /// slam.predict_velocity(1.0, 0.2, 0.5)?;
 /// slam.add_landmark(&RangeBearing::new(2.0, 0.3))?;
 /// let p = slam.active_covariance();
@@ -162,17 +166,20 @@ pub(crate) fn update_upper<T: Real, const N: usize, R: Copy>(
 /// # Ok::<(), microslam::EkfError>(())
 /// ```
 #[derive(Clone, Copy, Debug)]
-pub struct CovarianceView<'a, T: Real, const N: usize> {
-    storage: &'a SMatrix<T, N, N>,
+pub struct CovarianceView<'a, T: Real> {
+    factor: &'a [T],
     dim: usize,
 }
 
-impl<'a, T: Real, const N: usize> CovarianceView<'a, T, N> {
-    pub(crate) fn new(storage: &'a SMatrix<T, N, N>, dim: usize) -> Self {
-        Self {
-            storage,
-            dim: dim.min(N),
-        }
+impl<'a, T: Real> CovarianceView<'a, T> {
+    pub(crate) fn new(factor: &'a [T], dim: usize) -> Self {
+        // The active factor must be stored whole; otherwise the view is empty.
+        let dim = if row_start(dim) <= factor.len() {
+            dim
+        } else {
+            0
+        };
+        Self { factor, dim }
     }
 
     /// Dimension `k = 3 + 2n` of the active block.
@@ -182,7 +189,8 @@ impl<'a, T: Real, const N: usize> CovarianceView<'a, T, N> {
 
     /// Entry `(i, j)` (= entry `(j, i)`), `None` outside the active block.
     pub fn get(&self, i: usize, j: usize) -> Option<T> {
-        (i < self.dim && j < self.dim).then(|| entry(self.storage, i, j))
+        let k = self.dim;
+        (i < k && j < k).then(|| internal_entry(self.factor, internal(i, k), internal(j, k)))
     }
 
     /// The `R × C` block whose top-left entry is `(i, j)`, `None` unless it lies inside
@@ -192,96 +200,132 @@ impl<'a, T: Real, const N: usize> CovarianceView<'a, T, N> {
         i: usize,
         j: usize,
     ) -> Option<SMatrix<T, R, C>> {
-        (i + R <= self.dim && j + C <= self.dim).then(|| block(self.storage, i, j))
-    }
-
-    /// Rows `0..=j` of column `j`: the stored (upper) part of the column, contiguous.
-    pub fn upper_column(&self, j: usize) -> Option<&'a [T]> {
-        if j >= self.dim {
-            return None;
-        }
-        self.storage.as_slice().get(j * N..=j * N + j)
+        (i + R <= self.dim && j + C <= self.dim)
+            .then(|| SMatrix::from_fn(|r, c| self.get(i + r, j + c).unwrap_or(T::ZERO)))
     }
 
     /// Row-major iteration over the whole active block, both triangles.
     pub fn iter(&self) -> impl Iterator<Item = T> + '_ {
         let k = self.dim;
-        (0..k).flat_map(move |i| (0..k).map(move |j| entry(self.storage, i, j)))
+        (0..k).flat_map(move |i| (0..k).map(move |j| self.get(i, j).unwrap_or(T::ZERO)))
+    }
+
+    /// `Dᵢ` and row `i` of `L` (entries `0..i`) in the factor's own order (landmarks,
+    /// then the robot), `None` outside the active block: for diagnostics and tests.
+    pub fn factor_row(&self, i: usize) -> Option<(T, &'a [T])> {
+        (i < self.dim).then(|| (pivot(self.factor, i), strict_row(self.factor, i)))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::{DMatrix, Matrix3};
 
-    /// A symmetric 5 × 5 test matrix in upper storage within an 7 × 7 array.
-    fn stored(values: impl Fn(usize, usize) -> f64) -> SMatrix<f64, 7, 7> {
-        SMatrix::from_fn(|i, j| if i <= j { values(i, j) } else { 0.0 })
-    }
-
-    fn row(i: usize) -> UpdateRow<f64> {
-        let x = i as f64;
-        UpdateRow {
-            m: [0.3 - 0.1 * x, 0.05 * x * x - 0.2],
-            k: [1.0 / (1.0 + x), -0.4 + 0.15 * x],
-            a: [0.2 * x - 0.5, 0.7 - 0.03 * x * x],
-        }
-    }
-
-    fn upper(k: usize, p: &SMatrix<f64, 7, 7>) -> Vec<f64> {
-        (0..k)
-            .flat_map(|j| (0..=j).map(move |i| entry(p, i, j)))
-            .collect()
+    fn dense<const R: usize>(l: &[[f64; R]; R], d: &[f64; R]) -> DMatrix<f64> {
+        let l = DMatrix::from_fn(R, R, |i, j| l[i][j]);
+        &l * DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(d)) * l.transpose()
     }
 
     #[test]
-    fn blocked_update_matches_the_plain_loop_for_every_size() {
-        type Form = fn(f64, &UpdateRow<f64>, &UpdateRow<f64>) -> f64;
-        let forms: [Form; 2] = [symmetric_entry, joseph_entry];
-        for f in forms {
-            for k in 0..=7 {
-                let mut p = stored(|i, j| 1.0 + (i * 7 + j) as f64 / 9.0);
-                let rows: Vec<_> = (0..k).map(row).collect();
-                let mut expected = Vec::new();
-                for j in 0..k {
-                    for i in 0..=j {
-                        expected.push(f(entry(&p, i, j), &rows[i], &rows[j]));
-                    }
-                }
-                let untouched = p;
-                update_upper(&mut p, &rows, f);
-                assert_eq!(upper(k, &p), expected, "k = {k}");
-                for j in 0..7 {
-                    for i in 0..7 {
-                        if i > j || j >= k {
-                            assert_eq!(p[(i, j)], untouched[(i, j)], "({i}, {j}) written");
-                        }
-                    }
-                }
+    #[allow(clippy::needless_range_loop)]
+    fn mwgs_reproduces_the_weighted_gram_matrix() {
+        let w = [
+            [1.0, 0.5, -2.0, 0.3, 0.0],
+            [0.2, -1.0, 0.7, 0.0, 1.5],
+            [3.0, 0.1, 0.4, -0.6, 0.2],
+        ];
+        let q = [0.5, 2.0, 0.1, 1.0, 0.0];
+        let (l, d) = mwgs(w, &q);
+        let wm = DMatrix::from_fn(3, 5, |i, j| w[i][j]);
+        let expected = &wm
+            * DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&q))
+            * wm.transpose();
+        assert!((dense(&l, &d) - expected).abs().max() < 1e-12);
+        assert!(d.iter().all(|&v| v >= 0.0));
+        for i in 0..3 {
+            assert_eq!(l[i][i], 1.0);
+            for j in i + 1..3 {
+                assert_eq!(l[i][j], 0.0);
             }
         }
     }
 
     #[test]
-    fn update_forms_are_the_textbook_expressions() {
-        let (r, c) = (row(2), row(5));
-        let sym = 1.5 - (r.a[0] * c.k[0] + r.a[1] * c.k[1]);
-        let jos = 1.5 + (r.a[0] * c.k[0] + r.a[1] * c.k[1]) - (r.k[0] * c.m[0] + r.k[1] * c.m[1]);
-        assert!((symmetric_entry(1.5, &r, &c) - sym).abs() < 1e-12);
-        assert!((joseph_entry(1.5, &r, &c) - jos).abs() < 1e-12);
+    fn mwgs_of_a_rank_deficient_matrix_has_zero_pivots() {
+        // Rows 0 and 2 are parallel: the third pivot is (up to rounding) zero, not negative.
+        let w: [[f64; 2]; 3] = [[1.0, 2.0], [0.0, 1.0], [2.0, 4.0]];
+        let (l, d) = mwgs(w, &[1.0, 1.0]);
+        assert!(d[2].abs() < 1e-12 && d[2] >= 0.0, "{d:?}");
+        let wm = DMatrix::from_fn(3, 2, |i, j| w[i][j]);
+        assert!((dense(&l, &d) - &wm * wm.transpose()).abs().max() < 1e-12);
     }
 
     #[test]
-    fn the_view_is_symmetric_and_bounded() {
-        let p = stored(|i, j| (i + 2 * j) as f64);
-        let v = CovarianceView::new(&p, 4);
-        assert_eq!(v.dim(), 4);
-        assert_eq!(v.get(3, 1), Some(7.0));
-        assert_eq!(v.get(1, 3), Some(7.0));
-        assert_eq!(v.get(4, 0), None);
-        assert_eq!(v.upper_column(2), Some(&[4.0, 5.0, 6.0][..]));
-        assert_eq!(v.upper_column(4), None);
-        assert!(v.block::<2, 2>(3, 3).is_none());
-        assert_eq!(v.iter().count(), 16);
+    fn ldl_factors_psd_matrices_and_refuses_the_rest() {
+        let a = Matrix3::new(4.0, 2.0, 0.0, 2.0, 5.0, 1.0, 0.0, 1.0, 3.0);
+        let (l, d) = ldl(&a).unwrap();
+        let got = dense(&l, &d);
+        assert!((got - DMatrix::from_fn(3, 3, |i, j| a[(i, j)])).abs().max() < 1e-12);
+        // Singular but PSD (a zero row and column) is accepted.
+        assert!(
+            ldl(&Matrix3::from_diagonal(&nalgebra::Vector3::new(
+                1.0, 0.0, 2.0
+            )))
+            .is_some()
+        );
+        // Indefinite ones are refused: a negative pivot, a zero pivot with a nonzero column.
+        assert!(ldl(&Matrix3::new(1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0)).is_none());
+        assert!(ldl(&Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)).is_none());
+        assert!(
+            ldl(&Matrix3::new(
+                f64::NAN,
+                0.0,
+                0.0,
+                0.0,
+                1.0,
+                0.0,
+                0.0,
+                0.0,
+                1.0
+            ))
+            .is_none()
+        );
+    }
+
+    #[test]
+    #[allow(clippy::needless_range_loop)]
+    fn entries_and_the_view_follow_the_factor() {
+        // k = 5: one landmark (factor rows 0, 1), robot (rows 2, 3, 4).
+        let l = [
+            [1.0, 0.0, 0.0, 0.0, 0.0],
+            [0.3, 1.0, 0.0, 0.0, 0.0],
+            [-0.2, 0.5, 1.0, 0.0, 0.0],
+            [0.1, 0.0, 0.4, 1.0, 0.0],
+            [0.7, -0.3, 0.2, 0.6, 1.0],
+        ];
+        let d = [2.0, 1.0, 0.5, 3.0, 0.25];
+        let mut packed = [0.0; 15 + 6];
+        for i in 0..5 {
+            for j in 0..i {
+                packed[row_start(i) + j] = l[i][j];
+            }
+            packed[row_start(i) + i] = d[i];
+        }
+        let p = dense(&l, &d);
+        let view = CovarianceView::new(&packed, 5);
+        for i in 0..5 {
+            for j in 0..5 {
+                let got = view.get(i, j).unwrap();
+                let want = p[(internal(i, 5), internal(j, 5))];
+                assert!((got - want).abs() < 1e-12, "({i}, {j}): {got} vs {want}");
+            }
+        }
+        assert_eq!(view.get(5, 0), None);
+        assert!(view.block::<2, 2>(4, 4).is_none());
+        assert_eq!(view.iter().count(), 25);
+        assert_eq!(view.factor_row(2), Some((0.5, &[-0.2, 0.5][..])));
+        // A dimension the storage cannot hold gives an empty view.
+        assert_eq!(CovarianceView::new(&packed[..10], 5).dim(), 0);
     }
 }

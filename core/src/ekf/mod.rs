@@ -1,67 +1,85 @@
 //! Landmark EKF-SLAM with a fixed, compile-time maximum number of landmarks.
 //!
 //! The state is `[x, y, θ, x₁, y₁, …, x_L, y_L]` (robot pose, then point landmarks) with
-//! dimension `N = 3 + 2·L` ([`state_dim`]). Storage for the whole `N × N` covariance is
-//! reserved up front, but only the *active* block `(3 + 2n) × (3 + 2n)` of the `n`
-//! landmarks added so far is ever read or written:
+//! dimension `N = 3 + 2·L` ([`state_dim`]). The covariance is kept factorised,
+//! `P = L D Lᵀ` with `L` unit lower triangular and `D ≥ 0` diagonal, packed into
+//! `N (N + 1) / 2` scalars ([`factor_len`], the [`covariance`] module). Only the *active*
+//! part of the factor, for the `n` landmarks added so far, is ever read or written:
 //!
 //! | step | what it touches | cost |
 //! | --- | --- | --- |
-//! | [`EkfSlam::predict_increment`], [`EkfSlam::predict_velocity`] | robot mean, `P_RR`, `P_RM` | O(n) |
-//! | [`EkfSlam::update`] | the active block | O(n²) |
-//! | [`EkfSlam::add_landmark`] | one new row/column pair | O(n) |
+//! | [`EkfSlam::predict_increment`], [`EkfSlam::predict_velocity`], [`EkfSlam::inflate_pose_covariance`] | robot mean, the robot's three rows of `L` | O(n) |
+//! | [`EkfSlam::update`] | two scalar (Bierman) updates of the whole factor | O(n²) |
+//! | [`EkfSlam::add_landmark`] | two new rows, the robot rows move down | O(n) |
+//! | [`EkfSlam::innovation`], [`EkfSlam::pose_covariance`], one entry of [`EkfSlam::active_covariance`] | reads | O(n) |
 //!
-//! Nothing decomposes the covariance: the only inverse is of the 2 × 2 innovation
-//! covariance. Corrections to seed 1: the covariance update is `P − K S Kᵀ` (its eq. 19 has
-//! the wrong sign), the measurement model is polar on both sides (eq. 12 mixes a Cartesian
-//! prediction with a polar measurement), and all noise is configuration (eq. 9's constant
-//! `Q` is gone).
+//! Corrections to seed 1: the measurement model is polar on both sides (eq. 12 mixes a
+//! Cartesian prediction with a polar measurement), and all noise is configuration (eq. 9's
+//! constant `Q` is gone).
+//!
+//! # Why `P` stays positive semi-definite
+//!
+//! `P = L D Lᵀ` is positive semi-definite for *any* `L` as long as `D ≥ 0`, and every
+//! step computes the new `D` in a way that cannot be negative, rounding included:
+//! - a prediction `P' = F P Fᵀ + G Q Gᵀ` leaves the landmark rows alone, multiplies the
+//!   robot's coupling to the landmarks by `F`, and re-factors the robot's own block
+//!   `[F L_rr | G] diag(D_r, Q) [F L_rr | G]ᵀ` by a modified weighted Gram–Schmidt
+//!   (Thornton): each new pivot is a sum of weighted squares;
+//! - a new landmark `l = g(robot, z)` gets the rows `G_r L_rm` and, together with the
+//!   robot, a 5 × 5 block re-factored the same way from `[[G_r L_rr, G_z L_R], [L_rr, 0]]`
+//!   with weights `diag(D_r, D_R)` (`R = L_R D_R L_Rᵀ`);
+//! - an update is processed as two scalar measurements (range, then bearing, both
+//!   linearised at the prior; a correlated `R` is decorrelated first). Bierman's scalar
+//!   update sets `Dⱼ' = Dⱼ αⱼ₋₁ / αⱼ` with `α` a running sum of `r` and non-negative
+//!   terms `Dⱼ fⱼ²`: a product and quotient of non-negative numbers.
+//!
+//! There are no variance caps, no diagonal loading and no symmetrisation: a lost robot
+//! with 10⁸ m² variances next to millimetre landmarks stays positive semi-definite. Each
+//! scalar update treats the sighting as no more precise than `ε · H P Hᵀ` (`ε` the
+//! machine epsilon), which keeps its gain finite; it is not needed for `D ≥ 0`.
 //!
 //! # Numerical safeguards
 //!
-//! Written down as PX4's EKF2 does, and exercised by the fuzz targets in `fuzz/`:
-//! - every step checks its inputs and the finiteness of what it would write *before*
-//!   writing; an update, prediction or new landmark that would leave a negative
-//!   variance is refused ([`EkfError::NumericalFailure`]) — the state is then exactly
-//!   what it was;
-//! - the covariance is symmetric by construction: only its upper triangle is stored and
-//!   computed ([`covariance`] module; read it through [`EkfSlam::active_covariance`]);
-//! - the robot and landmarks stay within [`MAX_COORDINATE`] of the origin, where `f32`
-//!   coordinates are still finer than a centimetre;
-//! - the Joseph update treats a sighting as no more precise than the rounding level of
-//!   `H P Hᵀ`, and gives rows whose terms cancel heavily their rounding error back as
-//!   variance ([`CovarianceUpdate::Joseph`]): positive semi-definite additions that
-//!   keep `f32` rounding from making `P` indefinite when it holds 10⁴ m² next to 10⁻⁴;
-//! - as a last resort, a prediction caps the robot's variances at
-//!   [`MAX_POSITION_VARIANCE`] and [`MAX_HEADING_VARIANCE`], and a new landmark's at
-//!   [`MAX_POSITION_VARIANCE`], by scaling their rows and columns (a congruence, which
-//!   keeps `P` positive semi-definite). A robot or landmark that uncertain is lost;
-//!   without the cap, `f32` cancellation in the next update would break the covariance.
+//! Exercised by the fuzz targets in `fuzz/`: every step checks its inputs, and the
+//! finiteness of what it would write, *before* writing (an update checks its O(n)
+//! quantities — pivots, gains' denominators — before the O(n²) pass); a refused step
+//! returns an [`EkfError`] and leaves the state as it was. The robot and landmarks stay
+//! within [`MAX_COORDINATE`] of the origin, where `f32` coordinates are still finer than
+//! a centimetre.
 //!
 //! # Memory
 //!
-//! `size_of::<EkfSlam<T, N>>() = (N² + N) · size_of::<T>() + EKF_OVERHEAD_BYTES(T)`; for
-//! `f32` the overhead is [`EKF_OVERHEAD_BYTES_F32`]. With `f32`:
+//! `size_of::<EkfSlam<T, N, P>>() = (N + P) · size_of::<T>() + EKF_OVERHEAD_BYTES(T)`
+//! with `P = N (N + 1) / 2`; for `f32` the overhead is [`EKF_OVERHEAD_BYTES_F32`]. With
+//! `f32`:
 //!
-//! | landmarks | N | bytes |
-//! | --- | --- | --- |
-//! | 16 | 35 | 5 128 |
-//! | 32 | 67 | 18 312 |
-//! | 64 | 131 | 69 256 |
+//! | landmarks | N | P | bytes |
+//! | --- | --- | --- | --- |
+//! | 16 | 35 | 630 | 2 744 |
+//! | 32 | 67 | 2 278 | 9 464 |
+//! | 64 | 131 | 8 646 | 35 192 |
 //!
 //! Such a filter belongs in a `static` on a microcontroller: [`EkfSlam::new`] is a
 //! `const fn`, so `static`s are laid out by the linker (`.bss`/`.data`) and never pass
 //! through the stack; [`EkfSlam::init`] re-initialises in place. An update uses
-//! `6 · N · size_of::<T>()` bytes of stack for its per-row terms, the Joseph form
-//! `N · size_of::<T>()` more for the size of each row's rounding. The strict lower
-//! triangle of the storage is never used (see [`covariance`]).
+//! `6 · N · size_of::<T>()` bytes of stack for its per-state terms.
 //!
-//! A state dimension that is not `3 + 2k` is rejected at compile time:
+//! The two const parameters are the state dimension and the packed factor length; write
+//! them with [`state_dim`] and [`factor_len`] (stable Rust cannot compute one from the
+//! other in a type). A pair that does not match is rejected at compile time:
+//!
+//! ```compile_fail
+//! use microslam::ekf::{state_dim, EkfConfig, EkfSlam};
+//! // The factor of N = 7 needs 28 scalars, not 49.
+//! let ekf = EkfSlam::<f32, { state_dim(2) }, 49>::new(EkfConfig::DEFAULT_F32);
+//! ```
+//!
+//! and so is a state dimension that is not `3 + 2k`:
 //!
 //! ```compile_fail
 //! use microslam::ekf::{EkfConfig, EkfSlam};
 //! // 4 = 3 + 2·0.5: no whole number of landmarks fits.
-//! let ekf = EkfSlam::<f32, 4>::new(EkfConfig::DEFAULT_F32);
+//! let ekf = EkfSlam::<f32, 4, 10>::new(EkfConfig::DEFAULT_F32);
 //! ```
 
 use crate::error::EkfError;
@@ -73,21 +91,18 @@ use crate::motion::{
 };
 use crate::scalar::Real;
 use crate::sensors::range_bearing::{RangeBearing, RangeBearingSensor};
-use nalgebra::{ArrayStorage, Matrix2, Matrix2x3, Matrix3, SMatrix, SVector, Vector2};
+use nalgebra::{ArrayStorage, Matrix2, Matrix2x3, Matrix3, SVector, Vector2};
 
 pub mod covariance;
 
-pub use covariance::CovarianceView;
-use covariance::{
-    UpdateRow, block, entry, joseph_entry, load_diagonal, set_diagonal_block, symmetric_entry,
-    update_upper,
-};
+pub use covariance::{CovarianceView, factor_len};
+use covariance::{internal_entry, ldl, mwgs, pivot, row_start, strict_row};
 
 /// State dimension for a maximum of `max_landmarks` point landmarks: `3 + 2 · max_landmarks`.
 ///
 /// ```
-/// use microslam::ekf::{state_dim, EkfSlam};
-/// type Slam32 = EkfSlam<f32, { state_dim(32) }>;
+/// use microslam::ekf::{factor_len, state_dim, EkfSlam};
+/// type Slam32 = EkfSlam<f32, { state_dim(32) }, { factor_len(32) }>;
 /// assert_eq!(Slam32::MAX_LANDMARKS, 32);
 /// ```
 pub const fn state_dim(max_landmarks: usize) -> usize {
@@ -99,9 +114,9 @@ pub const fn state_dim(max_landmarks: usize) -> usize {
 pub const MAX_HEADING_VARIANCE: f64 = core::f64::consts::PI * core::f64::consts::PI;
 
 /// Cap on the robot's and a new landmark's x and y variances, m² (a standard deviation of
-/// 100 m). An `f32` covariance holding 10⁴ m² next to 10⁻² m² sightings loses about
-/// 10⁴ · 6·10⁻⁸ = 6·10⁻⁴ m² to rounding in an update, well below the sighting noise;
-/// at 10⁶ m² the fuzzer found updates that left `P` clearly indefinite.
+/// 100 m). A robot or landmark that uncertain is lost: without the cap a sighting could
+/// move it by thousands of kilometres, beyond [`MAX_COORDINATE`], and `f32` variances
+/// could overflow. Positive semi-definiteness does not depend on it.
 pub const MAX_POSITION_VARIANCE: f64 = 1.0e4;
 
 /// Largest |x| or |y| of the robot and of landmarks, metres. Beyond it an `f32`
@@ -110,60 +125,11 @@ pub const MAX_POSITION_VARIANCE: f64 = 1.0e4;
 /// refused ([`EkfError::NumericalFailure`]). Keep the map origin near the work area.
 pub const MAX_COORDINATE: f64 = 1.0e5;
 
-/// Diagonal loading of the Joseph update, in machine epsilons per state: variance `i`
-/// gets `JOSEPH_LOADING · k · ε · (wᵢ − CANCELLATION_RATIO · Pᵢᵢ)` added when positive,
-/// `wᵢ` being the size of row `i`'s update terms (see [`CovarianceUpdate::Joseph`]).
-const JOSEPH_LOADING: f64 = 16.0;
+/// Bytes an `f32` filter uses beyond its mean and covariance factor (configuration,
+/// counters).
+pub const EKF_OVERHEAD_BYTES_F32: usize = 84;
 
-/// A Joseph update row whose terms exceed its variance this many times cancels heavily
-/// enough to be loaded (see `JOSEPH_LOADING`).
-const CANCELLATION_RATIO: f64 = 16.0;
-
-/// Floor on the sighting variances of a Joseph update, in machine epsilons of the
-/// magnitude of `H P Hᵀ`'s terms (see [`CovarianceUpdate::Joseph`]).
-const ROUNDING_FLOOR: f64 = 16.0;
-
-/// Bytes an `f32` filter uses beyond its mean and covariance (configuration, counters).
-pub const EKF_OVERHEAD_BYTES_F32: usize = 88;
-
-/// How the covariance is updated after a measurement (as in adskalman-rs).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum CovarianceUpdate {
-    /// Joseph form `(I − KH) P (I − KH)ᵀ + K R Kᵀ`, evaluated in place in one pass over
-    /// the upper triangle (`P − K Mᵀ + D Kᵀ`, `M = P Hᵀ`): keeps `P` positive
-    /// semi-definite in `f32` even when `K` carries rounding errors.
-    ///
-    /// Two guards keep it so when `f32` cannot resolve what the update computes — a lost
-    /// robot (10⁴ m² variances, heading at the π² cap) seeing a landmark it has just
-    /// added, whose position relative to the robot is known to centimetres:
-    /// - the sighting's variances are raised, where smaller, to `16 ε (|H| |P| |H|ᵀ)ᵢᵢ`,
-    ///   the rounding level of `H P Hᵀ`: otherwise `S` there is mostly rounding, and the
-    ///   gain it gives can be thousands of times too large;
-    /// - a row `i` whose update terms cancel heavily — `wᵢ = |Kᵢ| · (|P| |H|ᵀ)ᵢ`, the
-    ///   size of the products that cancel in `M`, `A` and the pass, more than 16 times
-    ///   its variance `Pᵢᵢ` — gets its rounding error back as variance after the pass:
-    ///   `16 k ε (wᵢ − 16 Pᵢᵢ)` is added to `Pᵢᵢ` (`k = 3 + 2n`), a diagonal loading.
-    ///   Without it the pass rounds away the smallest eigenvalues of a `P` that holds
-    ///   10⁴ next to 10⁻⁴, and the next updates amplify the negative ones (−0.03 to
-    ///   −0.9 in one update).
-    ///
-    /// Both only ever add a positive semi-definite term, cost O(1) and O(k), and leave
-    /// ordinary updates untouched: the MRCLAM replays give the same figures to the
-    /// printed digits in `f32` and `f64`.
-    #[default]
-    Joseph,
-    /// The optimal-gain form `P − K S Kᵀ` on the upper triangle, mirrored (exactly
-    /// symmetric): one pass over half the block, the cheapest choice. It keeps variances
-    /// non-negative (steps that would leave a negative one are refused, predictions and
-    /// new landmarks included) but, unlike the Joseph form, not `P`
-    /// positive semi-definite when an `f32` update shrinks variances by many orders of
-    /// magnitude (found by the fuzzer after the variance caps): prefer Joseph unless the
-    /// instruction budget forbids it.
-    Symmetric,
-}
-
-/// Settings of the landmark EKF: noise, sensor mount, gate and update form.
+/// Settings of the landmark EKF: noise, sensor mount and gate.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct EkfConfig<T> {
@@ -179,8 +145,6 @@ pub struct EkfConfig<T> {
     pub sensor: RangeBearingSensor<T>,
     /// Innovation gate on the squared Mahalanobis distance (2 degrees of freedom).
     pub gate: ChiSquareGate<T>,
-    /// Form of the covariance update.
-    pub covariance_update: CovarianceUpdate,
 }
 
 macro_rules! default_config {
@@ -205,7 +169,6 @@ macro_rules! default_config {
             sensor: RangeBearingSensor::at_robot_origin(),
             // χ²₂ quantile at 0.999.
             gate: ChiSquareGate::from_threshold(13.815_511),
-            covariance_update: CovarianceUpdate::Joseph,
         }
     };
 }
@@ -215,15 +178,8 @@ impl EkfConfig<f32> {
     /// Tune them per robot and dataset.
     pub const DEFAULT_F32: Self = default_config!(f32);
 
-    /// [`EkfConfig::DEFAULT_F32`] with the optimal-gain covariance update
-    /// ([`CovarianceUpdate::Symmetric`]): what the example firmware runs. On a Cortex-M4F
-    /// an update at 64 landmarks costs about 64 k instructions this way against 104 k
-    /// for the Joseph form (2 instead of 4 multiply-adds per covariance entry); both
-    /// forms refuse an update that would leave a negative variance.
-    pub const MICROCONTROLLER: Self = Self {
-        covariance_update: CovarianceUpdate::Symmetric,
-        ..Self::DEFAULT_F32
-    };
+    /// What the example firmware runs: the generic defaults ([`EkfConfig::DEFAULT_F32`]).
+    pub const MICROCONTROLLER: Self = Self::DEFAULT_F32;
 }
 
 impl EkfConfig<f64> {
@@ -270,7 +226,6 @@ impl<T: Real> EkfConfig<T> {
             bearing_std: c(self.bearing_std),
             sensor: RangeBearingSensor::new(Pose2::new(c(m.x), c(m.y), c(m.theta))),
             gate: ChiSquareGate::from_threshold(c(self.gate.threshold)),
-            covariance_update: self.covariance_update,
         }
     }
 
@@ -343,14 +298,16 @@ pub struct Innovation<T: Real> {
     pub jacobian_landmark: Matrix2<T>,
 }
 
-/// Landmark EKF-SLAM over `f32` or `f64` with state dimension `N = 3 + 2·L`.
+/// Landmark EKF-SLAM over `f32` or `f64` with state dimension `N = 3 + 2·L` and a
+/// covariance factor of `P = N (N + 1) / 2` scalars (write them with [`state_dim`] and
+/// [`factor_len`]).
 ///
 /// ```
-/// use microslam::ekf::{state_dim, EkfConfig, EkfSlam, UpdateOutcome};
+/// use microslam::ekf::{factor_len, state_dim, EkfConfig, EkfSlam, UpdateOutcome};
 /// use microslam::geometry::Pose2;
 /// use microslam::sensors::range_bearing::RangeBearing;
 ///
-/// let mut slam = EkfSlam::<f64, { state_dim(8) }>::new(EkfConfig::DEFAULT_F64);
+/// let mut slam = EkfSlam::<f64, { state_dim(8) }, { factor_len(8) }>::new(EkfConfig::DEFAULT_F64);
 /// let sign = slam.add_landmark(&RangeBearing::new(2.0, 0.5))?;
 /// slam.predict_velocity(0.5, 0.1, 0.1)?;
 /// let outcome = slam.update(sign, &RangeBearing::new(1.96, 0.51))?;
@@ -359,21 +316,26 @@ pub struct Innovation<T: Real> {
 /// # Ok::<(), microslam::EkfError>(())
 /// ```
 #[derive(Clone, Debug)]
-pub struct EkfSlam<T: Real, const N: usize> {
+pub struct EkfSlam<T: Real, const N: usize, const P: usize> {
     mean: SVector<T, N>,
-    /// Upper triangle only (see [`covariance`]); the strict lower triangle stays zero.
-    covariance: SMatrix<T, N, N>,
+    /// `L` and `D`, packed (see [`covariance`]); beyond the active part it stays zero.
+    factor: [T; P],
     /// Number of active landmarks (`u32` keeps the layout the same on 32- and 64-bit).
     landmarks: u32,
     config: EkfConfig<T>,
     counters: EkfCounters,
 }
 
-impl<T: Real, const N: usize> EkfSlam<T, N> {
+/// One scalar measurement row: `(index inside the factor, coefficient)` for the five
+/// states a sighting depends on.
+type SparseRow<T> = [(usize, T); 5];
+
+impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// Checked at compile time wherever the type is constructed.
-    const DIMENSION_IS_VALID: () = assert!(
-        N >= 3 && (N - 3).is_multiple_of(2),
-        "EkfSlam state dimension must be 3 + 2 * max_landmarks: use state_dim()"
+    const DIMENSIONS_ARE_VALID: () = assert!(
+        N >= 3 && (N - 3).is_multiple_of(2) && P == N * (N + 1) / 2,
+        "EkfSlam<T, N, P> needs N = 3 + 2 * max_landmarks and P = N (N + 1) / 2: \
+         use state_dim() and factor_len()"
     );
 
     /// Maximum number of landmarks, `(N − 3) / 2`.
@@ -384,10 +346,10 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
     /// A `const fn`: use it to initialise a `static`, so the covariance is placed by the
     /// linker and never copied through the stack.
     pub const fn new(config: EkfConfig<T>) -> Self {
-        let () = Self::DIMENSION_IS_VALID;
+        let () = Self::DIMENSIONS_ARE_VALID;
         Self {
             mean: SVector::from_array_storage(ArrayStorage([[T::ZERO; N]; 1])),
-            covariance: SMatrix::from_array_storage(ArrayStorage([[T::ZERO; N]; N])),
+            factor: [T::ZERO; P],
             landmarks: 0,
             config,
             counters: EkfCounters {
@@ -400,7 +362,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
     }
 
     /// Re-initialises in place: robot at `pose` with zero covariance, no landmarks, new
-    /// configuration, counters cleared. Only the previously active block is cleared.
+    /// configuration, counters cleared. Only the previously active part is cleared.
     pub fn init(&mut self, config: EkfConfig<T>, pose: Pose2<T>) -> Result<(), EkfError> {
         if !config.is_valid() {
             return Err(EkfError::InvalidNoise);
@@ -409,7 +371,9 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             return Err(EkfError::NonFiniteInput);
         }
         let k = self.active_dim();
-        self.covariance.view_mut((0, 0), (k, k)).fill(T::ZERO);
+        if let Some(active) = self.factor.get_mut(..row_start(k)) {
+            active.fill(T::ZERO);
+        }
         self.mean.rows_mut(0, k).fill(T::ZERO);
         self.mean[0] = pose.x;
         self.mean[1] = pose.y;
@@ -454,9 +418,9 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         Pose2::new(self.mean[0], self.mean[1], self.mean[2])
     }
 
-    /// Covariance of the robot pose, `P_RR`.
+    /// Covariance of the robot pose, `P_RR` (O(n)).
     pub fn pose_covariance(&self) -> Matrix3<T> {
-        block(&self.covariance, 0, 0)
+        self.robot_summary().0
     }
 
     /// Position of landmark `index`, or `None` when there is no such landmark.
@@ -465,10 +429,12 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             .then(|| self.mean.fixed_rows::<2>(3 + 2 * index).into_owned())
     }
 
-    /// 2 × 2 covariance of landmark `index`, or `None` when there is no such landmark.
+    /// 2 × 2 covariance of landmark `index`, or `None` when there is no such landmark
+    /// (O(index)).
     pub fn landmark_covariance(&self, index: usize) -> Option<Matrix2<T>> {
-        let i = 3 + 2 * index;
-        (index < self.landmark_count()).then(|| block(&self.covariance, i, i))
+        let i = 2 * index;
+        (index < self.landmark_count())
+            .then(|| Matrix2::from_fn(|r, c| internal_entry(&self.factor, i + r, i + c)))
     }
 
     /// The active part of the mean, `[x, y, θ, x₁, y₁, …]`.
@@ -477,9 +443,10 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         self.mean.as_slice().get(..k).unwrap_or(&[])
     }
 
-    /// The active block of the covariance, as a symmetric view (no copy).
-    pub fn active_covariance(&self) -> CovarianceView<'_, T, N> {
-        CovarianceView::new(&self.covariance, self.active_dim())
+    /// The active block of the covariance, as a symmetric view computed from the factor
+    /// (no copy; O(n) per entry).
+    pub fn active_covariance(&self) -> CovarianceView<'_, T> {
+        CovarianceView::new(&self.factor, self.active_dim())
     }
 
     /// The whole mean, active or not (for tests and diagnostics).
@@ -487,17 +454,11 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         &self.mean
     }
 
-    /// The raw covariance storage, active or not (for tests and diagnostics): the upper
-    /// triangle of the active block holds the covariance, everything else is zero. Read
-    /// the covariance through [`EkfSlam::active_covariance`].
-    pub fn covariance_storage(&self) -> &SMatrix<T, N, N> {
-        &self.covariance
-    }
-
-    /// The largest variance of the active block: bounds every covariance entry (P is PSD).
-    fn max_variance(&self) -> T {
-        let diagonal = self.covariance.as_slice().iter().step_by(N + 1);
-        max_abs(diagonal.take(self.active_dim()).copied())
+    /// The packed factor storage, active or not (for tests and diagnostics): the first
+    /// `k (k + 1) / 2` scalars hold the active factor ([`covariance`]), the rest is zero.
+    /// Read the covariance through [`EkfSlam::active_covariance`].
+    pub fn factor_storage(&self) -> &[T; P] {
+        &self.factor
     }
 
     fn reject<R>(&mut self, e: EkfError) -> Result<R, EkfError> {
@@ -506,10 +467,83 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         Err(e)
     }
 
+    /// The robot's own block of the factor: `L_rr` (unit lower) and `D_r`.
+    #[allow(clippy::needless_range_loop)] // matrix indices read best as indices
+    fn robot_block(&self) -> ([[T; 3]; 3], [T; 3]) {
+        let r0 = self.active_dim() - 3;
+        let mut l = [[T::ZERO; 3]; 3];
+        let mut d = [T::ZERO; 3];
+        for a in 0..3 {
+            let row = strict_row(&self.factor, r0 + a);
+            for b in 0..a {
+                l[a][b] = row.get(r0 + b).copied().unwrap_or(T::ZERO);
+            }
+            l[a][a] = T::ONE;
+            d[a] = pivot(&self.factor, r0 + a);
+        }
+        (l, d)
+    }
+
+    /// Writes the robot's own block of the factor (the robot rows' entries in the robot
+    /// columns and their pivots).
+    fn set_robot_block(&mut self, l: &[[T; 3]; 3], d: &[T; 3]) {
+        let r0 = self.active_dim() - 3;
+        for a in 0..3 {
+            let start = row_start(r0 + a) + r0;
+            if let Some(row) = self.factor.get_mut(start..=start + a) {
+                for (b, slot) in row.iter_mut().enumerate() {
+                    *slot = if b == a { d[a] } else { l[a][b] };
+                }
+            }
+        }
+    }
+
+    /// `P_RR` and the largest |L_rc| of the robot rows over the landmark columns `c < 2n`,
+    /// in one pass over the robot's three rows.
+    fn robot_summary(&self) -> (Matrix3<T>, T) {
+        let r0 = self.active_dim() - 3;
+        let (lrr, dr) = self.robot_block();
+        let rows = [0, 1, 2].map(|a| {
+            let row = strict_row(&self.factor, r0 + a);
+            row.get(..r0).unwrap_or(&[])
+        });
+        let mut acc = [T::ZERO; 6];
+        let mut largest = T::ZERO;
+        let mut diag = 0;
+        for (c, ((&a, &b), &e)) in rows[0].iter().zip(rows[1]).zip(rows[2]).enumerate() {
+            let d = self.factor.get(diag).copied().unwrap_or(T::ZERO);
+            diag += c + 2;
+            let (da, db, de) = (d * a, d * b, d * e);
+            acc[0] += da * a;
+            acc[1] += da * b;
+            acc[2] += da * e;
+            acc[3] += db * b;
+            acc[4] += db * e;
+            acc[5] += de * e;
+            largest = max_abs([largest, a, b, e].into_iter());
+        }
+        let own = Matrix3::from_fn(|i, j| lrr[i][j]);
+        let own = own * Matrix3::from_diagonal(&dr.into()) * own.transpose();
+        let coupled = Matrix3::new(
+            acc[0], acc[1], acc[2], acc[1], acc[3], acc[4], acc[2], acc[4], acc[5],
+        );
+        (coupled + own, largest)
+    }
+
+    /// The robot's three rows over the landmark columns `c < 2n` (`L_rm`), mutable.
+    fn robot_coupling_mut(&mut self) -> Option<[&mut [T]; 3]> {
+        let r0 = self.active_dim() - 3;
+        let s0 = row_start(r0);
+        let all = self.factor.get_mut(s0..row_start(r0 + 3))?;
+        let (a, rest) = all.split_at_mut(r0 + 1);
+        let (b, c) = rest.split_at_mut(r0 + 2);
+        Some([a.get_mut(..r0)?, b.get_mut(..r0)?, c.get_mut(..r0)?])
+    }
+
     /// Prediction with an odometry increment `(dx, dy, dθ)` in the previous robot frame
     /// (seed 1, eqs. 4–8), with the configured [`IncrementNoise`].
     ///
-    /// Touches only the robot mean, `P_RR` and `P_RM`. Non-finite input →
+    /// Touches only the robot mean and the robot's rows of the factor. Non-finite input →
     /// [`EkfError::NonFiniteInput`], state unchanged.
     pub fn predict_increment(&mut self, increment: &OdometryIncrement<T>) -> Result<(), EkfError> {
         if !increment.is_finite() {
@@ -517,8 +551,7 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         }
         let step = compose_increment(&self.pose(), increment);
         let q = self.config.increment_noise.covariance(increment);
-        let q = step.wrt_input * q * step.wrt_input.transpose();
-        self.apply_motion(&step, &q)
+        self.apply_motion(&step, &[q[(0, 0)], q[(1, 1)], q[(2, 2)]])
     }
 
     /// Prediction with velocities `(v, ω)` held for `dt` seconds (seed 2, eq. 6), with the
@@ -538,58 +571,65 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         }
         let step = integrate_velocity(&self.pose(), v, omega, dt);
         let q = self.config.velocity_noise.covariance(v, omega, dt);
-        let q = step.wrt_input * q * step.wrt_input.transpose();
-        self.apply_motion(&step, &q)
+        self.apply_motion(&step, &[q[(0, 0)], q[(1, 1)]])
     }
 
-    /// `P_RR ← A P_RR Aᵀ + W Q Wᵀ`, `P_RM ← A P_RM`, mean ← new pose.
+    /// Adds the positive semi-definite `added` to the robot pose covariance, `P_RR`,
+    /// leaving the mean and every other covariance entry as they are: a prediction with
+    /// `F = I` and noise `added` (O(n), like a prediction). For recovery logic that
+    /// declares the robot lost. The robot's variances stay within
+    /// [`MAX_POSITION_VARIANCE`] and [`MAX_HEADING_VARIANCE`] as after any prediction.
+    ///
+    /// Errors (state unchanged): [`EkfError::NonFiniteInput`] for a non-finite `added`,
+    /// [`EkfError::InvalidNoise`] when it is not symmetric positive semi-definite (its
+    /// `L D Lᵀ` factorisation has a negative pivot), [`EkfError::NumericalFailure`] when
+    /// the result would not be finite.
+    ///
+    /// ```
+    /// use microslam::ekf::{factor_len, state_dim, EkfConfig, EkfSlam};
+    /// use nalgebra::Matrix3;
+    ///
+    /// let mut slam = EkfSlam::<f64, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F64);
+    /// slam.inflate_pose_covariance(&Matrix3::from_diagonal_element(0.5))?;
+    /// assert_eq!(slam.pose_covariance(), Matrix3::from_diagonal_element(0.5));
+    /// let indefinite = Matrix3::new(1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+    /// assert!(slam.inflate_pose_covariance(&indefinite).is_err());
+    /// # Ok::<(), microslam::EkfError>(())
+    /// ```
+    pub fn inflate_pose_covariance(&mut self, added: &Matrix3<T>) -> Result<(), EkfError> {
+        if !added.iter().all(|v| v.finite()) {
+            return self.reject(EkfError::NonFiniteInput);
+        }
+        let Some((la, da)) = ldl(added) else {
+            return self.reject(EkfError::InvalidNoise);
+        };
+        let g = Matrix3::from_fn(|i, j| la[i][j]);
+        match self.robot_map(&Matrix3::identity(), &g, &da) {
+            Ok(()) => Ok(()),
+            Err(e) => self.reject(e),
+        }
+    }
+
+    /// `P' = F P Fᵀ + G Q Gᵀ` for a motion step, mean ← new pose.
     fn apply_motion<const U: usize>(
         &mut self,
         step: &MotionStep<T, U>,
-        q: &Matrix3<T>,
+        q: &[T; U],
     ) -> Result<(), EkfError> {
-        let a = &step.wrt_pose;
-        let p_rr: Matrix3<T> = block(&self.covariance, 0, 0);
-        let new_rr = a * p_rr * a.transpose() + q;
-        // |P_RM| ≤ max variance (P is PSD), so A P_RM is bounded by 3 · max|A| · max variance.
-        let cross_bound = T::lit(3.0) * max_abs(a.iter().copied()) * self.max_variance();
         let far = T::lit(MAX_COORDINATE);
         let inside = step.pose.x.abs() <= far && step.pose.y.abs() <= far;
-        // A negative variance can only come from a `P` that is no longer positive
-        // semi-definite (the optimal-gain form allows that): refused like such updates.
-        let negative = (0..3).any(|i| new_rr[(i, i)] < T::ZERO);
-        if !inside
-            || negative
-            || !step.pose.is_finite()
-            || !new_rr.iter().all(|v| v.finite())
-            || !cross_bound.finite()
-        {
+        if !inside || !step.pose.is_finite() {
             return self.reject(EkfError::NumericalFailure);
         }
-        // Last-resort variance caps (see the module docs): scale the robot's rows and
-        // columns by D = diag(s) — a congruence, so P stays positive semi-definite.
-        let caps = [
-            T::lit(MAX_POSITION_VARIANCE),
-            T::lit(MAX_POSITION_VARIANCE),
-            T::lit(MAX_HEADING_VARIANCE),
-        ];
-        let mut scale = [T::ONE; 3];
-        for (i, (s, cap)) in scale.iter_mut().zip(caps).enumerate() {
-            if new_rr[(i, i)] > cap {
-                *s = (cap / new_rr[(i, i)]).sqrt();
-            }
+        // Inputs padded to three (zero weight).
+        let mut g = Matrix3::zeros();
+        let mut weights = [T::ZERO; 3];
+        for (u, &qu) in q.iter().enumerate().take(3) {
+            g.set_column(u, &step.wrt_input.column(u));
+            weights[u] = qu;
         }
-        let d = Matrix3::from_diagonal(&nalgebra::Vector3::new(scale[0], scale[1], scale[2]));
-        let mut new_rr = d * new_rr * d;
-        symmetrise3(&mut new_rr);
-        let a = d * a;
-        set_diagonal_block(&mut self.covariance, 0, &new_rr);
-        // P_RM ← A P_RM: rows 0..3 of every landmark column (all above the diagonal).
-        let k = self.active_dim();
-        for j in 3..k {
-            let col = self.covariance.fixed_view::<3, 1>(0, j).into_owned();
-            let new = a * col;
-            self.covariance.fixed_view_mut::<3, 1>(0, j).copy_from(&new);
+        if let Err(e) = self.robot_map(&step.wrt_pose, &g, &weights) {
+            return self.reject(e);
         }
         self.mean[0] = step.pose.x;
         self.mean[1] = step.pose.y;
@@ -598,43 +638,121 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         Ok(())
     }
 
+    /// `P' = F P Fᵀ + G diag(q) Gᵀ` with `F`, `G` acting on the robot only, on the factor:
+    /// the robot's coupling rows `L_rm ← S F L_rm`, and its own block re-factored from
+    /// `S [F L_rr | G]` with weights `(D_r, q)`. `S` is the diagonal congruence that
+    /// caps the robot's variances (see [`MAX_POSITION_VARIANCE`]); it is the identity
+    /// unless a cap is exceeded. Checks everything before writing.
+    fn robot_map(&mut self, f: &Matrix3<T>, g: &Matrix3<T>, q: &[T; 3]) -> Result<(), EkfError> {
+        let (p_rr, coupling) = self.robot_summary();
+        let new_rr =
+            f * p_rr * f.transpose() + g * Matrix3::from_diagonal(&(*q).into()) * g.transpose();
+        let scale = capped([
+            (new_rr[(0, 0)], MAX_POSITION_VARIANCE),
+            (new_rr[(1, 1)], MAX_POSITION_VARIANCE),
+            (new_rr[(2, 2)], MAX_HEADING_VARIANCE),
+        ]);
+        let s = Matrix3::from_diagonal(&scale.into());
+        let (f, g) = (s * f, s * g);
+        let (lrr, dr) = self.robot_block();
+        let flrr = f * Matrix3::from_fn(|i, j| lrr[i][j]);
+        let mut w = [[T::ZERO; 6]; 3];
+        let mut weights = [T::ZERO; 6];
+        for a in 0..3 {
+            for c in 0..3 {
+                w[a][c] = flrr[(a, c)];
+                w[a][3 + c] = g[(a, c)];
+            }
+            weights[a] = dr[a];
+            weights[3 + a] = q[a];
+        }
+        let (l, d) = mwgs(w, &weights);
+        // |F L_rm| ≤ 3 · max|F| · max|L_rm|.
+        let coupling_bound = T::lit(3.0) * max_abs(f.iter().copied()) * coupling;
+        if !new_rr.iter().all(|v| v.finite()) || !all_finite(&l, &d) || !coupling_bound.finite() {
+            return Err(EkfError::NumericalFailure);
+        }
+        if let Some([ra, rb, rc]) = self.robot_coupling_mut() {
+            for ((a, b), c) in ra.iter_mut().zip(rb.iter_mut()).zip(rc.iter_mut()) {
+                let (x, y, z) = (*a, *b, *c);
+                *a = f[(0, 0)] * x + f[(0, 1)] * y + f[(0, 2)] * z;
+                *b = f[(1, 0)] * x + f[(1, 1)] * y + f[(1, 2)] * z;
+                *c = f[(2, 0)] * x + f[(2, 1)] * y + f[(2, 2)] * z;
+            }
+        }
+        self.set_robot_block(&l, &d);
+        Ok(())
+    }
+
+    /// The two measurement rows of a sighting of landmark `index` with Jacobians
+    /// `hr` (robot) and `hl` (landmark), as sparse rows over the factor's order.
+    fn sparse_rows(&self, index: usize, hr: &Matrix2x3<T>, hl: &Matrix2<T>) -> [SparseRow<T>; 2] {
+        let r0 = self.active_dim() - 3;
+        let li = 2 * index;
+        [0, 1].map(|r| {
+            [
+                (li, hl[(r, 0)]),
+                (li + 1, hl[(r, 1)]),
+                (r0, hr[(r, 0)]),
+                (r0 + 1, hr[(r, 1)]),
+                (r0 + 2, hr[(r, 2)]),
+            ]
+        })
+    }
+
+    /// `f = Lᵀ hᵀ` over the first `f.len()` states, for a sparse row `h`.
+    fn project(&self, h: &SparseRow<T>, f: &mut [T]) {
+        f.fill(T::ZERO);
+        for &(s, hs) in h {
+            for (fc, &l) in f.iter_mut().zip(strict_row(&self.factor, s)) {
+                *fc += hs * l;
+            }
+            if let Some(fs) = f.get_mut(s) {
+                *fs += hs;
+            }
+        }
+    }
+
     /// The innovation of sighting `z` (covariance `r`) against landmark `index`, without
-    /// changing anything, and the measurement covariance it used: `r` itself, or for the
-    /// Joseph form `r` with its variances raised to the rounding level of `H P Hᵀ`
-    /// ([`rounding_floor`]).
-    fn innovation_with(
+    /// changing anything: `S = H P Hᵀ + R` with `H P Hᵀ = Fᵀ D F`, `F = Lᵀ Hᵀ` (O(n)).
+    /// `f0`, `f1` (at least the active dimension long) receive the two columns of `F`.
+    fn innovation_into(
         &self,
         index: usize,
         z: &RangeBearing<T>,
         r: &Matrix2<T>,
-    ) -> Result<(Innovation<T>, Matrix2<T>), EkfError> {
+        f0: &mut [T],
+        f1: &mut [T],
+    ) -> Result<Innovation<T>, EkfError> {
         if index >= self.landmark_count() {
             return Err(EkfError::UnknownLandmark);
         }
-        let li = 3 + 2 * index;
-        let landmark = self.mean.fixed_rows::<2>(li).into_owned();
+        let landmark = self.mean.fixed_rows::<2>(3 + 2 * index).into_owned();
         let pred = self
             .config
             .sensor
             .predict(&self.pose(), &landmark)
             .ok_or(EkfError::LandmarkOnSensor)?;
         let (hr, hl) = (pred.wrt_robot, pred.wrt_landmark);
-        // S = H P Hᵀ + R, from the robot and landmark blocks only.
-        let p_rr: Matrix3<T> = block(&self.covariance, 0, 0);
-        let p_rl = self.covariance.fixed_view::<3, 2>(0, li); // above the diagonal: li ≥ 3
-        let p_ll: Matrix2<T> = block(&self.covariance, li, li);
-        let r = match self.config.covariance_update {
-            CovarianceUpdate::Joseph => {
-                rounding_floor(r, &hr, &hl, &p_rr, &p_rl.into_owned(), &p_ll)
-            }
-            CovarianceUpdate::Symmetric => *r,
+        let [h0, h1] = self.sparse_rows(index, &hr, &hl);
+        let k = self.active_dim();
+        let (Some(f0), Some(f1)) = (f0.get_mut(..k), f1.get_mut(..k)) else {
+            return Err(EkfError::NumericalFailure);
         };
-        let hphr = hr * p_rl * hl.transpose();
-        let mut s =
-            hr * p_rr * hr.transpose() + hphr + hphr.transpose() + hl * p_ll * hl.transpose() + r;
-        let off = (s[(0, 1)] + s[(1, 0)]) * T::lit(0.5);
-        s[(0, 1)] = off;
-        s[(1, 0)] = off;
+        self.project(&h0, f0);
+        self.project(&h1, f1);
+        let (mut s00, mut s01, mut s11) = (T::ZERO, T::ZERO, T::ZERO);
+        let mut diag = 0;
+        for (c, (&a, &b)) in f0.iter().zip(f1.iter()).enumerate() {
+            let d = self.factor.get(diag).copied().unwrap_or(T::ZERO);
+            diag += c + 2;
+            let (da, db) = (d * a, d * b);
+            s00 += da * a;
+            s01 += da * b;
+            s11 += db * b;
+        }
+        let off = s01 + (r[(0, 1)] + r[(1, 0)]) * T::lit(0.5);
+        let s = Matrix2::new(s00 + r[(0, 0)], off, off, s11 + r[(1, 1)]);
         let det = s[(0, 0)] * s[(1, 1)] - off * off;
         if !is_positive(det) || !is_positive(s[(0, 0)]) || !det.finite() {
             return Err(EkfError::SingularInnovation);
@@ -648,15 +766,25 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         if !d2.finite() {
             return Err(EkfError::NumericalFailure);
         }
-        let inn = Innovation {
+        Ok(Innovation {
             nu,
             s,
             s_inv,
             mahalanobis_squared: d2,
             jacobian_robot: hr,
             jacobian_landmark: hl,
-        };
-        Ok((inn, r))
+        })
+    }
+
+    /// [`EkfSlam::innovation_into`] with its own scratch.
+    fn innovation_with(
+        &self,
+        index: usize,
+        z: &RangeBearing<T>,
+        r: &Matrix2<T>,
+    ) -> Result<Innovation<T>, EkfError> {
+        let (mut f0, mut f1) = ([T::ZERO; N], [T::ZERO; N]);
+        self.innovation_into(index, z, r, &mut f0, &mut f1)
     }
 
     /// Checks a sighting and its covariance; returns the covariance to use.
@@ -688,11 +816,26 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         Ok(r)
     }
 
+    /// `R = L_R D_R L_Rᵀ` of a checked 2 × 2 measurement covariance: `(l₁₀, [d₀, d₁])`,
+    /// `d ≥ 0` (the second pivot is `det R / r₀₀`, clamped at zero against rounding).
+    fn decorrelate(r: &Matrix2<T>) -> (T, [T; 2]) {
+        let r00 = r[(0, 0)];
+        let off = (r[(0, 1)] + r[(1, 0)]) * T::lit(0.5);
+        if r00 > T::ZERO {
+            let l = off / r00;
+            let d1 = r[(1, 1)] - l * off;
+            (l, [r00, if d1 > T::ZERO { d1 } else { T::ZERO }])
+        } else {
+            // r₀₀ = 0 and det ≥ 0 force the off-diagonal to zero.
+            (T::ZERO, [T::ZERO, r[(1, 1)]])
+        }
+    }
+
     /// The innovation of sighting `z` against landmark `index` (for data association),
     /// with the configured measurement noise, without changing the state.
     pub fn innovation(&self, index: usize, z: &RangeBearing<T>) -> Result<Innovation<T>, EkfError> {
         let r = self.checked_measurement(z, None)?;
-        self.innovation_with(index, z, &r).map(|(inn, _)| inn)
+        self.innovation_with(index, z, &r)
     }
 
     /// Corrects the state with a sighting `z` of landmark `index`, using the configured
@@ -712,6 +855,10 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
     /// [`UpdateOutcome::Gated`] is returned. Errors (state unchanged): non-finite input,
     /// non-positive range, invalid covariance, unknown landmark, landmark on the sensor, a
     /// non-positive-definite innovation covariance.
+    ///
+    /// The correction is two scalar updates (range, then bearing; both rows linearised
+    /// at the prior, a correlated `r` decorrelated first), which together equal the
+    /// joint linear update.
     pub fn update_with_covariance(
         &mut self,
         index: usize,
@@ -731,7 +878,9 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             Ok(r) => r,
             Err(e) => return self.reject(e),
         };
-        let (inn, r) = match self.innovation_with(index, z, &r) {
+        // f0, f1: the columns of Lᵀ Hᵀ; later f0 holds the new pivots.
+        let (mut f0, mut f1) = ([T::ZERO; N], [T::ZERO; N]);
+        let inn = match self.innovation_into(index, z, &r, &mut f0, &mut f1) {
             Ok(found) => found,
             Err(e) => return self.reject(e),
         };
@@ -740,236 +889,169 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             self.counters.gated = self.counters.gated.saturating_add(1);
             return Ok(UpdateOutcome::Gated { nis });
         }
-        let k = self.active_dim();
-        let li = 3 + 2 * index;
-        let mut storage = [UpdateRow {
-            m: [T::ZERO; 2],
-            k: [T::ZERO; 2],
-            a: [T::ZERO; 2],
-        }; N];
-        let rows = storage.get_mut(..k).unwrap_or(&mut []);
-        self.cross_covariance(li, &inn, rows);
-        let form = self.config.covariance_update;
-        // One monomorphised pass per form (a function pointer would cost a call per entry).
-        match form {
-            CovarianceUpdate::Joseph => {
-                // The size of each row's rounding in the covariance pass (Joseph only).
-                let mut scales = [T::ZERO; N];
-                let scales = scales.get_mut(..k).unwrap_or(&mut []);
-                if let Err(e) = self.gain_and_terms(li, &inn, &r, rows, form, scales) {
-                    return self.reject(e);
-                }
-                self.correct_mean(rows, &inn.nu);
-                update_upper(&mut self.covariance, rows, joseph_entry);
-                let loading = T::lit(JOSEPH_LOADING * k as f64) * T::default_epsilon();
-                load_diagonal(&mut self.covariance, scales, loading);
-            }
-            CovarianceUpdate::Symmetric => {
-                if let Err(e) = self.gain_and_terms(li, &inn, &r, rows, form, &mut []) {
-                    return self.reject(e);
-                }
-                self.correct_mean(rows, &inn.nu);
-                update_upper(&mut self.covariance, rows, symmetric_entry)
-            }
+        let mut terms = [[T::ZERO; 4]; N];
+        let plan = match self.plan_update(&r, &inn.nu, &mut f0, &f1, &mut terms) {
+            Ok(plan) => plan,
+            Err(e) => return self.reject(e),
+        };
+        if self.apply_update(&plan, &f0, &terms).is_err() {
+            return self.reject(EkfError::NumericalFailure);
         }
         self.counters.updates = self.counters.updates.saturating_add(1);
         Ok(UpdateOutcome::Accepted { nis })
     }
 
-    /// `x ← x + K ν`, heading wrapped.
-    #[inline(always)]
-    fn correct_mean(&mut self, rows: &[UpdateRow<T>], nu: &Vector2<T>) {
-        for (x, row) in self.mean.as_mut_slice().iter_mut().zip(rows.iter()) {
-            *x += row.k[0] * nu[0] + row.k[1] * nu[1];
-        }
-        self.mean[2] = wrap_near(self.mean[2]);
-    }
-
-    /// Fills the gain `K = M S⁻¹` and the form's terms (`K S`, or the Joseph form's `D`)
-    /// of every row, and refuses (before anything is written) an update that would not
-    /// stay finite or would leave a negative variance.
-    fn gain_and_terms(
-        &self,
-        li: usize,
-        inn: &Innovation<T>,
-        r: &Matrix2<T>,
-        rows: &mut [UpdateRow<T>],
-        form: CovarianceUpdate,
-        scales: &mut [T],
-    ) -> Result<(), EkfError> {
-        let s = inn.s;
-        match form {
-            CovarianceUpdate::Joseph => {
-                // A Hᵀ reads M at the five columns where H is nonzero.
-                let (hr, hl) = (&inn.jacobian_robot, &inn.jacobian_landmark);
-                let h = [
-                    [hr[(0, 0)], hr[(0, 1)], hr[(0, 2)], hl[(0, 0)], hl[(0, 1)]],
-                    [hr[(1, 0)], hr[(1, 1)], hr[(1, 2)], hl[(1, 0)], hl[(1, 1)]],
-                ];
-                let m_at =
-                    [0, 1, 2, li, li + 1].map(|c| rows.get(c).map_or([T::ZERO; 2], |row| row.m));
-                let data = self.covariance.as_slice();
-                let mut scales = scales.iter_mut();
-                let terms = |i: usize, [k0, k1]: [T; 2]| {
-                    let (robot, landmark) = self.observed_entries(i, li);
-                    let p_at = [robot[0], robot[1], robot[2], landmark[0], landmark[1]];
-                    let (mut b0, mut b1) = (T::ZERO, T::ZERO);
-                    // |P| |H|ᵀ on this row: the size of the terms that cancel in M and A.
-                    let (mut u0, mut u1) = (T::ZERO, T::ZERO);
-                    for (c, (&p, mc)) in p_at.iter().zip(&m_at).enumerate() {
-                        let a = p - (k0 * mc[0] + k1 * mc[1]);
-                        b0 += a * h[0][c];
-                        b1 += a * h[1][c];
-                        u0 += p.abs() * h[0][c].abs();
-                        u1 += p.abs() * h[1][c].abs();
-                    }
-                    // Row i's loading scale (see `JOSEPH_LOADING`): terms beyond 16 Pᵢᵢ.
-                    if let Some(scale) = scales.next() {
-                        let p_ii = data.get(i * (N + 1)).copied().unwrap_or(T::ZERO);
-                        let terms = k0.abs() * u0 + k1.abs() * u1;
-                        let excess = terms - T::lit(CANCELLATION_RATIO) * p_ii;
-                        *scale = if excess > T::ZERO { excess } else { T::ZERO };
-                    }
-                    [
-                        k0 * r[(0, 0)] + k1 * r[(1, 0)] - b0,
-                        k0 * r[(0, 1)] + k1 * r[(1, 1)] - b1,
-                    ]
-                };
-                self.checked_terms(inn, r, rows, terms, joseph_entry)
-            }
-            CovarianceUpdate::Symmetric => {
-                let terms = |_: usize, [k0, k1]: [T; 2]| {
-                    [
-                        k0 * s[(0, 0)] + k1 * s[(1, 0)],
-                        k0 * s[(0, 1)] + k1 * s[(1, 1)],
-                    ]
-                };
-                self.checked_terms(inn, r, rows, terms, symmetric_entry)
-            }
-        }
-    }
-
-    /// The pass behind [`EkfSlam::gain_and_terms`] for one form: `terms(i, K_i)` gives row
-    /// `i`'s form terms and `new_entry` the form's covariance entry.
+    /// Everything of an update but the O(n²) pass, in O(n), checked before anything is
+    /// written: two scalar (Bierman) updates, range then bearing, both linearised at the
+    /// prior, with `r` decorrelated first (`R = L_R D_R L_Rᵀ`, second row `h₁ − l h₀`).
     ///
-    /// Every new variance is computed here exactly as the covariance pass will compute it
-    /// (`f32` cancellation after absurd inputs can make one negative). The off-diagonal
-    /// entries are bounded instead: with `D = K R − A Hᵀ` bounded by
-    /// `2|K|(|R| + |S|) + |M|`, every new entry is at most
-    /// `max var + 2|K|·(|M| + |K|(|R| + |S|))` in size, with `|·|` entrywise maxima — here
-    /// over-estimated by sums over the rows (the trace for the largest variance), which is
-    /// cheaper and still finite whenever the update is sane.
-    #[inline(always)]
-    fn checked_terms(
+    /// Scalar update `s` with `f = Lᵀ hᵀ`, `vⱼ = Dⱼ fⱼ` and `α` running from `r` over
+    /// `j = k−1 … 0` (`α ← α + vⱼ fⱼ`) sets `Dⱼ' = Dⱼ α_before / α_after ≥ 0` and, row by
+    /// row from the last entry to the first, `L_ij' = L_ij + bᵢ pⱼ`, `bᵢ ← bᵢ + L_ij vⱼ`,
+    /// with `bᵢ = vᵢ` at the start and `pⱼ = −fⱼ / α_before`; `bᵢ` ends as `(P hᵀ)ᵢ`, so
+    /// the gain is `b / α_total`. The second update's `f` after the first is
+    /// `f₂ⱼ = f̃₁ⱼ + p₁ⱼ Σ_{t>j} v₁ₜ f̃₁ₜ` (no pass over `L` needed), so both run in one
+    /// pass. On return `f0` holds the final pivots and `terms[j] = [p₁ⱼ, v₁ⱼ, p₂ⱼ, v₂ⱼ]`.
+    fn plan_update(
         &self,
-        inn: &Innovation<T>,
         r: &Matrix2<T>,
-        rows: &mut [UpdateRow<T>],
-        mut terms: impl FnMut(usize, [T; 2]) -> [T; 2],
-        new_entry: impl Fn(T, &UpdateRow<T>, &UpdateRow<T>) -> T,
-    ) -> Result<(), EkfError> {
-        let (si, nu) = (inn.s_inv, inn.nu);
-        let data = self.covariance.as_slice();
-        let (mut gsum, mut msum, mut trace, mut poison) = (T::ZERO, T::ZERO, T::ZERO, T::ZERO);
-        let means = self.mean.as_slice();
-        for (i, (row, &mean)) in rows.iter_mut().zip(means).enumerate() {
-            let [m0, m1] = row.m;
-            let k = [
-                m0 * si[(0, 0)] + m1 * si[(1, 0)],
-                m0 * si[(0, 1)] + m1 * si[(1, 1)],
-            ];
-            row.k = k;
-            row.a = terms(i, k);
-            let p_ii = data.get(i * (N + 1)).copied().unwrap_or(T::ZERO);
-            let new = new_entry(p_ii, row, row);
-            if new < T::ZERO {
-                return Err(EkfError::NumericalFailure);
-            }
-            trace += p_ii;
-            gsum += k[0].abs() + k[1].abs();
-            msum += m0.abs() + m1.abs();
-            // `x · 0` is 0 for a finite x and NaN otherwise (NaN variances included), so
-            // `poison` stays 0 only while everything is finite (a non-finite M makes K
-            // non-finite too; a sum of finite values that overflows is refused as well).
-            let moved = mean + (k[0] * nu[0] + k[1] * nu[1]);
-            poison += (new + moved + k[0] + k[1]) * T::ZERO;
+        nu: &Vector2<T>,
+        f0: &mut [T; N],
+        f1: &[T; N],
+        terms: &mut [[T; 4]; N],
+    ) -> Result<UpdatePlan<T>, EkfError> {
+        let k = self.active_dim();
+        let (l, d) = Self::decorrelate(r);
+        let (Some(f0), Some(f1), Some(terms)) = (f0.get_mut(..k), f1.get(..k), terms.get_mut(..k))
+        else {
+            return Err(EkfError::NumericalFailure);
+        };
+        // First scalar: v₁ = D f₀.
+        let mut hph = T::ZERO;
+        let mut diag = 0;
+        for (c, (t, &fc)) in terms.iter_mut().zip(f0.iter()).enumerate() {
+            let dc = self.factor.get(diag).copied().unwrap_or(T::ZERO);
+            diag += c + 2;
+            t[1] = dc * fc;
+            hph += t[1] * fc;
         }
-        let sr = max_abs(inn.s.iter().chain(r.iter()).copied());
-        let bound = trace + T::lit(16.0) * gsum * (msum + gsum * sr);
-        if poison != T::ZERO || !bound.finite() {
+        let r0 = sighting_floor(d[0], hph);
+        let total0 = hph + r0;
+        // Descending: D', p₁, and f₂ = f̃₁ + p₁ β with β the suffix sum of v₁ f̃₁.
+        let mut alpha = r0;
+        let mut beta = T::ZERO;
+        let mut hph = T::ZERO;
+        for c in (0..k).rev() {
+            let (Some(t), Some(fc), Some(&g)) = (terms.get_mut(c), f0.get_mut(c), f1.get(c)) else {
+                return Err(EkfError::NumericalFailure);
+            };
+            let g = g - l * *fc;
+            let next = alpha + t[1] * *fc;
+            let dc = pivot(&self.factor, c);
+            let (new_d, p) = bierman_step(dc, *fc, alpha, next);
+            t[0] = p;
+            let f2 = g + p * beta;
+            beta += t[1] * g;
+            t[3] = new_d * f2;
+            hph += t[3] * f2;
+            // f0 now carries f₂ until the second chain below.
+            *fc = f2;
+            // The first update's pivot, kept in t[2] until the second chain.
+            t[2] = new_d;
+            alpha = next;
+        }
+        let r1 = sighting_floor(d[1], hph);
+        let total1 = hph + r1;
+        let mut alpha = r1;
+        let mut poison = T::ZERO;
+        for c in (0..k).rev() {
+            let (Some(t), Some(fc)) = (terms.get_mut(c), f0.get_mut(c)) else {
+                return Err(EkfError::NumericalFailure);
+            };
+            let next = alpha + t[3] * *fc;
+            let (new_d, p) = bierman_step(t[2], *fc, alpha, next);
+            t[2] = p;
+            *fc = new_d;
+            poison += (t[0] + t[1] + t[2] + t[3] + new_d) * T::ZERO;
+            alpha = next;
+        }
+        // ν̃₁ = ν₁ − l ν₀, minus what the first correction explains: h̃₁ K₀ ν₀.
+        let scale0 = if total0 > T::ZERO {
+            nu[0] / total0
+        } else {
+            T::ZERO
+        };
+        let nu1 = nu[1] - l * nu[0] - beta * scale0;
+        let scale1 = if total1 > T::ZERO {
+            nu1 / total1
+        } else {
+            T::ZERO
+        };
+        poison += (total0 + total1 + scale0 + scale1) * T::ZERO;
+        if poison != T::ZERO {
             return Err(EkfError::NumericalFailure);
         }
-        Ok(())
+        Ok(UpdatePlan { scale0, scale1 })
     }
 
-    /// Row `i`'s entries in the columns where `H` is nonzero: the robot's (0..3) and the
-    /// landmark's (`li`, `li + 1`), read straight from the stored triangle: for `i ≥ 3`
-    /// the robot entries are rows 0..3 of column `i`; the landmark entries are row `i` of
-    /// columns `li`, `li + 1` above the landmark and rows `li`, `li + 1` of column `i`
-    /// below it.
-    #[inline(always)]
-    fn observed_entries(&self, i: usize, li: usize) -> ([T; 3], [T; 2]) {
-        let data = self.covariance.as_slice();
-        let at = |n: usize| data.get(n).copied().unwrap_or(T::ZERO);
-        let robot = if i >= 3 {
-            [at(i * N), at(i * N + 1), at(i * N + 2)]
-        } else {
-            [0, 1, 2].map(|c| entry(&self.covariance, i, c))
-        };
-        let landmark = if i < li {
-            [at(li * N + i), at((li + 1) * N + i)]
-        } else if i >= li + 2 {
-            [at(i * N + li), at(i * N + li + 1)]
-        } else {
-            [
-                entry(&self.covariance, i, li),
-                entry(&self.covariance, i, li + 1),
-            ]
-        };
-        (robot, landmark)
-    }
-
-    /// Fills `m` of each row `i` with row `i` of `M = P Hᵀ`, where `H` is nonzero only on
-    /// the robot's columns (`∂h/∂robot`) and the landmark's columns `li`, `li + 1`.
-    ///
-    /// Row by row from the stored triangle: rows 3.. take the robot entries from rows 0..3
-    /// of their own column; rows above the landmark take the landmark entries from row `i`
-    /// of columns `li`, `li + 1`, rows below it from rows `li`, `li + 1` of their own
-    /// column. The five rows of the robot and the landmark go through [`entry`].
-    fn cross_covariance(&self, li: usize, inn: &Innovation<T>, rows: &mut [UpdateRow<T>]) {
-        let (hr, hl) = (&inn.jacobian_robot, &inn.jacobian_landmark);
-        let m = |robot: [T; 3], landmark: [T; 2]| -> [T; 2] {
-            [0, 1].map(|r| {
-                robot[0] * hr[(r, 0)]
-                    + robot[1] * hr[(r, 1)]
-                    + robot[2] * hr[(r, 2)]
-                    + landmark[0] * hl[(r, 0)]
-                    + landmark[1] * hl[(r, 1)]
-            })
-        };
-        let data = self.covariance.as_slice();
-        let (lm0, lm1) = (data.get(li * N..), data.get((li + 1) * N..));
-        let (Some(lm0), Some(lm1)) = (lm0, lm1) else {
-            return;
-        };
-        let columns = data.chunks_exact(N);
-        for (i, (row, column)) in rows.iter_mut().zip(columns).enumerate() {
-            let robot = match column {
-                [a, b, c, ..] if i >= 3 => [*a, *b, *c],
-                _ => [0, 1, 2].map(|c| entry(&self.covariance, i, c)),
+    /// The O(n²) pass of an update planned by [`EkfSlam::plan_update`]: each row of `L`
+    /// once, both scalar updates per entry, and `x ← x + K₀ ν₀ + K₁ ν̃₁` (heading wrapped).
+    /// `Err` when the result is not finite (the state is then no longer what it was).
+    fn apply_update(
+        &mut self,
+        plan: &UpdatePlan<T>,
+        pivots: &[T; N],
+        terms: &[[T; 4]; N],
+    ) -> Result<(), ()> {
+        let k = self.active_dim();
+        let mut poison = T::ZERO;
+        // Rows two at a time: rows i and i + 1 share the terms of columns 0..i, loaded once.
+        let mut i = 0;
+        while i < k {
+            let pair = i + 1 < k;
+            let len = if pair { 2 * i + 3 } else { i + 1 };
+            let start = row_start(i);
+            let (Some(rows), Some(head), Some(&[_, va, _, vb])) = (
+                self.factor.get_mut(start..start + len),
+                terms.get(..i),
+                terms.get(i),
+            ) else {
+                return Err(());
             };
-            let landmark = if i < li {
-                [lm0.get(i), lm1.get(i)].map(|v| v.copied().unwrap_or(T::ZERO))
-            } else if i >= li + 2 {
-                [column.get(li), column.get(li + 1)].map(|v| v.copied().unwrap_or(T::ZERO))
+            let (row_a, rest) = rows.split_at_mut(i + 1);
+            let Some((diag_a, row_a)) = row_a.split_last_mut() else {
+                return Err(());
+            };
+            *diag_a = pivots.get(i).copied().unwrap_or(T::ZERO);
+            let (ba, bb) = if let Some((diag_b, row_b)) = rest.split_last_mut() {
+                *diag_b = pivots.get(i + 1).copied().unwrap_or(T::ZERO);
+                let Some((last_b, row_b)) = row_b.split_last_mut() else {
+                    return Err(());
+                };
+                let (Some(&[_, wa, _, wb]), Some(own)) = (terms.get(i + 1), terms.get(i..=i))
+                else {
+                    return Err(());
+                };
+                // Row i + 1's entry in column i first (its last), then both rows together.
+                let b = bierman_row(core::slice::from_mut(last_b), own, wa, wb);
+                bierman_rows(row_a, row_b, head, (va, vb), b)
             } else {
-                [
-                    entry(&self.covariance, i, li),
-                    entry(&self.covariance, i, li + 1),
-                ]
+                (bierman_row(row_a, head, va, vb), (T::ZERO, T::ZERO))
             };
-            row.m = m(robot, landmark);
+            for (r, (b0, b1)) in [(i, ba), (i + 1, bb)]
+                .into_iter()
+                .take(if pair { 2 } else { 1 })
+            {
+                let dx = b0 * plan.scale0 + b1 * plan.scale1;
+                if let Some(x) = self.mean.as_mut_slice().get_mut(internal_to_public(r, k)) {
+                    *x += dx;
+                }
+                poison += dx * T::ZERO;
+            }
+            i += 2;
         }
+        self.mean[2] = wrap_near(self.mean[2]);
+        if poison != T::ZERO { Err(()) } else { Ok(()) }
     }
 
     /// Adds a landmark seen at `z`, with the configured measurement noise. See
@@ -979,8 +1061,11 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
     }
 
     /// Adds a landmark seen at `z` with measurement covariance `r`, by the inverse
-    /// observation model `g` (seed 1, eqs. 20–24): mean `g(x_R, z)`,
-    /// `P_pp = G_R P_RR G_Rᵀ + G_z R G_zᵀ`, `P_pX = G_R [P_RR P_RM]`. Returns its index.
+    /// observation model `g` (seed 1, eqs. 20–24): mean `g(x_R, z)`, covariance
+    /// `P_pp = G_R P_RR G_Rᵀ + G_z R G_zᵀ`, `P_pX = G_R [P_RR P_RM]`, kept factorised:
+    /// the landmark's rows `G_R L_rm`, and the 5 × 5 block of the landmark and the robot
+    /// re-factored from `[[G_R L_rr, G_z L_R], [L_rr, 0]]` with weights `(D_r, D_R)`.
+    /// Returns its index.
     ///
     /// Errors (state unchanged): [`EkfError::MapFull`] when all `L` slots are used (the
     /// filter goes on with the landmarks it has), non-finite input, non-positive range,
@@ -1006,56 +1091,179 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
             return self.reject(EkfError::MapFull);
         }
         let g = self.config.sensor.landmark_from(&self.pose(), z);
-        let k = self.active_dim();
-        let p_rr: Matrix3<T> = block(&self.covariance, 0, 0);
-        let p_pp = g.wrt_robot * p_rr * g.wrt_robot.transpose()
+        // Last-resort cap, as for the robot: scale the new rows (a congruence).
+        let (p_rr, coupling) = self.robot_summary();
+        let p_ll = g.wrt_robot * p_rr * g.wrt_robot.transpose()
             + g.wrt_measurement * r * g.wrt_measurement.transpose();
-        // Last-resort cap, as for the robot: scale the new rows and columns (a congruence).
-        let cap = T::lit(MAX_POSITION_VARIANCE);
-        let scale = Vector2::new(
-            if p_pp[(0, 0)] > cap {
-                (cap / p_pp[(0, 0)]).sqrt()
-            } else {
-                T::ONE
-            },
-            if p_pp[(1, 1)] > cap {
-                (cap / p_pp[(1, 1)]).sqrt()
-            } else {
-                T::ONE
-            },
-        );
-        let d = Matrix2::from_diagonal(&scale);
-        let mut p_pp = d * p_pp * d;
-        let off = (p_pp[(0, 1)] + p_pp[(1, 0)]) * T::lit(0.5);
-        p_pp[(0, 1)] = off;
-        p_pp[(1, 0)] = off;
-        let g_robot = d * g.wrt_robot;
-        let cross_bound = T::lit(3.0) * max_abs(g_robot.iter().copied()) * self.max_variance();
+        let scale = capped([
+            (p_ll[(0, 0)], MAX_POSITION_VARIANCE),
+            (p_ll[(1, 1)], MAX_POSITION_VARIANCE),
+        ]);
+        let s = Matrix2::from_diagonal(&scale.into());
+        let (gr, gz) = (s * g.wrt_robot, s * g.wrt_measurement);
+        let (lr, dr_meas) = Self::decorrelate(&r);
+        let gz_lr = gz * Matrix2::new(T::ONE, T::ZERO, lr, T::ONE);
+        let (lrr, dr) = self.robot_block();
+        let gr_lrr = gr * Matrix3::from_fn(|i, j| lrr[i][j]);
+        let mut w = [[T::ZERO; 5]; 5];
+        for a in 0..2 {
+            for c in 0..3 {
+                w[a][c] = gr_lrr[(a, c)];
+            }
+            w[a][3] = gz_lr[(a, 0)];
+            w[a][4] = gz_lr[(a, 1)];
+        }
+        for a in 0..3 {
+            w[2 + a][..3].copy_from_slice(&lrr[a]);
+        }
+        let weights = [dr[0], dr[1], dr[2], dr_meas[0], dr_meas[1]];
+        let (l5, d5) = mwgs(w, &weights);
+        let coupling_bound = T::lit(3.0) * max_abs(gr.iter().copied()) * coupling;
         let far = T::lit(MAX_COORDINATE);
         let inside = g.landmark.iter().all(|c| c.abs() <= far);
-        // As in a prediction: negative only when `P_RR` is no longer PSD; refused.
-        let negative = p_pp[(0, 0)] < T::ZERO || p_pp[(1, 1)] < T::ZERO;
         if !inside
-            || negative
-            || !g.landmark.iter().chain(p_pp.iter()).all(|v| v.finite())
-            || !cross_bound.finite()
+            || !g.landmark.iter().all(|v| v.finite())
+            || !p_ll.iter().all(|v| v.finite())
+            || !all_finite(&l5, &d5)
+            || !coupling_bound.finite()
         {
             return self.reject(EkfError::NumericalFailure);
         }
-        // P_Xp = (G_R P[0..3, 0..k])ᵀ: rows 0..k of the two new columns (above the diagonal).
-        for j in 0..k {
-            let col: nalgebra::Vector3<T> = block(&self.covariance, 0, j);
-            let v = g_robot * col;
-            self.covariance
-                .fixed_view_mut::<1, 2>(j, k)
-                .copy_from(&v.transpose());
+        let k = self.active_dim();
+        let r0 = k - 3;
+        if row_start(k + 2) > P {
+            return self.reject(EkfError::MapFull);
         }
-        set_diagonal_block(&mut self.covariance, k, &p_pp);
+        // Move the robot rows two slots down (last first: each destination lies beyond
+        // every source not yet moved), keeping their landmark columns 0..r0.
+        for a in (0..3).rev() {
+            let from = row_start(r0 + a);
+            let to = row_start(r0 + 2 + a);
+            self.factor.copy_within(from..from + r0, to);
+        }
+        // The landmark rows r0, r0 + 1: G_R L_rm, then l5's own block.
+        let new_robot = [0, 1, 2].map(|a| row_start(r0 + 2 + a));
+        for c in 0..r0 {
+            let col = [0, 1, 2].map(|a| {
+                self.factor
+                    .get(new_robot[a] + c)
+                    .copied()
+                    .unwrap_or(T::ZERO)
+            });
+            for a in 0..2 {
+                let v = gr[(a, 0)] * col[0] + gr[(a, 1)] * col[1] + gr[(a, 2)] * col[2];
+                if let Some(slot) = self.factor.get_mut(row_start(r0 + a) + c) {
+                    *slot = v;
+                }
+            }
+        }
+        // The new 5 × 5 block: rows r0 … r0 + 4, columns r0 ….
+        for a in 0..5 {
+            let start = row_start(r0 + a) + r0;
+            if let Some(row) = self.factor.get_mut(start..=start + a) {
+                for (b, slot) in row.iter_mut().enumerate() {
+                    *slot = if b == a { d5[a] } else { l5[a][b] };
+                }
+            }
+        }
         self.mean.fixed_rows_mut::<2>(k).copy_from(&g.landmark);
         let index = self.landmark_count();
         self.landmarks += 1;
         Ok(index)
     }
+}
+
+/// The O(n) results of [`EkfSlam::plan_update`]: the mean moves by
+/// `b₀ · scale0 + b₁ · scale1` per state (`K ν` of the two scalar updates).
+struct UpdatePlan<T> {
+    scale0: T,
+    scale1: T,
+}
+
+/// The measurement variance a scalar update uses: `r`, but at least `ε · h P hᵀ` (no
+/// sighting is more precise than the rounding of its prediction; keeps the gain finite).
+#[inline(always)]
+fn sighting_floor<T: Real>(r: T, hph: T) -> T {
+    let floor = T::default_epsilon() * hph;
+    if r > floor { r } else { floor }
+}
+
+/// One step of Bierman's chain: the new pivot `D α / α_next` and the column factor
+/// `−f / α` (both zero when nothing before carried information; `D` kept when the
+/// state does not enter the measurement).
+#[inline(always)]
+fn bierman_step<T: Real>(d: T, f: T, alpha: T, next: T) -> (T, T) {
+    if next <= T::ZERO {
+        (d, T::ZERO)
+    } else if alpha <= T::ZERO {
+        (T::ZERO, T::ZERO)
+    } else {
+        (d * (alpha / next), -f / alpha)
+    }
+}
+
+/// Both scalar updates on one row of `L` (its strict part), from its last entry to its
+/// first: returns `(b₀, b₁)`, row `i` of `P h₀ᵀ` and of `P' h̃₁ᵀ`. The hot loop of the
+/// update; not inlined, so the row and the terms keep their no-alias guarantees.
+#[inline(never)]
+fn bierman_row<T: Real>(row: &mut [T], terms: &[[T; 4]], v1: T, v2: T) -> (T, T) {
+    let (mut b0, mut b1) = (v1, v2);
+    for (l, &[p1, w1, p2, w2]) in row.iter_mut().rev().zip(terms.iter().rev()) {
+        let old = *l;
+        let once = old + b0 * p1;
+        b0 += old * w1;
+        *l = once + b1 * p2;
+        b1 += once * w2;
+    }
+    (b0, b1)
+}
+
+/// [`bierman_row`] on two rows at once over the same columns (each column's terms loaded
+/// once for both): `a` and `b` are the rows' running `(b₀, b₁)` at the start; returns
+/// both at the end.
+#[inline(never)]
+fn bierman_rows<T: Real>(
+    row_a: &mut [T],
+    row_b: &mut [T],
+    terms: &[[T; 4]],
+    a: (T, T),
+    b: (T, T),
+) -> ((T, T), (T, T)) {
+    let ((mut a0, mut a1), (mut b0, mut b1)) = (a, b);
+    let rows = row_a.iter_mut().zip(row_b.iter_mut());
+    for ((la, lb), &[p1, w1, p2, w2]) in rows.zip(terms).rev() {
+        let (old_a, old_b) = (*la, *lb);
+        let once_a = old_a + a0 * p1;
+        let once_b = old_b + b0 * p1;
+        a0 += old_a * w1;
+        b0 += old_b * w1;
+        *la = once_a + a1 * p2;
+        *lb = once_b + b1 * p2;
+        a1 += once_a * w2;
+        b1 += once_b * w2;
+    }
+    ((a0, a1), (b0, b1))
+}
+
+/// Public state index (robot first) of index `i` inside the factor (robot last), for an
+/// active dimension `k`.
+#[inline(always)]
+fn internal_to_public(i: usize, k: usize) -> usize {
+    if i + 3 >= k { i + 3 - k } else { i + 3 }
+}
+
+/// Per-variance scale factors `√(cap / v)` for the variances `v` above their cap, 1 for
+/// the others.
+fn capped<T: Real, const R: usize>(variances: [(T, f64); R]) -> [T; R] {
+    variances.map(|(v, cap)| {
+        let cap = T::lit(cap);
+        if v > cap { (cap / v).sqrt() } else { T::ONE }
+    })
+}
+
+/// `true` when every entry of a small factor (`L`, `D`) is finite.
+fn all_finite<T: Real, const R: usize>(l: &[[T; R]; R], d: &[T; R]) -> bool {
+    l.iter().flatten().chain(d).all(|v| v.finite())
 }
 
 /// The largest absolute value (NaN propagates as NaN, an empty sequence gives 0).
@@ -1066,46 +1274,22 @@ fn max_abs<T: Real>(values: impl Iterator<Item = T>) -> T {
     })
 }
 
-/// The measurement covariance of a Joseph update: `r` with each variance raised, where it
-/// is smaller, to `ROUNDING_FLOOR · ε · (|H| |P| |H|ᵀ)ᵢᵢ`, the rounding level of
-/// `(H P Hᵀ)ᵢᵢ` computed in `T` from the robot and landmark blocks of `P`.
-fn rounding_floor<T: Real>(
-    r: &Matrix2<T>,
-    hr: &Matrix2x3<T>,
-    hl: &Matrix2<T>,
-    p_rr: &Matrix3<T>,
-    p_rl: &SMatrix<T, 3, 2>,
-    p_ll: &Matrix2<T>,
-) -> Matrix2<T> {
-    let abs = |v: T| v.abs();
-    let (hr, hl) = (hr.map(abs), hl.map(abs));
-    let cross = hr * p_rl.map(abs) * hl.transpose();
-    let scale = hr * p_rr.map(abs) * hr.transpose()
-        + cross
-        + cross.transpose()
-        + hl * p_ll.map(abs) * hl.transpose();
-    let unit = T::lit(ROUNDING_FLOOR) * T::default_epsilon();
-    let mut r = *r;
-    for i in 0..2 {
-        let floor = unit * scale[(i, i)];
-        if floor > r[(i, i)] {
-            r[(i, i)] = floor;
-        }
-    }
-    r
-}
-
 /// `x > 0`, false for NaN.
 fn is_positive<T: Real>(x: T) -> bool {
     x > T::ZERO
 }
 
-fn symmetrise3<T: Real>(m: &mut Matrix3<T>) {
-    for i in 0..3 {
-        for j in 0..i {
-            let v = (m[(i, j)] + m[(j, i)]) * T::lit(0.5);
-            m[(i, j)] = v;
-            m[(j, i)] = v;
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use covariance::internal;
+
+    #[test]
+    fn public_and_internal_indices_are_inverse() {
+        for k in [3, 5, 9] {
+            for s in 0..k {
+                assert_eq!(internal_to_public(internal(s, k), k), s);
+            }
         }
     }
 }

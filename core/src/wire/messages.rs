@@ -6,7 +6,7 @@
 //! each estimate names the `seq` of the event it answers, so the host can stream without
 //! waiting for replies.
 
-use crate::ekf::{CovarianceUpdate, EkfConfig};
+use crate::ekf::EkfConfig;
 use crate::gate::ChiSquareGate;
 use crate::geometry::Pose2;
 use crate::motion::{IncrementNoise, VelocityNoise};
@@ -108,8 +108,6 @@ pub struct EkfSettings {
     pub sensor_mount: [f32; 3],
     /// Gate on the squared Mahalanobis distance.
     pub gate_threshold: f32,
-    /// `true`: the Joseph form; `false`: the optimal-gain (symmetric) form.
-    pub joseph_form: bool,
 }
 
 impl EkfSettings {
@@ -139,7 +137,6 @@ impl EkfSettings {
             bearing_std: config.bearing_std,
             sensor_mount: [m.x, m.y, m.theta],
             gate_threshold: config.gate.threshold,
-            joseph_form: config.covariance_update == CovarianceUpdate::Joseph,
         }
     }
 
@@ -168,11 +165,6 @@ impl EkfSettings {
             bearing_std: self.bearing_std,
             sensor: RangeBearingSensor::new(Pose2::new(mx, my, mt)),
             gate: ChiSquareGate::from_threshold(self.gate_threshold),
-            covariance_update: if self.joseph_form {
-                CovarianceUpdate::Joseph
-            } else {
-                CovarianceUpdate::Symmetric
-            },
         }
     }
 }

@@ -118,11 +118,11 @@ const TICKS_REFUSED: u8 = 0x81;
 /// known-id table of `L` ids.
 ///
 /// ```
-/// use microslam::ekf::{state_dim, EkfConfig, EkfSlam};
+/// use microslam::ekf::{factor_len, state_dim, EkfConfig, EkfSlam};
 /// use microslam::wire::{encode_frame, Odometry, Session, ToDevice, ToHost, MAX_FRAME_LEN};
 ///
-/// let mut ekf = EkfSlam::<f32, { state_dim(8) }>::new(EkfConfig::DEFAULT_F32);
-/// let mut session = Session::<_, 8>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+/// let mut ekf = EkfSlam::<f32, { state_dim(8) }, { factor_len(8) }>::new(EkfConfig::DEFAULT_F32);
+/// let mut session = Session::<_, _, 8>::new(&mut ekf, EkfConfig::DEFAULT_F32);
 /// let msg = ToDevice::Odometry { seq: 1, stamp_us: 0, odometry: Odometry::Velocity { v: 1.0, omega: 0.0, dt: 0.5 } };
 /// let mut buf = [0u8; MAX_FRAME_LEN];
 /// let mut replies = 0;
@@ -141,9 +141,9 @@ const TICKS_REFUSED: u8 = 0x81;
 /// reassembled and observed (each chunk is answered; the one completing a scan with the
 /// grid step's result), and estimates carry the grid pose (the heaviest particle), the
 /// particle cloud's covariance and the resample count.
-pub struct Session<'a, const N: usize, const L: usize> {
+pub struct Session<'a, const N: usize, const P: usize, const L: usize> {
     decoder: FrameDecoder<MAX_FRAME_LEN>,
-    ekf: &'a mut EkfSlam<f32, N>,
+    ekf: &'a mut EkfSlam<f32, N, P>,
     ekf_config: EkfConfig<f32>,
     ids: KnownIds<L>,
     grid: Option<&'a mut dyn GridEstimator>,
@@ -154,10 +154,10 @@ pub struct Session<'a, const N: usize, const L: usize> {
     status: Status,
 }
 
-impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
+impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
     /// A session over `ekf`, which is re-initialised in place with `ekf_config` (robot at
     /// the origin). An invalid configuration leaves the filter's own configuration.
-    pub fn new(ekf: &'a mut EkfSlam<f32, N>, ekf_config: EkfConfig<f32>) -> Self {
+    pub fn new(ekf: &'a mut EkfSlam<f32, N, P>, ekf_config: EkfConfig<f32>) -> Self {
         let mut session = Self {
             decoder: FrameDecoder::new(),
             ekf,
@@ -177,7 +177,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
     /// A session over `ekf` and a grid estimator `grid` (e.g. a [`GridSlam`] on a grid in
     /// a `static`); it starts on the EKF, and [`Command::SelectEstimator`] switches.
     pub fn with_grid(
-        ekf: &'a mut EkfSlam<f32, N>,
+        ekf: &'a mut EkfSlam<f32, N, P>,
         ekf_config: EkfConfig<f32>,
         grid: &'a mut dyn GridEstimator,
         setup: GridSetup,
@@ -199,7 +199,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
     }
 
     /// The EKF.
-    pub fn ekf(&self) -> &EkfSlam<f32, N> {
+    pub fn ekf(&self) -> &EkfSlam<f32, N, P> {
         self.ekf
     }
 
@@ -452,7 +452,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ekf::state_dim;
+    use crate::ekf::{factor_len, state_dim};
     use crate::wire::EkfSettings;
     use crate::wire::encode_frame;
 
@@ -494,13 +494,15 @@ mod tests {
             sighting(6, 41, 2.9, -0.52),
             sighting(7, 40, f32::NAN, 0.0),
         ];
-        let mut ekf = EkfSlam::<f32, { state_dim(4) }>::new(EkfConfig::DEFAULT_F32);
-        let mut session = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+        let mut ekf =
+            EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut session = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
         let mut replies = std::vec::Vec::new();
         for b in frames(&msgs) {
             replies.extend(session.receive(b));
         }
-        let mut direct = EkfSlam::<f32, { state_dim(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut direct =
+            EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
         let a = direct.add_landmark(&RangeBearing::new(2.0, 0.3)).unwrap();
         direct.predict_velocity(0.5, 0.1, 0.1).unwrap();
         direct.update(a, &RangeBearing::new(1.95, 0.33)).unwrap();
@@ -547,8 +549,9 @@ mod tests {
 
     #[test]
     fn ekf_settings_from_the_wire_replace_the_configuration() {
-        let mut ekf = EkfSlam::<f32, { state_dim(4) }>::new(EkfConfig::DEFAULT_F32);
-        let mut session = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+        let mut ekf =
+            EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut session = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
         let mut wanted = EkfConfig::MICROCONTROLLER;
         wanted.range_std = 0.123;
         wanted.gate = crate::gate::ChiSquareGate::from_threshold(7.5);
@@ -594,8 +597,9 @@ mod tests {
 
     #[test]
     fn bad_frames_are_counted_and_commands_answered_with_status() {
-        let mut ekf = EkfSlam::<f32, { state_dim(4) }>::new(EkfConfig::DEFAULT_F32);
-        let mut session = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+        let mut ekf =
+            EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut session = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
         let mut bytes = frames(&[sighting(1, 7, 2.0, 0.0)]);
         bytes.extend_from_slice(&[1, 2, 3, 0, 0xff, 0xfe, 0]);
         bytes.extend(frames(&[
@@ -713,14 +717,15 @@ mod tests {
             chunk(10, 4, 0),
             chunk(11, 4, 32),
         ];
-        let mut ekf = EkfSlam::<f32, { state_dim(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut ekf =
+            EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
         let mut grid = std::boxed::Box::new(OccupancyGrid::<64, 64>::centred(
             config.resolution,
             config.log_odds,
         ));
         let mut slam = Slam::new(&mut grid, config, Pose2::new(0.0, 0.0, 0.0)).unwrap();
         let mut session =
-            Session::<_, 4>::with_grid(&mut ekf, EkfConfig::DEFAULT_F32, &mut slam, setup);
+            Session::<_, _, 4>::with_grid(&mut ekf, EkfConfig::DEFAULT_F32, &mut slam, setup);
         let replies: std::vec::Vec<_> = frames(&msgs)
             .iter()
             .filter_map(|&b| session.receive(b))

@@ -16,24 +16,31 @@ use core::fmt::Write;
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use firmware_example::board::{self, Serial};
 use firmware_example::cost::{Ticks, thousand_nops};
-use microslam::ekf::{CovarianceUpdate, EkfConfig, EkfSlam, UpdateOutcome, state_dim};
+use microslam::ekf::{EkfConfig, EkfSlam, UpdateOutcome, factor_len, state_dim};
 use microslam::sensors::range_bearing::RangeBearing;
 use panic_probe as _;
 use static_cell::ConstStaticCell;
 
-type Ekf<const N: usize> = EkfSlam<f32, N>;
+type Ekf<const N: usize, const P: usize> = EkfSlam<f32, N, P>;
 const ZEROED: EkfConfig<f32> = firmware_example::config::ZEROED_EKF_CONFIG;
 
-static EKF16: ConstStaticCell<Ekf<{ state_dim(16) }>> = ConstStaticCell::new(Ekf::new(ZEROED));
-static EKF32: ConstStaticCell<Ekf<{ state_dim(32) }>> = ConstStaticCell::new(Ekf::new(ZEROED));
-static EKF64: ConstStaticCell<Ekf<{ state_dim(64) }>> = ConstStaticCell::new(Ekf::new(ZEROED));
+static EKF16: ConstStaticCell<Ekf<{ state_dim(16) }, { factor_len(16) }>> =
+    ConstStaticCell::new(Ekf::new(ZEROED));
+static EKF32: ConstStaticCell<Ekf<{ state_dim(32) }, { factor_len(32) }>> =
+    ConstStaticCell::new(Ekf::new(ZEROED));
+static EKF64: ConstStaticCell<Ekf<{ state_dim(64) }, { factor_len(64) }>> =
+    ConstStaticCell::new(Ekf::new(ZEROED));
 
 /// Calls per figure: the reported value is the mean.
 const REPEAT: u32 = 8;
 
 /// Range and bearing of landmark `i` as the filter predicts it (so updates pass the gate),
 /// slightly perturbed.
-fn predicted<const N: usize>(slam: &Ekf<N>, i: usize, k: u32) -> Option<RangeBearing<f32>> {
+fn predicted<const N: usize, const P: usize>(
+    slam: &Ekf<N, P>,
+    i: usize,
+    k: u32,
+) -> Option<RangeBearing<f32>> {
     let p = slam.pose();
     let l = slam.landmark(i)?;
     let (dx, dy) = (l[0] - p.x, l[1] - p.y);
@@ -44,7 +51,10 @@ fn predicted<const N: usize>(slam: &Ekf<N>, i: usize, k: u32) -> Option<RangeBea
 }
 
 /// Maps `n` landmarks on a ring while driving, so the covariance is dense.
-fn build_map<const N: usize>(slam: &mut Ekf<N>, n: usize) -> Result<(), microslam::EkfError> {
+fn build_map<const N: usize, const P: usize>(
+    slam: &mut Ekf<N, P>,
+    n: usize,
+) -> Result<(), microslam::EkfError> {
     slam.init(
         firmware_example::config::EKF_CONFIG,
         microslam::Pose2::new(0.0, 0.0, 0.0),
@@ -57,12 +67,25 @@ fn build_map<const N: usize>(slam: &mut Ekf<N>, n: usize) -> Result<(), microsla
     Ok(())
 }
 
-fn measure<const N: usize>(
+fn measure<const N: usize, const P: usize>(
     out: &mut Serial,
     ticks: &mut Ticks,
-    slam: &mut Ekf<N>,
+    slam: &mut Ekf<N, P>,
     n: usize,
 ) -> core::fmt::Result {
+    // The cost of the n-th landmark: a map of n − 1 landmarks, then one more, REPEAT times.
+    let mut add = 0u32;
+    for _ in 0..REPEAT {
+        if build_map(slam, n - 1).is_err() {
+            return writeln!(out, "error ekf n={n} map");
+        }
+        let mut outcome = None;
+        add +=
+            ticks.instructions(|| outcome = Some(slam.add_landmark(&RangeBearing::new(2.5, 0.7))));
+        if !matches!(outcome, Some(Ok(_))) {
+            return writeln!(out, "error ekf n={n} add");
+        }
+    }
     if build_map(slam, n).is_err() {
         return writeln!(out, "error ekf n={n} map");
     }
@@ -72,35 +95,25 @@ fn measure<const N: usize>(
             let _ = slam.predict_velocity(0.2, 0.05, 0.1);
         });
     }
-    let mut figures = [0u32; 2];
-    for (form, total) in [CovarianceUpdate::Joseph, CovarianceUpdate::Symmetric]
-        .into_iter()
-        .zip(figures.iter_mut())
-    {
-        let mut config = *slam.config();
-        config.covariance_update = form;
-        if slam.set_config(config).is_err() {
-            return writeln!(out, "error ekf n={n} config");
-        }
-        for k in 0..REPEAT {
-            let i = (k as usize * 5) % n;
-            let Some(z) = predicted(slam, i, k) else {
-                return writeln!(out, "error ekf n={n} landmark");
-            };
-            let mut outcome = None;
-            *total += ticks.instructions(|| outcome = Some(slam.update(i, &z)));
-            if !matches!(outcome, Some(Ok(UpdateOutcome::Accepted { .. }))) {
-                return writeln!(out, "error ekf n={n} update not accepted");
-            }
+    let mut update = 0u32;
+    for k in 0..REPEAT {
+        let i = (k as usize * 5) % n;
+        let Some(z) = predicted(slam, i, k) else {
+            return writeln!(out, "error ekf n={n} landmark");
+        };
+        let mut outcome = None;
+        update += ticks.instructions(|| outcome = Some(slam.update(i, &z)));
+        if !matches!(outcome, Some(Ok(UpdateOutcome::Accepted { .. }))) {
+            return writeln!(out, "error ekf n={n} update not accepted");
         }
     }
     writeln!(
         out,
-        "ekf n={} predict={} update_joseph={} update_symmetric={}",
+        "ekf n={} predict={} update={} add_landmark={}",
         n,
         predict / REPEAT,
-        figures[0] / REPEAT,
-        figures[1] / REPEAT
+        update / REPEAT,
+        add / REPEAT
     )
 }
 

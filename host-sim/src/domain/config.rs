@@ -5,7 +5,7 @@
 use super::AssociationMode;
 use anyhow::{Context, Result, bail};
 use microslam::association::AssociationConfig;
-use microslam::ekf::{CovarianceUpdate, EkfConfig};
+use microslam::ekf::EkfConfig;
 use microslam::gate::{ChiSquareGate, chi_square_quantile};
 use microslam::geometry::Pose2;
 use microslam::motion::{IncrementNoise, VelocityNoise};
@@ -30,8 +30,6 @@ pub struct Settings {
     pub sighting: SightingSettings,
     /// Data association.
     pub association: AssociationSettings,
-    /// Filter options.
-    pub filter: FilterSettings,
     /// Simulator scenario (only in `sim.toml`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scenario: Option<Scenario>,
@@ -85,24 +83,6 @@ pub struct AssociationSettings {
     pub max_search_nodes: u32,
     pub batch_window_s: f64,
     pub ambiguity_margin: f64,
-}
-
-/// See `configs/mrclam.toml` for the meaning of each field.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-#[allow(missing_docs)]
-pub struct FilterSettings {
-    pub covariance_update: CovarianceUpdateSetting,
-}
-
-/// The covariance update form, as written in the file.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum CovarianceUpdateSetting {
-    /// Joseph form.
-    Joseph,
-    /// `P − K S Kᵀ`, symmetric.
-    Symmetric,
 }
 
 impl Settings {
@@ -243,10 +223,6 @@ impl Settings {
                 s.update_gate_probability,
                 2,
             ))),
-            covariance_update: match self.filter.covariance_update {
-                CovarianceUpdateSetting::Joseph => CovarianceUpdate::Joseph,
-                CovarianceUpdateSetting::Symmetric => CovarianceUpdate::Symmetric,
-            },
         }
     }
 

@@ -22,7 +22,7 @@ use crate::drivers::ekf::{AssociationCounts, MapLandmark, PoseSample, ReplayRun}
 use crate::inputs::camera::world::{Sign, SimCamera};
 use anyhow::{Result, bail};
 use microslam::association::{Candidates, KnownIds, LabelCheck, LandmarkLabels, Pairing};
-use microslam::ekf::{EkfSlam, UpdateOutcome, state_dim};
+use microslam::ekf::{EkfSlam, UpdateOutcome, factor_len, state_dim};
 use microslam::event::{Event, EventKind, Identity, Sighting};
 use microslam::geometry::Pose2;
 use microslam::sensors::camera::DetectionNoise;
@@ -35,7 +35,7 @@ use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 const MAX_LANDMARKS: usize = 64;
-type Slam = EkfSlam<f64, { state_dim(MAX_LANDMARKS) }>;
+type Slam = EkfSlam<f64, { state_dim(MAX_LANDMARKS) }, { factor_len(MAX_LANDMARKS) }>;
 
 /// The simulated detector.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -7,7 +7,7 @@ use anyhow::{Result, bail};
 use indicatif::ProgressBar;
 use microslam::EkfError;
 use microslam::association::{Jcbb, KnownIds, Observed, Pairing, icnn, observe_known};
-use microslam::ekf::{EkfSlam, UpdateOutcome, state_dim};
+use microslam::ekf::{EkfSlam, UpdateOutcome, factor_len, state_dim};
 use microslam::event::{EventKind, Identity};
 use microslam::geometry::Pose2;
 use microslam::motion::integrate_velocity;
@@ -23,7 +23,7 @@ pub const MAX_BATCH: usize = 8;
 /// Candidate landmarks kept per sighting in JCBB.
 pub const MAX_CANDIDATES: usize = 8;
 
-type Slam<T> = EkfSlam<T, { state_dim(MAX_LANDMARKS) }>;
+type Slam<T> = EkfSlam<T, { state_dim(MAX_LANDMARKS) }, { factor_len(MAX_LANDMARKS) }>;
 
 /// The filter's pose estimate after the prediction to an odometry stamp.
 #[derive(Clone, Copy, Debug, PartialEq)]

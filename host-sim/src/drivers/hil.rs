@@ -16,7 +16,7 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
-use microslam::ekf::{EkfConfig, EkfSlam, state_dim};
+use microslam::ekf::{EkfConfig, EkfSlam, factor_len, state_dim};
 use microslam::geometry::Pose2;
 use microslam::grid::{OccupancyGrid, occupancy_bytes};
 use microslam::pf::{GridPfConfig, GridSlam};
@@ -29,7 +29,7 @@ use serde::Serialize;
 use crate::domain::recording::Recording;
 
 /// Landmarks of the firmware's EKF (`firmware_example::config::EKF_LANDMARKS`).
-pub const FIRMWARE_LANDMARKS: usize = 32;
+pub const FIRMWARE_LANDMARKS: usize = 64;
 
 /// Bytes of the firmware grid's occupied-cell bitmap (`firmware_example::config::GRID_BITMAP`).
 pub const FIRMWARE_GRID_BITMAP: usize = occupancy_bytes(256, 256);
@@ -128,15 +128,17 @@ pub fn encode_all_corrupted(messages: &[ToDevice], rate: f64, seed: u64) -> (Vec
 /// The replies of the host reference: the firmware's [`Session`], with the firmware's EKF
 /// and grid estimator (sizes and configurations), fed the same bytes.
 pub fn host_replies(bytes: &[u8]) -> Vec<ToHost> {
-    let mut ekf = Box::new(EkfSlam::<f32, { state_dim(FIRMWARE_LANDMARKS) }>::new(
-        EkfConfig::MICROCONTROLLER,
-    ));
+    let mut ekf = Box::new(EkfSlam::<
+        f32,
+        { state_dim(FIRMWARE_LANDMARKS) },
+        { factor_len(FIRMWARE_LANDMARKS) },
+    >::new(EkfConfig::MICROCONTROLLER));
     let config = GridPfConfig::MICROCONTROLLER;
     let mut grid = Box::new(FirmwareGrid::centred(config.resolution, config.log_odds));
     let Ok(mut slam) = FirmwareGridSlam::new(&mut grid, config, Pose2::new(0.0, 0.0, 0.0)) else {
         unreachable!("the firmware's grid configuration is valid")
     };
-    let mut session = Session::<_, FIRMWARE_LANDMARKS>::with_grid(
+    let mut session = Session::<_, _, FIRMWARE_LANDMARKS>::with_grid(
         &mut ekf,
         EkfConfig::MICROCONTROLLER,
         &mut slam,
