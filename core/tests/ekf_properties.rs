@@ -1,11 +1,12 @@
 //! Property tests of the EKF over random sequences of steps, in f32 and f64: the active
 //! covariance stays symmetric positive semi-definite, the heading stays wrapped, the
-//! inactive part of the state is never touched, and refused steps change nothing.
+//! inactive part of the state is never touched, valid steps are accepted (a new landmark
+//! only refused with `MapFull` when the table is full), and refused steps change nothing.
 
-use microslam::Real;
 use microslam::ekf::{CovarianceUpdate, EkfConfig, EkfSlam, state_dim};
 use microslam::geometry::Pose2;
-use microslam::sensors::range_bearing::RangeBearing;
+use microslam::sensors::range_bearing::{MIN_RANGE, RangeBearing};
+use microslam::{EkfError, Real};
 use nalgebra::DMatrix;
 use proptest::prelude::*;
 
@@ -34,40 +35,33 @@ fn op() -> impl Strategy<Value = Op> {
     ]
 }
 
-/// Applies one op; returns `true` when the filter refused it.
-fn apply<T: Real>(ekf: &mut EkfSlam<T, N>, op: &Op) -> bool {
+/// Applies one op; returns the filter's answer, `Ok(())` also when nothing was applied (an
+/// update with no landmark yet, or whose offset range falls below `MIN_RANGE`).
+fn apply<T: Real>(ekf: &mut EkfSlam<T, N>, op: &Op) -> Result<(), EkfError> {
     let t = T::lit;
     match *op {
-        Op::Velocity(v, w, dt) => {
-            let _ = ekf.predict_velocity(t(v), t(w), t(dt));
-            false
-        }
-        Op::Increment(x, y, th) => {
-            let _ = ekf.predict_increment(&Pose2::new(t(x), t(y), t(th)));
-            false
-        }
+        Op::Velocity(v, w, dt) => ekf.predict_velocity(t(v), t(w), t(dt)),
+        Op::Increment(x, y, th) => ekf.predict_increment(&Pose2::new(t(x), t(y), t(th))),
         Op::Update(i, dr, db) => {
             let n = ekf.landmark_count();
             if n == 0 {
-                return false;
+                return Ok(());
             }
             let idx = i % n;
-            let Some(l) = ekf.landmark(idx) else {
-                return false;
-            };
-            let Some(p) = ekf.config().sensor.predict(&ekf.pose(), &l) else {
-                return false;
-            };
+            let l = ekf.landmark(idx).ok_or(EkfError::UnknownLandmark)?;
+            let p = ekf
+                .config()
+                .sensor
+                .predict(&ekf.pose(), &l)
+                .ok_or(EkfError::LandmarkOnSensor)?;
             let z = RangeBearing::new(p.z.range + t(dr), p.z.bearing + t(db));
-            if z.range > T::ZERO {
-                let _ = ekf.update(idx, &z);
+            if z.range.to_f64() < MIN_RANGE {
+                return Ok(());
             }
-            false
+            // Accepted or gated: both are answers to valid input.
+            ekf.update(idx, &z).map(|_| ())
         }
-        Op::Add(r, b) => {
-            let _ = ekf.add_landmark(&RangeBearing::new(t(r), t(b)));
-            false
-        }
+        Op::Add(r, b) => ekf.add_landmark(&RangeBearing::new(t(r), t(b))).map(|_| ()),
         Op::Bad(which, v) => {
             let v = t(v);
             let results = [
@@ -79,7 +73,11 @@ fn apply<T: Real>(ekf: &mut EkfSlam<T, N>, op: &Op) -> bool {
                 ekf.add_landmark(&RangeBearing::new(T::ONE, v)).is_err(),
                 ekf.update(0, &RangeBearing::new(T::ONE, v)).is_err(),
             ];
-            results[which]
+            if results[which] {
+                Err(EkfError::NonFiniteInput)
+            } else {
+                Ok(())
+            }
         }
     }
 }
@@ -132,12 +130,16 @@ fn run<T: Real>(config: EkfConfig<T>, ops: &[Op]) -> Result<(), TestCaseError> {
     for op in ops {
         let before_mean = ekf.active_mean().to_vec();
         let before_cov = active_as_f64(&ekf);
-        let must_refuse = matches!(op, Op::Bad(..));
-        let refused = apply(&mut ekf, op);
-        if must_refuse {
-            prop_assert!(refused, "{:?} was accepted", op);
-            prop_assert_eq!(ekf.active_mean(), &before_mean[..]);
-            prop_assert_eq!(active_as_f64(&ekf), before_cov);
+        let full = ekf.landmark_count() == L;
+        let outcome = apply(&mut ekf, op);
+        match op {
+            Op::Bad(..) => {
+                prop_assert!(outcome.is_err(), "{:?} was accepted", op);
+                prop_assert_eq!(ekf.active_mean(), &before_mean[..]);
+                prop_assert_eq!(active_as_f64(&ekf), before_cov);
+            }
+            Op::Add(..) if full => prop_assert_eq!(outcome, Err(EkfError::MapFull)),
+            _ => prop_assert_eq!(outcome, Ok(()), "valid {:?} refused", op),
         }
         check_invariants(&ekf)?;
     }
@@ -173,8 +175,8 @@ proptest! {
         let mut a = EkfSlam::<f64, N>::new(EkfConfig::DEFAULT_F64);
         let mut b = EkfSlam::<f64, N>::new(EkfConfig { covariance_update: CovarianceUpdate::Symmetric, ..EkfConfig::DEFAULT_F64 });
         for op in &ops {
-            apply(&mut a, op);
-            apply(&mut b, op);
+            let _ = apply(&mut a, op);
+            let _ = apply(&mut b, op);
         }
         let (pa, pb) = (active_as_f64(&a), active_as_f64(&b));
         prop_assert!((pa.clone() - pb).abs().max() <= 1e-9 * (1.0 + pa.abs().max()));

@@ -4,7 +4,9 @@
 use host_sim::cli::{AssociationMode, Precision};
 use host_sim::config::Settings;
 use host_sim::metrics::evaluate;
+use microslam::event::{EventKind, Identity};
 use microslam::gate::chi_square_quantile;
+use std::collections::BTreeSet;
 
 const RUNS: u64 = 12;
 
@@ -48,10 +50,26 @@ fn jcbb_on_the_simulator_finds_every_landmark() {
         s.duration_s = 120.0;
     }
     let rec = host_sim::sim::simulate(&settings, 1).unwrap();
+    // The landmarks the robot saw: the simulator's ids, which JCBB does not get to use.
+    let seen: BTreeSet<u32> = rec
+        .events
+        .iter()
+        .filter_map(|e| match e.kind {
+            EventKind::Sighting(s) => match s.identity {
+                Identity::Unique(id) => Some(id),
+                _ => None,
+            },
+            _ => None,
+        })
+        .collect();
+    assert!(seen.len() > 5, "{seen:?}");
     let run =
         host_sim::replay::replay(&rec, &settings, AssociationMode::Jcbb, Precision::F32, None)
             .unwrap();
     let m = evaluate(&rec, &run);
+    println!("JCBB, f32, seed 1: {m:?}");
+    // One landmark per landmark seen, none twice, none missed.
+    assert_eq!(m.landmarks_created, seen.len(), "{m:?}");
     assert!(m.association_purity.unwrap() > 0.99, "{m:?}");
     assert!(m.ate_rmse_m.se2.unwrap() < 0.1, "{m:?}");
 }

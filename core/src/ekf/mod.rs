@@ -58,7 +58,7 @@
 //!
 //! A state dimension that is not `3 + 2k` is rejected at compile time:
 //!
-//! ```compile_fail
+//! ```compile_fail,E0080
 //! use microslam::ekf::{EkfConfig, EkfSlam};
 //! // 4 = 3 + 2·0.5: no whole number of landmarks fits.
 //! let ekf = EkfSlam::<f32, 4>::new(EkfConfig::DEFAULT_F32);
