@@ -17,6 +17,7 @@ fn pose_nees_inside_the_chi_square_band() {
         s.duration_s = 120.0;
     }
     let mut sum = 0.0;
+    let mut worst_landmarks = 0.0f64;
     for seed in 1..=RUNS {
         let rec = host_sim::sim::simulate(&settings, seed).unwrap();
         let run = host_sim::replay::replay(
@@ -29,9 +30,18 @@ fn pose_nees_inside_the_chi_square_band() {
         .unwrap();
         let m = evaluate(&rec, &run);
         sum += m.nees_pose_mean.unwrap();
-        // Every run maps well: the landmarks within a few centimetres.
-        assert!(m.landmark_rmse_m.se2.unwrap() < 0.05, "seed {seed}: {m:?}");
+        let landmarks = m.landmark_rmse_m.se2.unwrap();
+        println!(
+            "seed {seed}: NEES {:.3}, landmarks {landmarks:.4} m",
+            m.nees_pose_mean.unwrap()
+        );
+        worst_landmarks = worst_landmarks.max(landmarks);
     }
+    // Every run maps well: the worst seed's landmark error (seed 10), measured 0.0350 m.
+    assert!(
+        worst_landmarks < 0.0365,
+        "worst landmark error {worst_landmarks} m"
+    );
     let mean = sum / RUNS as f64;
     // Each run's time-averaged NEES counts as one 3-dof draw (its samples are correlated).
     let dof = 3 * RUNS as u32;
@@ -70,6 +80,7 @@ fn jcbb_on_the_simulator_finds_every_landmark() {
     println!("JCBB, f32, seed 1: {m:?}");
     // One landmark per landmark seen, none twice, none missed.
     assert_eq!(m.landmarks_created, seen.len(), "{m:?}");
-    assert!(m.association_purity.unwrap() > 0.99, "{m:?}");
-    assert!(m.ate_rmse_m.se2.unwrap() < 0.1, "{m:?}");
+    assert_eq!(m.association_purity, Some(1.0), "{m:?}");
+    // Measured 0.0422 m (seed 1, 120 s).
+    assert!(m.ate_rmse_m.se2.unwrap() < 0.044, "{m:?}");
 }
