@@ -85,7 +85,7 @@ for elf in cost cost_grid; do
     timeout 600 qemu-system-arm -machine mps2-an386 -cpu cortex-m4 -display none -monitor none \
         -serial stdio -icount shift=6 -semihosting-config enable=on,target=native \
         -kernel "$OUT/$elf.elf" </dev/null | tee "$OUT/$elf.run.log"
-    grep -qx done "$OUT/$elf.run.log" || fail "$elf run did not finish"
+    grep -qx "done" "$OUT/$elf.run.log" || fail "$elf run did not finish"
     if grep '^error' "$OUT/$elf.run.log" >&2; then fail "$elf reported an error"; fi
     cat "$OUT/$elf.run.log" >>"$cost_log"
 done

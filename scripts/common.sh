@@ -1,6 +1,8 @@
+# shellcheck shell=bash
 # Shared by scripts/check and .ci/firmware.sh (sourced, not run).
 
-step() { printf '\n==> %s\n' "$*"; }
+# step TEXT: a heading, with the time this script has been running.
+step() { printf '\n==> [%d:%02d] %s\n' $((SECONDS / 60)) $((SECONDS % 60)) "$*"; }
 
 fail() {
     echo "FAILED: $*" >&2
