@@ -36,7 +36,8 @@ fn op() -> impl Strategy<Value = Op> {
 }
 
 /// Applies one op; returns the filter's answer, `Ok(())` also when nothing was applied (an
-/// update with no landmark yet, or whose offset range falls below `MIN_RANGE`).
+/// update with no landmark yet, of a landmark on the sensor, or whose offset range falls
+/// below `MIN_RANGE`).
 fn apply<T: Real>(ekf: &mut EkfSlam<T, N>, op: &Op) -> Result<(), EkfError> {
     let t = T::lit;
     match *op {
@@ -49,11 +50,10 @@ fn apply<T: Real>(ekf: &mut EkfSlam<T, N>, op: &Op) -> Result<(), EkfError> {
             }
             let idx = i % n;
             let l = ekf.landmark(idx).ok_or(EkfError::UnknownLandmark)?;
-            let p = ekf
-                .config()
-                .sensor
-                .predict(&ekf.pose(), &l)
-                .ok_or(EkfError::LandmarkOnSensor)?;
+            // A landmark within `MIN_RANGE` of the sensor cannot be sighted: nothing to do.
+            let Some(p) = ekf.config().sensor.predict(&ekf.pose(), &l) else {
+                return Ok(());
+            };
             let z = RangeBearing::new(p.z.range + t(dr), p.z.bearing + t(db));
             if z.range.to_f64() < MIN_RANGE {
                 return Ok(());
