@@ -1,10 +1,11 @@
 //! Capacity edges of the grid particle filter, through the public API: all particles with
 //! zero likelihood, a zero-length time step, an empty scan, and a robot driving off the
-//! map — each must leave the filter finite, normalised and able to go on.
+//! map — each must leave the filter finite, normalised and able to go on — and scan end
+//! points off the grid, which SLAM skips and counts.
 
 use microslam::geometry::Pose2;
-use microslam::grid::{GridGeometry, GridView};
-use microslam::pf::{GridLocalizer, GridPfConfig, PfError};
+use microslam::grid::{GridGeometry, GridView, OccupancyGrid};
+use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam, PfError};
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
 
 const SIDE: usize = 64;
@@ -97,10 +98,11 @@ fn zero_time_step_empty_scan_and_leaving_the_map() {
             .err(),
         Some(PfError::EmptyScan)
     );
-    // Drive 100 m away: off the map every beam is skipped, the filter stays finite.
+    // Drive 100 m away: off the map nothing scores, the filter stays finite.
     l.predict(100.0, 0.0).expect("finite");
     let ranges = [1.0f32; 64];
-    let _ = l.observe(&LidarScan::new(&ranges, LidarGeometry::CARMEN_SICK_180));
+    l.observe(&LidarScan::new(&ranges, LidarGeometry::CARMEN_SICK_180))
+        .expect("a usable scan, off the map too");
     assert_normalised(&l);
     let poses = l.filter().poses();
     assert!(poses.iter().all(|p| p.is_finite()), "{poses:?}");
@@ -109,4 +111,42 @@ fn zero_time_step_empty_scan_and_leaving_the_map() {
         poses.iter().filter(|p| p.x.hypot(p.y) > 10.0).count() >= 8,
         "{poses:?}"
     );
+}
+
+#[test]
+fn slam_at_the_edge_of_the_grid_counts_its_off_grid_points() {
+    let config = GridPfConfig::MICROCONTROLLER;
+    let mut grid = Box::new(OccupancyGrid::<SIDE, SIDE>::centred(
+        config.resolution,
+        config.log_odds,
+    ));
+    // The grid spans ±1.6 m. The robot at x = 1.5 m sees a wall 1 m away all around: the
+    // end points at x ≥ 1.6 m fall off the grid, the others on it.
+    let geometry = LidarGeometry {
+        first_angle: -3.1,
+        angle_increment: 0.098,
+        ..LidarGeometry::CARMEN_SICK_180
+    };
+    let ranges = [1.0f32; 64];
+    let used: Vec<f64> = (0..64)
+        .step_by(config.beam_decimation)
+        .map(|i| -3.1 + 0.098 * i as f64)
+        .collect();
+    // From the beam angles alone; no end point lies within 1 cm of the edge.
+    let off = used.iter().filter(|a| 1.5 + a.cos() >= 1.6).count() as u32;
+    assert!(used.iter().all(|a| (1.5 + a.cos() - 1.6).abs() > 0.01));
+    assert!(off > 0 && (off as usize) < used.len());
+    let mut slam =
+        GridSlam::<SIDE, SIDE, 16, 64>::new(&mut grid, config, Pose2::new(1.5, 0.0, 0.0))
+            .expect("valid");
+    let report = slam
+        .observe(&LidarScan::new(&ranges, geometry))
+        .expect("a usable scan");
+    let map = report.map;
+    assert_eq!(map.beams as usize, used.len(), "{map:?}");
+    assert_eq!(map.off_grid, off, "{map:?}");
+    assert_eq!(map.hits, map.beams - off, "{map:?}");
+    assert_eq!(map.rays_skipped, 0, "{map:?}");
+    drop(slam);
+    assert_eq!(grid.off_grid_points(), off);
 }

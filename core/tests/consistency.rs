@@ -133,11 +133,15 @@ fn pose_nees_is_inside_the_95_percent_band() {
         (lo..=hi).contains(&mean),
         "average NEES {mean} outside [{lo}, {hi}]"
     );
+    // A consistent filter puts each step's average inside the 95 % band with probability
+    // 0.95; consecutive steps are strongly correlated, so the share varies far more than a
+    // binomial over the steps would: 0.90 (measured 96.6 %).
     assert!(
         inside >= 0.90,
         "only {:.1} % of steps inside the band",
         inside * 100.0
     );
-    // Measured 0.049 m (range noise 0.05 m, errors correlated through the pose).
-    assert!(lm < 0.055, "mean final landmark error {lm} m");
+    // The seeds are fixed, so this mean is a deterministic figure: measured 0.0490 m
+    // (range noise 0.05 m, errors correlated through the pose), bound + 4 %.
+    assert!(lm < 0.051, "mean final landmark error {lm} m");
 }

@@ -1,14 +1,15 @@
 //! Property tests of the EKF over random sequences of steps, in f32 and f64: the factorised
 //! covariance equals a dense Joseph-form reference in f64, the covariance read back stays
 //! positive semi-definite (also for lost robots with huge variances), the heading stays
-//! wrapped, the inactive part of the state is never touched, and refused steps change
+//! wrapped, the inactive part of the state is never touched, valid steps are accepted (a
+//! new landmark refused only with `MapFull` when the table is full), and refused steps change
 //! nothing.
 
-use microslam::Real;
+use microslam::{EkfError, Real};
 use microslam::ekf::{EkfConfig, EkfSlam, UpdateOutcome, factor_len, state_dim};
 use microslam::geometry::{Pose2, wrap_angle, wrap_near};
 use microslam::motion::{MotionStep, compose_increment, integrate_velocity};
-use microslam::sensors::range_bearing::RangeBearing;
+use microslam::sensors::range_bearing::{MIN_RANGE, RangeBearing};
 use nalgebra::{DMatrix, DVector, Matrix2, SMatrix};
 use proptest::prelude::*;
 
@@ -58,9 +59,10 @@ enum Done {
     Updated(usize, RangeBearing<f64>),
 }
 
-/// Applies one op; returns whether it was refused and what it did (in `f64`, for the
-/// reference).
-fn apply<T: Real>(ekf: &mut Slam<T>, op: &Op) -> (bool, Done) {
+/// Applies one op; returns the filter's answer (`Ok(())` also when nothing was applied: an
+/// update with no landmark yet, or of a landmark on the sensor) and what it did (in `f64`,
+/// for the reference).
+fn apply<T: Real>(ekf: &mut Slam<T>, op: &Op) -> (Result<(), EkfError>, Done) {
     let t = T::lit;
     let pose = ekf.pose();
     let pose64 = Pose2::new(pose.x.to_f64(), pose.y.to_f64(), pose.theta.to_f64());
@@ -68,8 +70,11 @@ fn apply<T: Real>(ekf: &mut Slam<T>, op: &Op) -> (bool, Done) {
     match *op {
         Op::Velocity(v, w, dt) => {
             let (v, w, dt) = (t(v), t(w), t(dt));
-            if ekf.predict_velocity(v, w, dt).is_err() || dt == T::ZERO {
-                return (false, Done::Nothing);
+            if let Err(e) = ekf.predict_velocity(v, w, dt) {
+                return (Err(e), Done::Nothing);
+            }
+            if dt == T::ZERO {
+                return (Ok(()), Done::Nothing);
             }
             let (v, w, dt) = (v.to_f64(), w.to_f64(), dt.to_f64());
             let step = integrate_velocity(&pose64, v, w, dt);
@@ -81,48 +86,54 @@ fn apply<T: Real>(ekf: &mut Slam<T>, op: &Op) -> (bool, Done) {
                 wrt_pose: step.wrt_pose,
                 wrt_input: SMatrix::<f64, 3, 3>::zeros(),
             };
-            (false, Done::Predicted(Box::new((step, q))))
+            (Ok(()), Done::Predicted(Box::new((step, q))))
         }
         Op::Increment(x, y, th) => {
             let inc = Pose2::new(t(x), t(y), t(th));
-            if ekf.predict_increment(&inc).is_err() {
-                return (false, Done::Nothing);
+            if let Err(e) = ekf.predict_increment(&inc) {
+                return (Err(e), Done::Nothing);
             }
             let inc = Pose2::new(inc.x.to_f64(), inc.y.to_f64(), inc.theta.to_f64());
             let step = compose_increment(&pose64, &inc);
             let q =
                 step.wrt_input * cfg.increment_noise.covariance(&inc) * step.wrt_input.transpose();
-            (false, Done::Predicted(Box::new((step, q))))
+            (Ok(()), Done::Predicted(Box::new((step, q))))
         }
         Op::Update(i, dr, db) => {
             let n = ekf.landmark_count();
             if n == 0 {
-                return (false, Done::Nothing);
+                return (Ok(()), Done::Nothing);
             }
             let idx = i % n;
             let Some(l) = ekf.landmark(idx) else {
-                return (false, Done::Nothing);
+                return (Err(EkfError::UnknownLandmark), Done::Nothing);
             };
+            // A landmark within the minimum range of the sensor cannot be sighted.
             let Some(p) = ekf.config().sensor.predict(&ekf.pose(), &l) else {
-                return (false, Done::Nothing);
+                return (Ok(()), Done::Nothing);
             };
             let z = RangeBearing::new(p.z.range + t(dr), wrap_angle(p.z.bearing + t(db)));
+            if z.range.to_f64() < MIN_RANGE {
+                return (Ok(()), Done::Nothing);
+            }
             match ekf.update(idx, &z) {
                 Ok(UpdateOutcome::Accepted { .. }) => (
-                    false,
+                    Ok(()),
                     Done::Updated(idx, RangeBearing::new(z.range.to_f64(), z.bearing.to_f64())),
                 ),
-                _ => (false, Done::Nothing),
+                // Gated: an answer to valid input.
+                Ok(_) => (Ok(()), Done::Nothing),
+                Err(e) => (Err(e), Done::Nothing),
             }
         }
         Op::Add(r, b) => {
             let z = RangeBearing::new(t(r), t(b));
             match ekf.add_landmark(&z) {
                 Ok(_) => (
-                    false,
+                    Ok(()),
                     Done::Added(RangeBearing::new(z.range.to_f64(), z.bearing.to_f64())),
                 ),
-                Err(_) => (false, Done::Nothing),
+                Err(e) => (Err(e), Done::Nothing),
             }
         }
         Op::Bad(which, v) => {
@@ -136,7 +147,8 @@ fn apply<T: Real>(ekf: &mut Slam<T>, op: &Op) -> (bool, Done) {
                 ekf.add_landmark(&RangeBearing::new(T::ONE, v)).is_err(),
                 ekf.update(0, &RangeBearing::new(T::ONE, v)).is_err(),
             ];
-            (results[which], Done::Nothing)
+            let outcome = if results[which] { Err(EkfError::NonFiniteInput) } else { Ok(()) };
+            (outcome, Done::Nothing)
         }
     }
 }
@@ -287,17 +299,30 @@ fn check_invariants<T: Real>(ekf: &Slam<T>) -> Result<(), TestCaseError> {
     Ok(())
 }
 
-fn run<T: Real>(config: EkfConfig<T>, ops: &[Op]) -> Result<(), TestCaseError> {
+/// Runs `ops` and checks the invariants after each. Input with a NaN or infinity must be
+/// refused without effect; with `valid_accepted`, every other step must be accepted (a new
+/// landmark refused only with `MapFull` when the table is full). Drives with a lost robot
+/// pass `false`: their absurd steps may be refused by the variance caps.
+fn run<T: Real>(
+    config: EkfConfig<T>,
+    ops: &[Op],
+    valid_accepted: bool,
+) -> Result<(), TestCaseError> {
     let mut ekf = Slam::<T>::new(config);
     for op in ops {
         let before_mean = ekf.active_mean().to_vec();
         let before_cov = active_as_f64(&ekf);
-        let must_refuse = matches!(op, Op::Bad(..));
-        let (refused, _) = apply(&mut ekf, op);
-        if must_refuse {
-            prop_assert!(refused, "{:?} was accepted", op);
-            prop_assert_eq!(ekf.active_mean(), &before_mean[..]);
-            prop_assert_eq!(active_as_f64(&ekf), before_cov);
+        let full = ekf.landmark_count() == L;
+        let (outcome, _) = apply(&mut ekf, op);
+        match op {
+            Op::Bad(..) => {
+                prop_assert!(outcome.is_err(), "{:?} was accepted", op);
+                prop_assert_eq!(ekf.active_mean(), &before_mean[..]);
+                prop_assert_eq!(active_as_f64(&ekf), before_cov);
+            }
+            _ if !valid_accepted => {}
+            Op::Add(..) if full => prop_assert_eq!(outcome, Err(EkfError::MapFull)),
+            _ => prop_assert_eq!(outcome, Ok(()), "valid {:?} refused", op),
         }
         check_invariants(&ekf)?;
     }
@@ -309,22 +334,22 @@ proptest! {
 
     #[test]
     fn f64_invariants(ops in proptest::collection::vec(ordinary(), 1..80)) {
-        run(EkfConfig::DEFAULT_F64, &ops)?;
+        run(EkfConfig::DEFAULT_F64, &ops, true)?;
     }
 
     #[test]
     fn f32_invariants(ops in proptest::collection::vec(ordinary(), 1..80)) {
-        run(EkfConfig::DEFAULT_F32, &ops)?;
+        run(EkfConfig::DEFAULT_F32, &ops, true)?;
     }
 
     #[test]
     fn f32_stays_psd_with_a_lost_robot(ops in proptest::collection::vec(with_lost_robot(), 1..80)) {
-        run(EkfConfig::DEFAULT_F32, &ops)?;
+        run(EkfConfig::DEFAULT_F32, &ops, false)?;
     }
 
     #[test]
     fn f64_stays_psd_with_a_lost_robot(ops in proptest::collection::vec(with_lost_robot(), 1..80)) {
-        run(EkfConfig::DEFAULT_F64, &ops)?;
+        run(EkfConfig::DEFAULT_F64, &ops, false)?;
     }
 
     /// The factorised filter equals a dense Joseph-form EKF in `f64` (mean and covariance,

@@ -342,10 +342,23 @@ pub fn carmen_reader(data: &[u8]) {
     }
 }
 
-/// Fuzzes the benchmark relations parser: no panic; every relation read is finite or the
-/// file is refused.
+/// Fuzzes the benchmark relations parser: no panic; every relation read is finite, or the
+/// file is refused with an error naming its line.
 pub fn relations_reader(data: &[u8]) {
-    let _ = host_sim::metrics::relations::parse(std::io::BufReader::new(data));
+    match host_sim::metrics::relations::parse(std::io::BufReader::new(data)) {
+        Ok(relations) => {
+            for r in &relations {
+                assert!(
+                    r.t1.is_finite() && r.t2.is_finite() && r.pose.iter().all(|v| v.is_finite()),
+                    "non-finite relation accepted: {r:?}"
+                );
+            }
+        }
+        Err(e) => {
+            let text = e.to_string();
+            assert!(text.contains("line"), "error without a line: {text}");
+        }
+    }
 }
 
 /// Fuzzes the MRCLAM reader on a folder of four files cut from the input at `0xFF` bytes

@@ -3,8 +3,9 @@
 //! texture map's colour error, and the misclassified-sign scenario through the EKF-SLAM.
 //!
 //! Expected values come from the room's geometry (trigonometry written out here), never
-//! from the conversion under test. Accuracy bounds are measured figures plus a small
-//! margin (see each test).
+//! from the conversion under test. Accuracy bounds are measured figures plus at most 5 %
+//! (see each test); re-measure with `cargo test -p microslam-replay-tests --test camera --
+//! --nocapture`.
 
 use host_sim::drivers::detections::{ClassUse, DetectorSettings};
 use host_sim::drivers::texture::TextureSettings;
@@ -227,13 +228,13 @@ fn texture_map_matches_the_true_floor() {
     eprintln!("{report:#?}");
     let t = report.true_poses;
     let e = report.ekf_poses;
-    // Measured (seed 1, 0.5 Hz, stride 2): true poses 1.84 mean |ΔRGB| (0-255 scale),
-    // coverage 0.547 of the room; EKF poses (ATE 0.037 m) 5.86.
-    assert!(t.mean_abs_rgb_error.unwrap() < 2.0, "{t:?}");
+    // Measured (seed 1, 0.5 Hz, stride 2): true poses 1.837 mean |ΔRGB| (0-255 scale),
+    // coverage 0.547 of the room; EKF poses (ATE 0.0370 m) 5.859.
+    assert!(t.mean_abs_rgb_error.unwrap() < 1.92, "{t:?}");
     assert!(t.coverage > 0.53, "{t:?}");
-    assert!(e.mean_abs_rgb_error.unwrap() < 6.3, "{e:?}");
+    assert!(e.mean_abs_rgb_error.unwrap() < 6.1, "{e:?}");
     assert!(e.mean_abs_rgb_error > t.mean_abs_rgb_error);
-    assert!(report.ekf_ate_rmse_m.unwrap() < 0.05);
+    assert!(report.ekf_ate_rmse_m.unwrap() < 0.0385);
     // The metric can fail: a map shifted by 0.1 m is far worse.
     let mut shifted = host_sim::drivers::texture::TextureMap::new(7.0, map.resolution_m);
     for i in 0..map.size * map.size {
@@ -280,14 +281,15 @@ fn association_corrects_wrong_class_ids() {
     // The detector's wrong-class share is 15 %.
     let share = c.wrong_class as f64 / c.detections as f64;
     assert!((0.13..0.17).contains(&share), "{share}");
-    // Measured (seed 1): 673 of 684 wrong classes corrected (98.4 %), ATE 0.037 m,
+    // Measured (seed 1): 673 of 684 wrong classes corrected (98.4 %), ATE 0.0370 m,
     // 25 landmarks for 24 signs, no wrong-class detection paired with another sign.
     assert!(c.corrected_share.unwrap() >= 0.97, "{c:?}");
     assert_eq!(c.misassociated, 0);
     assert_eq!(c.right_class_misassociated, 0);
-    assert!(hints.ekf.ate_rmse_m.se2.unwrap() < 0.045);
-    assert!(hints.ekf.landmarks_created <= 26);
-    // Seed 1's dictionary (the class names the landmark) breaks on the same detections.
+    assert!(hints.ekf.ate_rmse_m.se2.unwrap() < 0.0385);
+    assert_eq!(hints.ekf.landmarks_created, 25);
+    // Seed 1's dictionary (the class names the landmark) breaks on the same detections
+    // (measured: 3.5 % corrected, ATE 1.69 m): the contrast, not a figure to hold.
     let dict = mode(ClassUse::Dictionary);
     assert!(dict.classes.corrected_share.unwrap() < 0.1);
     assert!(dict.ekf.ate_rmse_m.se2.unwrap() > 0.5);

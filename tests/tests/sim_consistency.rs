@@ -4,7 +4,9 @@
 use host_sim::domain::config::Settings;
 use host_sim::domain::{AssociationMode, Precision};
 use host_sim::metrics::evaluate;
+use microslam::event::{EventKind, Identity};
 use microslam::gate::chi_square_quantile;
+use std::collections::BTreeSet;
 
 const RUNS: u64 = 12;
 
@@ -15,6 +17,7 @@ fn pose_nees_inside_the_chi_square_band() {
         s.duration_s = 120.0;
     }
     let mut sum = 0.0;
+    let mut worst_landmarks = 0.0f64;
     for seed in 1..=RUNS {
         let rec = host_sim::inputs::sim::simulate(&settings, seed).unwrap();
         let run = host_sim::drivers::ekf::replay(
@@ -27,9 +30,18 @@ fn pose_nees_inside_the_chi_square_band() {
         .unwrap();
         let m = evaluate(&rec, &run);
         sum += m.nees_pose_mean.unwrap();
-        // Every run maps well: the landmarks within a few centimetres.
-        assert!(m.landmark_rmse_m.se2.unwrap() < 0.05, "seed {seed}: {m:?}");
+        let landmarks = m.landmark_rmse_m.se2.unwrap();
+        println!(
+            "seed {seed}: NEES {:.3}, landmarks {landmarks:.4} m",
+            m.nees_pose_mean.unwrap()
+        );
+        worst_landmarks = worst_landmarks.max(landmarks);
     }
+    // Every run maps well: the worst seed's landmark error (seed 10), measured 0.0350 m.
+    assert!(
+        worst_landmarks < 0.0365,
+        "worst landmark error {worst_landmarks} m"
+    );
     let mean = sum / RUNS as f64;
     // Each run's time-averaged NEES counts as one 3-dof draw (its samples are correlated).
     let dof = 3 * RUNS as u32;
@@ -48,15 +60,27 @@ fn jcbb_on_the_simulator_finds_every_landmark() {
         s.duration_s = 120.0;
     }
     let rec = host_sim::inputs::sim::simulate(&settings, 1).unwrap();
-    let run = host_sim::drivers::ekf::replay(
-        &rec,
-        &settings,
-        AssociationMode::Jcbb,
-        Precision::F32,
-        None,
-    )
-    .unwrap();
+    // The landmarks the robot saw: the simulator's ids, which JCBB does not get to use.
+    let seen: BTreeSet<u32> = rec
+        .events
+        .iter()
+        .filter_map(|e| match e.kind {
+            EventKind::Sighting(s) => match s.identity {
+                Identity::Unique(id) => Some(id),
+                _ => None,
+            },
+            _ => None,
+        })
+        .collect();
+    assert!(seen.len() > 5, "{seen:?}");
+    let run =
+        host_sim::drivers::ekf::replay(&rec, &settings, AssociationMode::Jcbb, Precision::F32, None)
+            .unwrap();
     let m = evaluate(&rec, &run);
-    assert!(m.association_purity.unwrap() > 0.99, "{m:?}");
-    assert!(m.ate_rmse_m.se2.unwrap() < 0.1, "{m:?}");
+    println!("JCBB, f32, seed 1: {m:?}");
+    // One landmark per landmark seen, none twice, none missed.
+    assert_eq!(m.landmarks_created, seen.len(), "{m:?}");
+    assert_eq!(m.association_purity, Some(1.0), "{m:?}");
+    // Measured 0.0422 m (seed 1, 120 s).
+    assert!(m.ate_rmse_m.se2.unwrap() < 0.044, "{m:?}");
 }

@@ -76,7 +76,7 @@
 //!
 //! and so is a state dimension that is not `3 + 2k`:
 //!
-//! ```compile_fail
+//! ```compile_fail,E0080
 //! use microslam::ekf::{EkfConfig, EkfSlam};
 //! // 4 = 3 + 2·0.5: no whole number of landmarks fits.
 //! let ekf = EkfSlam::<f32, 4, 10>::new(EkfConfig::DEFAULT_F32);

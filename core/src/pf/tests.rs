@@ -162,12 +162,12 @@ fn simulated_slam_beats_odometry_and_stays_within_bound() {
     };
     let (est, grid) = run_slam(&sim, GridPfConfig::DEFAULT);
     let slam_ate = ate(&est, &sim.truth);
-    std::println!("odometry ATE {odom_ate:.3} m, SLAM ATE {slam_ate:.3} m");
+    std::println!("odometry ATE {odom_ate:.4} m, SLAM ATE {slam_ate:.4} m");
     assert!(
         odom_ate > 0.3,
         "the simulated odometry must drift: {odom_ate}"
     );
-    assert!(slam_ate < 0.09, "SLAM ATE {slam_ate}"); // measured 0.076 m
+    assert!(slam_ate < 0.079, "SLAM ATE {slam_ate}"); // measured 0.0761 m, + 3.8 %
     // The map has the south wall where it is: cells on y = −3 m occupied along x.
     let view = grid.view();
     let occupied = (-70..70)
@@ -209,8 +209,8 @@ fn simulated_localizer_on_a_true_map() {
         );
     }
     let e = ate(&est, &sim.truth);
-    std::println!("localizer ATE {e:.3} m");
-    assert!(e < 0.03, "localizer ATE {e}"); // measured 0.022 m
+    std::println!("localizer ATE {e:.4} m");
+    assert!(e < 0.0225, "localizer ATE {e}"); // measured 0.0215 m, + 4.7 %
 
     // The same flash map with its occupied-cell bitmap (the sparse search): the same
     // estimates, bit for bit.

@@ -24,13 +24,14 @@ pub struct Relation {
     pub pose: [f64; 3],
 }
 
-/// Reads a relations file (`#` lines and blank lines skipped).
+/// Reads a relations file (`#` lines and blank lines skipped). A line that cannot be read,
+/// has fewer than 8 numbers or a number that is not finite is refused with its line number.
 pub fn parse<R: BufRead>(
     reader: R,
 ) -> Result<Vec<Relation>, Box<dyn std::error::Error + Send + Sync>> {
     let mut out = Vec::new();
     for (i, line) in reader.lines().enumerate() {
-        let line = line?;
+        let line = line.map_err(|e| format!("relations line {}: {e}", i + 1))?;
         let t = line.trim();
         if t.is_empty() || t.starts_with('#') {
             continue;
@@ -40,6 +41,9 @@ pub fn parse<R: BufRead>(
             .map(|s| s.parse::<f64>())
             .collect::<Result<_, _>>()
             .map_err(|e| format!("relations line {}: {e}", i + 1))?;
+        if let Some(k) = v.iter().position(|x| !x.is_finite()) {
+            return Err(format!("relations line {}: number {} is not finite", i + 1, k + 1).into());
+        }
         if v.len() < 8 {
             return Err(format!(
                 "relations line {}: expected 8 numbers, got {}",
