@@ -10,7 +10,7 @@
 
 use microslam::EkfError;
 use microslam::association::KnownIds;
-use microslam::ekf::{EkfConfig, EkfSlam, state_dim};
+use microslam::ekf::{EkfConfig, EkfSlam, factor_len, state_dim};
 use microslam::event::{Event, EventKind, Identity, Sighting};
 use microslam::feed::{EventFeed, Fed, FeedError, Predictor, observe_known_sighting};
 use microslam::geometry::Pose2;
@@ -19,7 +19,7 @@ use microslam::sensors::range_bearing::RangeBearingSensor;
 use nalgebra::Vector2;
 
 /// At most 16 landmarks: the state is `3 + 2 · 16` numbers.
-type Slam = EkfSlam<f32, { state_dim(16) }>;
+type Slam = EkfSlam<f32, { state_dim(16) }, { factor_len(16) }>;
 
 /// The markers: id and position (m).
 const MARKERS: [(u32, [f32; 2]); 8] = [

@@ -20,7 +20,7 @@
 mod room;
 
 use microslam::association::{KnownIds, observe_known};
-use microslam::ekf::{EkfConfig, EkfSlam, state_dim};
+use microslam::ekf::{EkfConfig, EkfSlam, factor_len, state_dim};
 use microslam::grid::{GridGeometry, GridView, OccupancyGrid};
 use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam};
 use microslam::sensors::lidar::LidarScan;
@@ -28,7 +28,7 @@ use microslam::sensors::range_bearing::RangeBearing;
 use static_cell::{ConstStaticCell, StaticCell};
 
 const LANDMARKS: usize = 32;
-type Ekf = EkfSlam<f32, { state_dim(LANDMARKS) }>;
+type Ekf = EkfSlam<f32, { state_dim(LANDMARKS) }, { factor_len(LANDMARKS) }>;
 type Grid = OccupancyGrid<256, 256>;
 const P: usize = 32;
 const GRID_CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;

@@ -24,12 +24,12 @@
 //!
 //! ```
 //! use microslam::association::KnownIds;
-//! use microslam::ekf::{state_dim, EkfConfig, EkfSlam};
+//! use microslam::ekf::{factor_len, state_dim, EkfConfig, EkfSlam};
 //! use microslam::event::{Event, EventKind, Identity, Sighting};
 //! use microslam::feed::{observe_known_sighting, EventFeed, Fed};
 //! use microslam::sensors::range_bearing::RangeBearing;
 //!
-//! let mut slam = EkfSlam::<f32, { state_dim(8) }>::new(EkfConfig::DEFAULT_F32);
+//! let mut slam = EkfSlam::<f32, { state_dim(8) }, { factor_len(8) }>::new(EkfConfig::DEFAULT_F32);
 //! let mut ids = KnownIds::<8>::new();
 //! let mut feed = EventFeed::<f32>::new(1.0);
 //! let sighting = Sighting {
@@ -73,7 +73,7 @@ pub trait Predictor<T: Real> {
     fn predict_increment(&mut self, increment: &Pose2<T>) -> Result<(), Self::Error>;
 }
 
-impl<T: Real, const N: usize> Predictor<T> for EkfSlam<T, N> {
+impl<T: Real, const N: usize, const P: usize> Predictor<T> for EkfSlam<T, N, P> {
     type Error = EkfError;
 
     fn predict_velocity(&mut self, v: T, omega: T, dt: T) -> Result<(), EkfError> {
@@ -244,8 +244,8 @@ impl<T: Real> EventFeed<T> {
 /// Seed 1's known-id step for a sighting from an event: [`observe_known`] (with the
 /// sighting's own covariance when it carries one) for [`Identity::Unique`] ids;
 /// `Ok(None)` for a class or an unknown identity, which need ICNN or JCBB.
-pub fn observe_known_sighting<T: Real, const N: usize, const L: usize>(
-    slam: &mut EkfSlam<T, N>,
+pub fn observe_known_sighting<T: Real, const N: usize, const P: usize, const L: usize>(
+    slam: &mut EkfSlam<T, N, P>,
     ids: &mut KnownIds<L>,
     sighting: &Sighting<T>,
 ) -> Result<Option<Observed<T>>, EkfError> {
@@ -270,11 +270,11 @@ pub fn observe_known_sighting<T: Real, const N: usize, const L: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ekf::{EkfConfig, state_dim};
+    use crate::ekf::{EkfConfig, factor_len, state_dim};
     use crate::sensors::range_bearing::RangeBearing;
     use nalgebra::Matrix2;
 
-    type Slam = EkfSlam<f64, { state_dim(4) }>;
+    type Slam = EkfSlam<f64, { state_dim(4) }, { factor_len(4) }>;
 
     fn velocity(t: f64, v: f64, omega: f64) -> Event<f64> {
         Event::new(t, EventKind::Velocity { v, omega })
