@@ -70,6 +70,14 @@ pub struct GridArgs {
     /// Benchmark relations file (default: a `*.relations` file next to the log).
     #[arg(long)]
     pub relations: Option<PathBuf>,
+    /// Reference trajectory for ATE (global consistency): a TUM file or a corrected
+    /// CARMEN log (e.g. `intel/intel.gfs.log`), matched to the scans by stamp.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// Seconds added to the reference's stamps (976052857.337 for `intel.gfs.log`
+    /// against `intel-raw-part.clf`).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub reference_offset: f64,
 }
 
 /// Options of `host-sim localize`.

@@ -326,6 +326,53 @@ pub fn relation_error(run: &GridRun, rels: &[relations::Relation]) -> RelationEr
     relations::evaluate(&traj, rels, 1e-3)
 }
 
+/// ATE of a run's trajectory against the reference trajectory in `path` (TUM or a
+/// corrected CARMEN log, stamps + `offset_s`), matched by stamp.
+pub fn reference_ate(
+    run: &GridRun,
+    path: &Path,
+    offset_s: f64,
+) -> Result<crate::metrics::reference::ReferenceAte> {
+    use crate::metrics::reference;
+    let reference = crate::readers::reference::read(path, offset_s)?;
+    let traj: Vec<(f64, Pose2<f64>)> = run
+        .trajectory
+        .iter()
+        .map(|(t, p)| {
+            (
+                *t,
+                Pose2::new(f64::from(p.x), f64::from(p.y), f64::from(p.theta)),
+            )
+        })
+        .collect();
+    let ate = reference::evaluate(&traj, &reference, reference::STAMP_TOLERANCE_S);
+    if ate.matched == 0 {
+        bail!(
+            "{}: no reference pose matches a scan's stamp within {} s (is --reference-offset right?)",
+            path.display(),
+            reference::STAMP_TOLERANCE_S
+        );
+    }
+    Ok(ate)
+}
+
+/// `metrics` with the `reference` entry: the ATE against `--reference` when given.
+fn with_reference(
+    mut metrics: serde_json::Value,
+    run: &GridRun,
+    grid: &crate::cli::GridArgs,
+) -> Result<serde_json::Value> {
+    if let Some(path) = &grid.reference {
+        let ate = reference_ate(run, path, grid.reference_offset)?;
+        metrics["reference"] = serde_json::json!({
+            "file": path.display().to_string(),
+            "time_offset_s": grid.reference_offset,
+            "ate": ate,
+        });
+    }
+    Ok(metrics)
+}
+
 /// The relations file to use: the one given, else a single `*.relations` file next to
 /// the log, else none.
 pub fn find_relations(log_path: &Path, given: Option<&Path>) -> Option<PathBuf> {
@@ -492,6 +539,15 @@ fn report(quiet: bool, dataset: &str, metrics: &serde_json::Value, out: &Path) {
             r["rot_std_deg"].as_f64().unwrap_or(f64::NAN)
         );
     }
+    if let Some(a) = metrics.get("reference").map(|r| &r["ate"]) {
+        println!(
+            "  ATE vs reference ({} of {} poses matched): {:.4} m SE(2), {:.4} m first pose",
+            a["matched"],
+            a["reference_poses"],
+            a["ate_m"]["se2"].as_f64().unwrap_or(f64::NAN),
+            a["ate_m"]["first_pose"].as_f64().unwrap_or(f64::NAN)
+        );
+    }
     println!(
         "  wall {:.2} s, filter {:.2} s ({:.3} ms/scan); outputs in {}",
         metrics["wall_time_s"].as_f64().unwrap_or(f64::NAN),
@@ -552,7 +608,11 @@ pub fn replay_cli(args: &crate::cli::ReplayArgs, quiet: bool) -> Result<()> {
         .map_or_else(|| file.clone(), |n| n.to_string_lossy().to_string());
     // Wall time: the whole replay (reading, filtering, metrics) before the files are written.
     let wall = start.elapsed().as_secs_f64();
-    let metrics = metrics_json(&name, &run, &options, rel, faults.as_ref(), wall);
+    let metrics = with_reference(
+        metrics_json(&name, &run, &options, rel, faults.as_ref(), wall),
+        &run,
+        &args.grid,
+    )?;
     write_outputs(&args.out, &run, &options.config, &metrics)?;
     report(quiet, &name, &metrics, &args.out);
     Ok(())
@@ -594,7 +654,11 @@ pub fn localize_cli(args: &crate::cli::LocalizeArgs, quiet: bool) -> Result<()> 
         .file_name()
         .map_or_else(|| file.clone(), |n| n.to_string_lossy().to_string());
     let wall = start.elapsed().as_secs_f64();
-    let metrics = metrics_json(&name, &run, &options, rel, None, wall);
+    let metrics = with_reference(
+        metrics_json(&name, &run, &options, rel, None, wall),
+        &run,
+        &args.grid,
+    )?;
     write_outputs(&args.out, &run, &options.config, &metrics)?;
     report(quiet, &name, &metrics, &args.out);
     Ok(())
