@@ -61,6 +61,10 @@ pub struct GridArgs {
     /// Particles (grid filter).
     #[arg(long, default_value_t = 200)]
     pub particles: usize,
+    /// Named settings (default: `microcontroller` below 100 particles, `default` from
+    /// 100 on); a `--config` file's `base` key takes precedence.
+    #[arg(long, value_enum)]
+    pub preset: Option<crate::grid_replay::Preset>,
     /// Half-width k of the (2k+1)² shift window, cells (default 4: 9 × 9).
     #[arg(long)]
     pub window: Option<u8>,
@@ -195,6 +199,14 @@ pub struct SimArgs {
     /// grid scenario).
     #[arg(long, default_value_t = 200)]
     pub grid_particles: usize,
+    /// Settings of the grid filters in the lidar world (default: by particle count, as
+    /// for `replay --preset`).
+    #[arg(long, value_enum)]
+    pub grid_preset: Option<crate::grid_replay::Preset>,
+    /// Grid filter settings for the lidar world (TOML, see `grid_replay::GridToml`),
+    /// laid over the preset.
+    #[arg(long)]
+    pub grid_config: Option<PathBuf>,
 }
 
 impl Default for SimArgs {
@@ -207,6 +219,8 @@ impl Default for SimArgs {
             precision: Precision::F64,
             no_plots: false,
             grid_particles: 200,
+            grid_preset: None,
+            grid_config: None,
         }
     }
 }

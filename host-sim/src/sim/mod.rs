@@ -170,12 +170,20 @@ pub fn run_cli(args: &SimArgs, quiet: bool) -> Result<()> {
     }
     let world = lidar_world::LidarWorld::office();
     let rec = lidar_world::simulate(&world, args.seed)?;
+    let preset = args
+        .grid_preset
+        .unwrap_or_else(|| crate::grid_replay::Preset::for_particles(args.grid_particles))
+        .config();
+    let preset = match &args.grid_config {
+        Some(p) => crate::grid_replay::GridToml::read(p)?.apply_over(preset)?,
+        None => preset,
+    };
     let config = microslam::pf::GridPfConfig {
         filter: microslam::pf::FilterConfig {
             seed: args.seed,
-            ..microslam::pf::GridPfConfig::DEFAULT.filter
+            ..preset.filter
         },
-        ..microslam::pf::GridPfConfig::DEFAULT
+        ..preset
     };
     let out = args.out.join("grid");
     let (slam, loc) = grid::run_and_write(&rec, config, args.grid_particles, &out)?;
