@@ -70,6 +70,10 @@ impl Preset {
     }
 }
 
+/// Beams the `microcontroller` preset uses when `--beams` is not given: the firmware's
+/// (its settings were tuned with 90 of the Intel log's 180 beams).
+pub const MICROCONTROLLER_BEAMS: usize = 90;
+
 /// Particle counts compiled in (the count is a type parameter of the filter).
 pub const SUPPORTED_PARTICLES: [usize; 8] = [8, 16, 32, 64, 100, 128, 200, 400];
 
@@ -508,13 +512,12 @@ fn options_from(
     grid: &crate::cli::GridArgs,
     log: &CarmenLog,
 ) -> Result<GridRunOptions> {
-    let preset = grid
+    let named = grid
         .preset
-        .unwrap_or_else(|| Preset::for_particles(grid.particles))
-        .config();
+        .unwrap_or_else(|| Preset::for_particles(grid.particles));
     let mut c = match config {
-        Some(p) => GridToml::read(p)?.apply_over(preset)?,
-        None => preset,
+        Some(p) => GridToml::read(p)?.apply_over(named.config())?,
+        None => named.config(),
     };
     if let Some(k) = grid.window {
         c.filter.shift_window_cells = k;
@@ -522,6 +525,9 @@ fn options_from(
     let n = beam_count(log);
     if grid.beams.is_some() {
         c.beam_decimation = decimation_for(n, grid.beams);
+    } else if named == Preset::Microcontroller && c.beam_decimation == 1 {
+        // The firmware's settings were tuned with its beam count.
+        c.beam_decimation = decimation_for(n, Some(MICROCONTROLLER_BEAMS));
     }
     if !c.is_valid() {
         bail!(

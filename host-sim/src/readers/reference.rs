@@ -78,7 +78,7 @@ pub fn parse_tum(path: &Path, text: &str, offset_s: f64) -> Result<Vec<Reference
         .map(|r| {
             let [t, x, y, _z, qx, qy, qz, qw] = r.values;
             let norm = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
-            if !(norm > 1e-9) {
+            if norm.is_nan() || norm <= 1e-9 {
                 return Err(text::invalid(path, r.line, "quaternion has zero length"));
             }
             let (qx, qy, qz, qw) = (qx / norm, qy / norm, qz / norm, qw / norm);

@@ -170,14 +170,19 @@ pub fn run_cli(args: &SimArgs, quiet: bool) -> Result<()> {
     }
     let world = lidar_world::LidarWorld::office();
     let rec = lidar_world::simulate(&world, args.seed)?;
-    let preset = args
+    let named = args
         .grid_preset
-        .unwrap_or_else(|| crate::grid_replay::Preset::for_particles(args.grid_particles))
-        .config();
-    let preset = match &args.grid_config {
-        Some(p) => crate::grid_replay::GridToml::read(p)?.apply_over(preset)?,
-        None => preset,
+        .unwrap_or_else(|| crate::grid_replay::Preset::for_particles(args.grid_particles));
+    let mut preset = match &args.grid_config {
+        Some(p) => crate::grid_replay::GridToml::read(p)?.apply_over(named.config())?,
+        None => named.config(),
     };
+    if named == crate::grid_replay::Preset::Microcontroller && preset.beam_decimation == 1 {
+        preset.beam_decimation = crate::grid_replay::decimation_for(
+            rec.lidar_beams(),
+            Some(crate::grid_replay::MICROCONTROLLER_BEAMS),
+        );
+    }
     let config = microslam::pf::GridPfConfig {
         filter: microslam::pf::FilterConfig {
             seed: args.seed,
