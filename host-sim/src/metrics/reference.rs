@@ -12,9 +12,12 @@
 //! that repeat or go backwards in the run (the Intel log's do) cannot count a pose twice.
 
 use super::{Aligned, position_rmse, transforms, yaw_rmse_deg};
-use crate::readers::reference::ReferencePose;
+use crate::drivers::grid::GridRun;
+use crate::inputs::readers::reference::{self, ReferencePose};
+use anyhow::{Result, bail};
 use microslam::geometry::Pose2;
 use serde::Serialize;
+use std::path::Path;
 
 /// Stamps of the run and the reference closer than this (seconds) are the same scan
 /// (`intel.gfs.log` and `intel-raw-part.clf` agree to a few milliseconds: 345 of the
@@ -83,6 +86,32 @@ pub fn evaluate(
         ate_m: figure(&|t| position_rmse(t, &est, &gt)),
         yaw_deg: figure(&|t| yaw_rmse_deg(t, &est, &gt)),
     }
+}
+
+/// ATE of a grid run's trajectory against the reference trajectory in `path` (TUM or a
+/// corrected CARMEN log, stamps + `offset_s`), matched by stamp within
+/// [`STAMP_TOLERANCE_S`]. A reference that matches no scan is an error.
+pub fn grid_run_ate(run: &GridRun, path: &Path, offset_s: f64) -> Result<ReferenceAte> {
+    let poses = reference::read(path, offset_s)?;
+    let traj: Vec<(f64, Pose2<f64>)> = run
+        .trajectory
+        .iter()
+        .map(|(t, p)| {
+            (
+                *t,
+                Pose2::new(f64::from(p.x), f64::from(p.y), f64::from(p.theta)),
+            )
+        })
+        .collect();
+    let ate = evaluate(&traj, &poses, STAMP_TOLERANCE_S);
+    if ate.matched == 0 {
+        bail!(
+            "{}: no reference pose matches a scan's stamp within {} s (is --reference-offset right?)",
+            path.display(),
+            STAMP_TOLERANCE_S
+        );
+    }
+    Ok(ate)
 }
 
 #[cfg(test)]
