@@ -217,23 +217,26 @@ pub fn best_shift_with_prior(scores: &[u32], half_width: u8, penalty: f32) -> Sh
     }
     let k = i32::from(half_width.min(MAX_SHIFT_WINDOW));
     let n = (2 * k + 1) as usize;
-    let centre = n * n / 2;
-    let value = |i: usize, s: u32| {
-        let (dx, dy) = ((i % n) as i32 - k, (i / n) as i32 - k);
-        s as f32 - penalty * (dx * dx + dy * dy) as f32
-    };
-    let first = scores.get(centre).copied().unwrap_or(0);
-    let mut best = (centre, first, value(centre, first));
-    for (i, s) in scores.iter().take(n * n).enumerate() {
-        let v = value(i, *s);
-        if v > best.2 {
-            best = (i, *s, v);
+    let first = scores.get(n * n / 2).copied().unwrap_or(0);
+    // (dx, dy, score, value), the unshifted particle first.
+    let mut best = (0, 0, first, first as f32);
+    let mut rows = scores.chunks_exact(n).take(n);
+    for dy in -k..=k {
+        let Some(row) = rows.next() else { break };
+        for (dx, s) in (-k..=k).zip(row) {
+            // The penalty only lowers a score: one no higher than the best value cannot win.
+            if *s as f32 > best.3 {
+                let v = *s as f32 - penalty * (dx * dx + dy * dy) as f32;
+                if v > best.3 {
+                    best = (dx, dy, *s, v);
+                }
+            }
         }
     }
     ShiftScore {
-        dx: (best.0 % n) as i32 - k,
-        dy: (best.0 / n) as i32 - k,
-        score: best.1,
+        dx: best.0,
+        dy: best.1,
+        score: best.2,
     }
 }
 
