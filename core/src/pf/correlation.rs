@@ -202,6 +202,44 @@ pub fn best_shift(scores: &[u32], half_width: u8) -> ShiftScore {
     }
 }
 
+/// [`best_shift`] with a Gaussian prior on the shift: the shift that maximises
+/// `score − penalty · (dx² + dy²)` (`penalty` in score units per cell², 0: plain
+/// [`best_shift`]); the returned score is the correlation at that shift. Ties: the
+/// unshifted particle, then the first in row-major order.
+///
+/// Without a prior, a shift that gains a single hit wins however far it moves the
+/// particle; where the scan constrains a direction weakly (a corridor, the frontier of
+/// the map where the end points ahead fall on unknown cells and shifting back puts them
+/// on mapped ones) that biases every step the same way and the pose slides.
+pub fn best_shift_with_prior(scores: &[u32], half_width: u8, penalty: f32) -> ShiftScore {
+    if penalty.is_nan() || penalty <= 0.0 {
+        return best_shift(scores, half_width);
+    }
+    let k = i32::from(half_width.min(MAX_SHIFT_WINDOW));
+    let n = (2 * k + 1) as usize;
+    let first = scores.get(n * n / 2).copied().unwrap_or(0);
+    // (dx, dy, score, value), the unshifted particle first.
+    let mut best = (0, 0, first, first as f32);
+    let mut rows = scores.chunks_exact(n).take(n);
+    for dy in -k..=k {
+        let Some(row) = rows.next() else { break };
+        for (dx, s) in (-k..=k).zip(row) {
+            // The penalty only lowers a score: one no higher than the best value cannot win.
+            if *s as f32 > best.3 {
+                let v = *s as f32 - penalty * (dx * dx + dy * dy) as f32;
+                if v > best.3 {
+                    best = (dx, dy, *s, v);
+                }
+            }
+        }
+    }
+    ShiftScore {
+        dx: best.0,
+        dy: best.1,
+        score: best.2,
+    }
+}
+
 /// Correlation of the scan seen from `pose` for every shift of the window of half-width
 /// `half_width` (clamped to [`MAX_SHIFT_WINDOW`]); writes the `(2k+1)²` scores into
 /// `scores` (row-major, `dy` outer) and returns the best. The fast search.
@@ -455,6 +493,43 @@ mod tests {
                 dx: 1,
                 dy: -1,
                 score: 7
+            }
+        );
+    }
+
+    #[test]
+    fn shift_prior_trades_score_for_distance() {
+        // 3 × 3 window: centre 100, corner (+1, +1) 103. Without a prior the corner wins;
+        // with 2 units per cell² it costs 4 and the centre wins; with 1 per cell² it costs
+        // 2 and the corner still wins, reporting its own score.
+        let s = [0, 0, 0, 0, 100, 0, 0, 0, 103];
+        let corner = ShiftScore {
+            dx: 1,
+            dy: 1,
+            score: 103,
+        };
+        let centre = ShiftScore {
+            dx: 0,
+            dy: 0,
+            score: 100,
+        };
+        assert_eq!(best_shift_with_prior(&s, 1, 0.0), corner);
+        assert_eq!(best_shift_with_prior(&s, 1, f32::NAN), corner);
+        assert_eq!(best_shift_with_prior(&s, 1, 2.0), centre);
+        assert_eq!(best_shift_with_prior(&s, 1, 1.0), corner);
+        // A tie after the penalty keeps the unshifted particle.
+        assert_eq!(best_shift_with_prior(&s, 1, 1.5), centre);
+        // A far shift with a big gain wins over a near one with a small gain.
+        let mut w = [0u32; 25];
+        w[12] = 50; // centre of 5 × 5
+        w[13] = 52; // (+1, 0): 52 − 1 = 51
+        w[0] = 70; // (−2, −2): 70 − 8 = 62
+        assert_eq!(
+            best_shift_with_prior(&w, 2, 1.0),
+            ShiftScore {
+                dx: -2,
+                dy: -2,
+                score: 70
             }
         );
     }

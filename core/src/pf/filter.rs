@@ -1,7 +1,9 @@
 //! The particle filter over robot poses: predict with noisy inputs, weight by map
 //! correlation with the shift search, move each particle to its best shift, resample.
 
-use super::correlation::{MAX_SHIFTS, ScanPoint, ShiftScore, WEIGHT_ONE, search_window};
+use super::correlation::{
+    MAX_SHIFTS, ScanPoint, ShiftScore, WEIGHT_ONE, best_shift_with_prior, search_window,
+};
 
 /// A shift search: [`search_window`] or one of its variants.
 pub(crate) type ShiftSearch =
@@ -256,6 +258,19 @@ impl<const P: usize> ParticleFilter<P> {
         points: &[ScanPoint],
         search: ShiftSearch,
     ) -> Result<UpdateReport, PfError> {
+        self.update_with_prior(map, points, search, 0.0)
+    }
+
+    /// [`ParticleFilter::update_with`] with a Gaussian prior on the shifts: each particle
+    /// moves to the shift that maximises `corr − shift_penalty · (dx² + dy²)`
+    /// ([`best_shift_with_prior`]; 0: no prior) and is weighted by the correlation there.
+    pub(crate) fn update_with_prior(
+        &mut self,
+        map: &GridView<'_>,
+        points: &[ScanPoint],
+        search: ShiftSearch,
+        shift_penalty: f32,
+    ) -> Result<UpdateReport, PfError> {
         if points.is_empty() {
             return Err(PfError::EmptyScan);
         }
@@ -267,7 +282,14 @@ impl<const P: usize> ParticleFilter<P> {
             dy: 0,
             score: 0,
         }; P];
-        let scored = score_particles(map, &self.poses, points, k, search, &mut shifts);
+        let scored = score_particles(
+            map,
+            &self.poses,
+            points,
+            k,
+            (search, shift_penalty),
+            &mut shifts,
+        );
         for (p, s) in self.poses.iter_mut().zip(shifts.iter()) {
             p.x += s.dx as f32 * res;
             p.y += s.dy as f32 * res;
@@ -343,6 +365,27 @@ impl<const P: usize> ParticleFilter<P> {
     }
 }
 
+/// A shift search with the penalty of [`best_shift_with_prior`] (0: none).
+type PriorSearch = (ShiftSearch, f32);
+
+/// One particle's shift search, the best shift picked with the prior.
+fn search_with_prior(
+    map: &GridView<'_>,
+    pose: &Pose2<f32>,
+    points: &[ScanPoint],
+    half_width: u8,
+    search: PriorSearch,
+    scores: &mut [u32; MAX_SHIFTS],
+) -> ShiftScore {
+    let s = (search.0)(map, pose, points, half_width, scores);
+    if search.1 > 0.0 {
+        let n = 2 * usize::from(half_width.min(super::correlation::MAX_SHIFT_WINDOW)) + 1;
+        best_shift_with_prior(scores.get(..n * n).unwrap_or(&[]), half_width, search.1)
+    } else {
+        s
+    }
+}
+
 /// Best shift of every particle; a particle equal to its predecessor (copies after
 /// resampling that did not move) reuses its result. Returns how many were scored.
 #[cfg(not(feature = "parallel"))]
@@ -351,7 +394,7 @@ fn score_particles<const P: usize>(
     poses: &[Pose2<f32>; P],
     points: &[ScanPoint],
     half_width: u8,
-    search: ShiftSearch,
+    search: PriorSearch,
     shifts: &mut [ShiftScore; P],
 ) -> usize {
     let mut scores = [0u32; MAX_SHIFTS];
@@ -362,7 +405,7 @@ fn score_particles<const P: usize>(
             Some((q, s)) if q == p => s,
             _ => {
                 scored += 1;
-                search(map, p, points, half_width, &mut scores)
+                search_with_prior(map, p, points, half_width, search, &mut scores)
             }
         };
         previous = Some((p, *shift));
@@ -378,7 +421,7 @@ fn score_particles<const P: usize>(
     poses: &[Pose2<f32>; P],
     points: &[ScanPoint],
     half_width: u8,
-    search: ShiftSearch,
+    search: PriorSearch,
     shifts: &mut [ShiftScore; P],
 ) -> usize {
     use rayon::prelude::*;
@@ -391,7 +434,7 @@ fn score_particles<const P: usize>(
             if !repeats(i) {
                 let mut scores = [0u32; MAX_SHIFTS];
                 if let Some(p) = poses.get(i) {
-                    *shift = search(map, p, points, half_width, &mut scores);
+                    *shift = search_with_prior(map, p, points, half_width, search, &mut scores);
                 }
             }
         });

@@ -80,6 +80,11 @@ pub struct GridPfConfig {
     pub range_weight_exponent: f32,
     /// The particle filter.
     pub filter: FilterConfig,
+    /// Standard deviation, cells, of the Gaussian prior on each particle's shift in the
+    /// SLAM update (0: none, the seed): the shift search then maximises
+    /// `log_likelihood_per_unit · corr − (dx² + dy²) / (2σ²)` instead of `corr`
+    /// ([`correlation::best_shift_with_prior`]).
+    pub shift_prior_std_cells: f32,
 }
 
 impl GridPfConfig {
@@ -99,6 +104,7 @@ impl GridPfConfig {
             resampling: Resampling::Stratified,
             seed: 0,
         },
+        shift_prior_std_cells: 0.0,
     };
 
     /// The seed's structure (0.05 m cells, 9 × 9 shifts, N_eff ≤ 0.75 P) with the changes
@@ -127,13 +133,18 @@ impl GridPfConfig {
             resampling: Resampling::Systematic,
             seed: 0,
         },
+        shift_prior_std_cells: 0.0,
     };
 
     /// [`GridPfConfig::DEFAULT`] adjusted for few particles and beams (the firmware's
     /// P = 32 and 90 beams, tuned on the Intel log with every second beam): more heading
     /// noise (0.4° per step + 0.1 rad/m) so 32 particles still cover the odometry's heading
-    /// drift, likelihood 0.05 per unit to make up for half the beams, and resampling at
-    /// N_eff ≤ 0.9 P.
+    /// drift, likelihood 0.05 per unit to make up for half the beams, resampling at
+    /// N_eff ≤ 0.9 P, and a Gaussian prior of σ = 1.5 cells on each particle's shift
+    /// ([`GridPfConfig::shift_prior_std_cells`]): without it the few particles slide along
+    /// corridors and backwards at the map's frontier, and the map bends (Intel raw part,
+    /// ATE against the GMapping-corrected poses 0.38–0.58 m without, 0.06–0.11 m with;
+    /// see `docs/results-grid.md`).
     pub const MICROCONTROLLER: Self = Self {
         filter: FilterConfig {
             motion_noise: MotionNoise {
@@ -145,6 +156,7 @@ impl GridPfConfig {
             resample_neff_fraction: 0.9,
             ..Self::DEFAULT.filter
         },
+        shift_prior_std_cells: 1.5,
         ..Self::DEFAULT
     };
 
@@ -156,6 +168,20 @@ impl GridPfConfig {
             && self.range_weight_exponent.is_finite()
             && self.range_weight_exponent >= 0.0
             && self.filter.is_valid()
+            && self.shift_prior_std_cells.is_finite()
+            && self.shift_prior_std_cells >= 0.0
+    }
+
+    /// The shift prior as a penalty in correlation units (fixed point) per cell² (0:
+    /// none): `1 / (2σ² · log_likelihood_per_unit)` units of 1.0.
+    pub fn shift_penalty(&self) -> f32 {
+        let s = self.shift_prior_std_cells;
+        let l = self.filter.log_likelihood_per_unit;
+        if s > 0.0 && l > 0.0 {
+            correlation::WEIGHT_ONE as f32 / (2.0 * s * s * l)
+        } else {
+            0.0
+        }
     }
 }
 

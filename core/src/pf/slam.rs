@@ -205,9 +205,12 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const B
             } else {
                 search_window
             };
-            let u = self
-                .filter
-                .update_with(&self.map.view(), self.points.as_slice(), search)?;
+            let u = self.filter.update_with_prior(
+                &self.map.view(),
+                self.points.as_slice(),
+                search,
+                self.config.shift_penalty(),
+            )?;
             report.pose = u.best_pose;
             report.n_eff = u.n_eff;
             report.resampled = u.resampled;

@@ -1,7 +1,7 @@
 //! `host-sim localize`: the grid localizer on a saved map (`map.yaml` + PGM) over a
 //! CARMEN log, scored with the relation metric when a relations file is found.
 
-use super::replay::{metrics_json, options_from, report, scan_progress_bar};
+use super::replay::{metrics_json, options_from, report, scan_progress_bar, with_reference};
 use crate::domain::grid::GridOptions;
 use crate::drivers::grid::{carmen_inputs, run_localizer};
 use crate::inputs::readers::DatasetSpec;
@@ -62,7 +62,11 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
         .file_name()
         .map_or_else(|| file.clone(), |n| n.to_string_lossy().to_string());
     let wall = start.elapsed().as_secs_f64();
-    let metrics = metrics_json(&name, &run, &options, rel, None, wall);
+    let metrics = with_reference(
+        metrics_json(&name, &run, &options, rel, None, wall),
+        &run,
+        &args.grid,
+    )?;
     write_outputs(&args.out, &run, &options.config, &metrics)?;
     report(quiet, &name, &metrics, &args.out);
     Ok(())

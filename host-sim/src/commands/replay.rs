@@ -3,7 +3,7 @@
 //! and pictures; `thor:` runs give the encoder + IMU dead reckoning.
 
 use crate::domain::config::Settings;
-use crate::domain::grid::{GRID_CELLS, GridOptions, GridToml, carmen_lidar, decimation_for};
+use crate::domain::grid::{GRID_CELLS, GridOptions, Preset, carmen_lidar};
 use crate::domain::recording::Recording;
 use crate::domain::{AssociationMode, FilterKind, Precision};
 use crate::drivers::ekf::replay;
@@ -17,7 +17,6 @@ use crate::metrics::relations::RelationError;
 use crate::output::grid_map::{write_outputs, write_tum};
 use anyhow::{Result, bail};
 use microslam::geometry::Pose2;
-use microslam::pf::GridPfConfig;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -141,16 +140,13 @@ pub(crate) fn options_from(
     grid: &GridOptions,
     log: &CarmenLog,
 ) -> Result<GridRunOptions> {
-    let mut c = match config {
-        Some(p) => GridToml::read(p)?.apply()?,
-        None => GridPfConfig::DEFAULT,
-    };
+    let n = beam_count(log);
+    let mut c = grid
+        .preset
+        .unwrap_or_else(|| Preset::for_particles(grid.particles))
+        .settings(config, grid.beams, n)?;
     if let Some(k) = grid.window {
         c.filter.shift_window_cells = k;
-    }
-    let n = beam_count(log);
-    if let Some(beams) = grid.beams {
-        c.beam_decimation = decimation_for(n, beams)?;
     }
     if !c.is_valid() {
         bail!(
@@ -199,6 +195,23 @@ pub(crate) fn metrics_json(
     })
 }
 
+/// `metrics` with the `reference` entry: the ATE against `--reference` when given.
+pub(crate) fn with_reference(
+    mut metrics: serde_json::Value,
+    run: &GridRun,
+    grid: &GridOptions,
+) -> Result<serde_json::Value> {
+    if let Some(path) = &grid.reference {
+        let ate = crate::metrics::reference::grid_run_ate(run, path, grid.reference_offset)?;
+        metrics["reference"] = serde_json::json!({
+            "file": path.display().to_string(),
+            "time_offset_s": grid.reference_offset,
+            "ate": ate,
+        });
+    }
+    Ok(metrics)
+}
+
 pub(crate) fn report(quiet: bool, dataset: &str, metrics: &serde_json::Value, out: &Path) {
     if quiet {
         return;
@@ -215,6 +228,15 @@ pub(crate) fn report(quiet: bool, dataset: &str, metrics: &serde_json::Value, ou
             r["trans_std_m"].as_f64().unwrap_or(f64::NAN),
             r["rot_mean_deg"].as_f64().unwrap_or(f64::NAN),
             r["rot_std_deg"].as_f64().unwrap_or(f64::NAN)
+        );
+    }
+    if let Some(a) = metrics.get("reference").map(|r| &r["ate"]) {
+        println!(
+            "  ATE vs reference ({} of {} poses matched): {:.4} m SE(2), {:.4} m first pose",
+            a["matched"],
+            a["reference_poses"],
+            a["ate_m"]["se2"].as_f64().unwrap_or(f64::NAN),
+            a["ate_m"]["first_pose"].as_f64().unwrap_or(f64::NAN)
         );
     }
     println!(
@@ -276,7 +298,11 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
         .map_or_else(|| file.clone(), |n| n.to_string_lossy().to_string());
     // Wall time: the whole replay (reading, filtering, metrics) before the files are written.
     let wall = start.elapsed().as_secs_f64();
-    let metrics = metrics_json(&name, &run, &options, rel, faults.as_ref(), wall);
+    let metrics = with_reference(
+        metrics_json(&name, &run, &options, rel, faults.as_ref(), wall),
+        &run,
+        &args.grid,
+    )?;
     write_outputs(&args.out, &run, &options.config, &metrics)?;
     report(quiet, &name, &metrics, &args.out);
     Ok(())

@@ -7,6 +7,7 @@ use super::replay::run_and_report;
 use crate::domain::AssociationMode;
 use crate::domain::Precision;
 use crate::domain::config::Settings;
+use crate::domain::grid::Preset;
 use crate::drivers::grid::{GridRunOptions, f32_pose, run_localizer, run_slam, sim_inputs};
 use crate::inputs::sim::lidar_world::{LidarRecording, SIM_GRID_CELLS, true_map};
 use crate::inputs::sim::simulate;
@@ -36,6 +37,11 @@ pub struct SimOptions {
     /// Particles of the grid filters in the lidar world (one of [`SIM_PARTICLES`]; 0
     /// skips the grid scenario).
     pub grid_particles: usize,
+    /// Settings of the grid filters (default: [`Preset::for_particles`]).
+    pub grid_preset: Option<Preset>,
+    /// Grid filter settings (TOML, [`crate::domain::grid::GridToml`]) laid over the
+    /// preset.
+    pub grid_config: Option<PathBuf>,
 }
 
 impl Default for SimOptions {
@@ -48,6 +54,8 @@ impl Default for SimOptions {
             precision: Precision::F64,
             no_plots: false,
             grid_particles: 200,
+            grid_preset: None,
+            grid_config: None,
         }
     }
 }
@@ -75,12 +83,16 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
     }
     let world = crate::inputs::sim::lidar_world::LidarWorld::office();
     let rec = crate::inputs::sim::lidar_world::simulate(&world, args.seed)?;
+    let preset = args
+        .grid_preset
+        .unwrap_or_else(|| Preset::for_particles(args.grid_particles))
+        .settings(args.grid_config.as_deref(), None, rec.lidar_beams())?;
     let config = microslam::pf::GridPfConfig {
         filter: microslam::pf::FilterConfig {
             seed: args.seed,
-            ..microslam::pf::GridPfConfig::DEFAULT.filter
+            ..preset.filter
         },
-        ..microslam::pf::GridPfConfig::DEFAULT
+        ..preset
     };
     let out = args.out.join("grid");
     let (slam, loc) = run_and_write(&rec, config, args.grid_particles, &out)?;

@@ -29,7 +29,7 @@ pub const SUPPORTED_PARTICLES: [usize; 8] = [8, 16, 32, 64, 100, 128, 200, 400];
 /// Optional TOML overrides of the grid filter (`--config FILE`), every key optional:
 /// `resolution`, `hit`, `miss`, `occupied_above`, `range_weight_exponent`,
 /// `log_likelihood_per_unit`, `resample_neff_fraction`, `seed`, `shift_window_cells`,
-/// `beam_decimation`, and the [`MotionNoise`] fields.
+/// `beam_decimation`, `shift_prior_std_cells`, and the [`MotionNoise`] fields.
 #[derive(Clone, Debug, Default, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GridToml {
@@ -43,6 +43,7 @@ pub struct GridToml {
     seed: Option<u64>,
     shift_window_cells: Option<u8>,
     beam_decimation: Option<usize>,
+    shift_prior_std_cells: Option<f32>,
     distance_std: Option<f32>,
     distance_std_per_metre: Option<f32>,
     heading_std: Option<f32>,
@@ -62,10 +63,18 @@ impl GridToml {
         toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
     }
 
-    /// The configuration these overrides give.
+    /// The configuration these overrides give, laid over `GridPfConfig::DEFAULT` unless
+    /// the file names a `base`.
     pub fn apply(&self) -> Result<GridPfConfig> {
+        self.apply_over(GridPfConfig::DEFAULT)
+    }
+
+    /// The configuration these overrides give, laid over `fallback` unless the file
+    /// names a `base`.
+    pub fn apply_over(&self, fallback: GridPfConfig) -> Result<GridPfConfig> {
         let mut c = match self.base.as_deref() {
-            None | Some("default") => GridPfConfig::DEFAULT,
+            None => fallback,
+            Some("default") => GridPfConfig::DEFAULT,
             Some("seed") => GridPfConfig::SEED,
             Some("microcontroller") => GridPfConfig::MICROCONTROLLER,
             Some(other) => bail!("unknown base config `{other}` (default, seed, microcontroller)"),
@@ -81,7 +90,8 @@ impl GridToml {
             occupied_above => c.log_odds.occupied_above, range_weight_exponent => c.range_weight_exponent,
             log_likelihood_per_unit => c.filter.log_likelihood_per_unit,
             resample_neff_fraction => c.filter.resample_neff_fraction, seed => c.filter.seed,
-            shift_window_cells => c.filter.shift_window_cells, beam_decimation => c.beam_decimation);
+            shift_window_cells => c.filter.shift_window_cells, beam_decimation => c.beam_decimation,
+            shift_prior_std_cells => c.shift_prior_std_cells);
         if !c.is_valid() {
             bail!("grid filter settings out of range: {c:?}");
         }
@@ -121,7 +131,74 @@ pub struct GridOptions {
     pub beams: Option<usize>,
     /// Benchmark relations file (default: a `*.relations` file next to the log).
     pub relations: Option<std::path::PathBuf>,
+    /// Named settings (default: [`Preset::for_particles`]).
+    pub preset: Option<Preset>,
+    /// Reference trajectory for ATE (TUM or a corrected CARMEN log).
+    pub reference: Option<std::path::PathBuf>,
+    /// Seconds added to the reference's stamps.
+    pub reference_offset: f64,
 }
+
+/// Named grid filter settings (`--preset`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Preset {
+    /// `GridPfConfig::DEFAULT`: tuned with 200 particles and every beam.
+    Default,
+    /// `GridPfConfig::MICROCONTROLLER`: the firmware's, tuned with 32 particles and 90
+    /// beams.
+    Microcontroller,
+    /// `GridPfConfig::SEED`: the paper's algorithm exactly.
+    Seed,
+}
+
+impl Preset {
+    /// The settings of the preset.
+    pub fn config(self) -> GridPfConfig {
+        match self {
+            Self::Default => GridPfConfig::DEFAULT,
+            Self::Microcontroller => GridPfConfig::MICROCONTROLLER,
+            Self::Seed => GridPfConfig::SEED,
+        }
+    }
+
+    /// The preset for `particles` when none is named: `microcontroller` below 100
+    /// particles (`default` needs many particles to cover its heading noise and diverges
+    /// on the Intel log with 32), `default` from 100 on.
+    pub fn for_particles(particles: usize) -> Self {
+        if particles < 100 {
+            Self::Microcontroller
+        } else {
+            Self::Default
+        }
+    }
+
+    /// The settings of `self` with the file `config` (if any) laid over them, and the
+    /// `microcontroller` preset's beam count ([`MICROCONTROLLER_BEAMS`]) for a lidar of
+    /// `lidar_beams` when neither the file nor `beams` sets one.
+    pub fn settings(
+        self,
+        config: Option<&Path>,
+        beams: Option<usize>,
+        lidar_beams: usize,
+    ) -> Result<GridPfConfig> {
+        let mut c = match config {
+            Some(p) => GridToml::read(p)?.apply_over(self.config())?,
+            None => self.config(),
+        };
+        if let Some(beams) = beams {
+            c.beam_decimation = decimation_for(lidar_beams, beams)?;
+        } else if self == Self::Microcontroller && c.beam_decimation == 1 {
+            // The firmware's settings were tuned with its beam count.
+            c.beam_decimation = decimation_for(lidar_beams, MICROCONTROLLER_BEAMS.min(lidar_beams))?;
+        }
+        Ok(c)
+    }
+}
+
+/// Beams the `microcontroller` preset uses when no beam count is given: the firmware's
+/// (its settings were tuned with 90 of the Intel log's 180 beams).
+pub const MICROCONTROLLER_BEAMS: usize = 90;
 
 #[cfg(test)]
 mod tests {

@@ -21,6 +21,7 @@
 mod alignment;
 mod assignment;
 pub mod grid;
+pub mod reference;
 pub mod relations;
 
 pub use alignment::{Rigid, apply, first_pose, se2_least_squares};
@@ -211,7 +212,7 @@ pub fn position_rmse(t: &Pose2<f64>, est: &[Pose2<f64>], gt: &[Pose2<f64>]) -> O
     mean(&sq).map(f64::sqrt)
 }
 
-fn yaw_rmse_deg(t: &Pose2<f64>, est: &[Pose2<f64>], gt: &[Pose2<f64>]) -> Option<f64> {
+pub(crate) fn yaw_rmse_deg(t: &Pose2<f64>, est: &[Pose2<f64>], gt: &[Pose2<f64>]) -> Option<f64> {
     let r = Rigid::new(t);
     let sq: Vec<f64> = est
         .iter()

@@ -5,6 +5,7 @@
 
 pub mod carmen;
 pub mod mrclam;
+pub mod reference;
 mod text;
 pub mod thor;
 
