@@ -366,7 +366,8 @@ fn memory_per_capacity_is_as_documented() {
         slam <= filter + 24 * 90 + 100 + size_of::<GridPfConfig>(),
         "{slam}"
     );
-    assert!(slam < 3400 && loc < 3400, "{slam} {loc}");
+    // The localizer's lost detection and relocalization state add ~400 B (measured 3672).
+    assert!(slam < 3400 && loc < 3700, "{slam} {loc}");
 }
 
 #[test]
