@@ -429,7 +429,8 @@ fn heading_angle(j: u32, step: f32) -> f32 {
 /// `|⌊u⌋ − ⌊v⌋| ≤ ⌈|u − v|⌉`; 0.01 cell more covers the float rounding.
 #[inline]
 fn dilation(rho_cells: f32, delta: f32) -> i32 {
-    libm::ceilf(rho_cells * delta + 0.01) as i32
+    // trunc(v) + 1 ≥ ⌈v⌉ (equal unless v is a whole number), without a call to ceilf.
+    (rho_cells * delta + 0.01) as i32 + 1
 }
 
 /// Bound of the node `(headings [j0, j0 + 2^a), block 2^k × 2^k at (x, y))` given the
@@ -439,7 +440,7 @@ fn dilation(rho_cells: f32, delta: f32) -> i32 {
 #[allow(clippy::too_many_arguments)]
 fn bound(
     map: &GridView<'_>,
-    layers: &MaxPoolLayers<'_>,
+    levels: &Levels<'_>,
     sel: &Selected,
     cells: &[(i32, i32, u32)],
     step: f32,
@@ -454,21 +455,20 @@ fn bound(
         }
         let mut s = 0u32;
         for (cx, cy, w) in cells {
-            if layers.any_occupied(k, cx.wrapping_add(x), cy.wrapping_add(y)) {
+            if levels.any(k, cx.wrapping_add(x), cy.wrapping_add(y)) {
                 s = s.wrapping_add(*w);
             }
         }
         return s;
     }
     let delta = (1u32 << (a - 1)) as f32 * step;
-    let top = layers.levels();
     let mut s = 0u32;
     for ((cx, cy, w), rho) in cells.iter().zip(sel.rho_cells.iter()) {
         let e = dilation(*rho, delta);
         let size = (1i32 << k).saturating_add(e.saturating_mul(2));
         let level = (32 - (size.max(1) as u32 - 1).leading_zeros()) as u8;
-        if level > top
-            || layers.any_occupied(
+        if level > levels.top
+            || levels.any(
                 level,
                 cx.wrapping_add(x).wrapping_sub(e),
                 cy.wrapping_add(y).wrapping_sub(e),
@@ -478,6 +478,46 @@ fn bound(
         }
     }
     s
+}
+
+/// The occupied levels' bitmaps, looked up once per search (the bound's inner loop).
+struct Levels<'a> {
+    bits: [&'a [u8]; crate::grid::layers::MAX_LEVELS as usize + 1],
+    stride: usize,
+    width: i32,
+    height: i32,
+    top: u8,
+}
+
+impl<'a> Levels<'a> {
+    fn new(layers: &MaxPoolLayers<'a>) -> Self {
+        let mut bits: [&'a [u8]; crate::grid::layers::MAX_LEVELS as usize + 1] =
+            [&[]; crate::grid::layers::MAX_LEVELS as usize + 1];
+        for (k, b) in bits.iter_mut().enumerate().skip(1) {
+            *b = layers.occupied_level(k as u8).unwrap_or(&[]);
+        }
+        Self {
+            bits,
+            stride: layers.width().div_ceil(8),
+            width: layers.width() as i32,
+            height: layers.height() as i32,
+            top: layers.levels(),
+        }
+    }
+
+    /// [`MaxPoolLayers::any_occupied`] without recomputing the level's place.
+    #[inline]
+    fn any(&self, k: u8, x: i32, y: i32) -> bool {
+        let size = 1i32 << (k & 15);
+        if x >= self.width || y >= self.height || x <= -size || y <= -size {
+            return false;
+        }
+        let (x, y) = (x.max(0) as usize, y.max(0) as usize);
+        self.bits
+            .get(usize::from(k))
+            .and_then(|b| b.get(y * self.stride + x / 8))
+            .is_some_and(|b| (b >> (x % 8)) & 1 == 1)
+    }
 }
 
 /// Exact score of the robot at cell `(x, y)` given the end cells (level 0).
@@ -610,6 +650,7 @@ pub fn search<const N: usize>(
         cells: [(0, 0, 0); MAX_SEARCH_BEAMS],
     };
     let mut stack = [Node::default(); STACK];
+    let levels = Levels::new(layers);
     let threshold = |out: &Hypotheses<N>, pass_min: u32| {
         below_relative(config, out.best())
             .max(pass_min.saturating_sub(1))
@@ -622,6 +663,7 @@ pub fn search<const N: usize>(
         let pass_min = libm::ceilf(fraction * sel.total as f32) as u32;
         report.passes += 1;
         report.min_score = pass_min;
+        let mut thr = threshold(out, pass_min);
         let mut ry = 0;
         while ry < h {
             let mut rx = 0;
@@ -648,7 +690,7 @@ pub fn search<const N: usize>(
                     let Some(node) = stack.get(sp).copied() else {
                         break;
                     };
-                    if node.bound <= threshold(out, pass_min) {
+                    if node.bound <= thr {
                         continue;
                     }
                     if node.a == 0 && node.k == 0 {
@@ -660,6 +702,7 @@ pub fn search<const N: usize>(
                             config.separation_m,
                             config.separation_rad,
                         );
+                        thr = threshold(out, pass_min);
                         continue;
                     }
                     // Split the headings while their spread moves the far beams' ends by
@@ -712,8 +755,8 @@ pub fn search<const N: usize>(
                             report.leaves += 1;
                         }
                         let cells = end.at(&sel, step, c.reference(), &mut report);
-                        c.bound = bound(map, layers, &sel, cells, step, c.a, c.k, c.x, c.y);
-                        if c.bound > threshold(out, pass_min)
+                        c.bound = bound(map, &levels, &sel, cells, step, c.a, c.k, c.x, c.y);
+                        if c.bound > thr
                             && let Some(slot) = children.get_mut(kept)
                         {
                             *slot = c;
