@@ -90,6 +90,64 @@ pub struct LocalizeArgs {
     /// Output folder.
     #[arg(long, short, default_value = "out/localize")]
     pub out: PathBuf,
+    /// Global localization trials instead of one tracked run.
+    #[command(flatten)]
+    pub global: GlobalArgs,
+}
+
+/// Options of global localization trials (`host-sim localize --global`,
+/// `host-sim sim --global`).
+#[derive(Debug, Clone, Args)]
+pub struct GlobalArgs {
+    /// Run global localizations from random start scans without a pose, scored against
+    /// the localizer tracked from the true start; writes `metrics.json` with `global`.
+    #[arg(long)]
+    pub global: bool,
+    /// Number of trials.
+    #[arg(long, default_value_t = 20)]
+    pub trials: usize,
+    /// Seed of the random start scans.
+    #[arg(long, default_value_t = 1)]
+    pub trial_seed: u64,
+    /// Scans a trial may take to converge.
+    #[arg(long, default_value_t = 10)]
+    pub max_scans: usize,
+    /// Levels of the max-pooled map layers (windows up to 2^levels cells).
+    #[arg(long, default_value_t = 6)]
+    pub levels: u8,
+    /// Node budget of the global search (default: the core's).
+    #[arg(long)]
+    pub node_budget: Option<u32>,
+    /// Smallest score of a hypothesis, a fraction of the beams' total weight (default:
+    /// the core's).
+    #[arg(long)]
+    pub min_score: Option<f32>,
+    /// Beams farther than this are left out of the search, metres (default: the core's).
+    #[arg(long)]
+    pub search_range: Option<f32>,
+    /// Beams the search uses at most (default: the core's).
+    #[arg(long)]
+    pub search_beams: Option<u16>,
+    /// Particles spread over this many hypotheses (default: the core's).
+    #[arg(long)]
+    pub hypotheses: Option<u8>,
+}
+
+impl Default for GlobalArgs {
+    fn default() -> Self {
+        Self {
+            global: false,
+            trials: 20,
+            trial_seed: 1,
+            max_scans: 10,
+            levels: 6,
+            node_budget: None,
+            min_score: None,
+            search_range: None,
+            search_beams: None,
+            hypotheses: None,
+        }
+    }
 }
 
 /// How sightings are associated with landmarks.
@@ -187,6 +245,10 @@ pub struct SimArgs {
     /// grid scenario).
     #[arg(long, default_value_t = 200)]
     pub grid_particles: usize,
+    /// Global localization trials on the grid SLAM map of the lidar world (written to
+    /// `out/grid/global/`).
+    #[command(flatten)]
+    pub global: GlobalArgs,
 }
 
 impl Default for SimArgs {
@@ -199,6 +261,7 @@ impl Default for SimArgs {
             precision: Precision::F64,
             no_plots: false,
             grid_particles: 200,
+            global: GlobalArgs::default(),
         }
     }
 }
@@ -251,6 +314,9 @@ pub fn run(cli: &Cli) -> Result<()> {
         Some(Command::Replay(args)) => crate::replay::run_cli(args, cli.quiet),
         Some(Command::Sim(args)) => crate::sim::run_cli(args, cli.quiet),
         Some(Command::Hil(args)) => crate::hil::run_cli(args, cli.quiet),
+        Some(Command::Localize(args)) if args.global.global => {
+            crate::global_localize::localize_cli(args, cli.quiet)
+        }
         Some(Command::Localize(args)) => crate::grid_replay::localize_cli(args, cli.quiet),
         Some(Command::Texture(args)) => crate::camera::texture_cli(args, cli.quiet),
         Some(Command::Detections(args)) => crate::camera::detections_cli(args, cli.quiet),

@@ -398,7 +398,7 @@ pub fn write_outputs(
     Ok(())
 }
 
-fn progress_bar(len: usize, quiet: bool) -> indicatif::ProgressBar {
+pub(crate) fn progress_bar(len: usize, quiet: bool) -> indicatif::ProgressBar {
     if quiet {
         return indicatif::ProgressBar::hidden();
     }
@@ -411,7 +411,7 @@ fn progress_bar(len: usize, quiet: bool) -> indicatif::ProgressBar {
     pb
 }
 
-fn options_from(
+pub(crate) fn options_from(
     config: Option<&Path>,
     grid: &crate::cli::GridArgs,
     log: &CarmenLog,

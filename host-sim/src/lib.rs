@@ -17,6 +17,7 @@
 //! - [`camera`]: camera front ends on the simulator: rendered RGB-D frames, the floor
 //!   texture map, sign detections through the EKF-SLAM.
 //! - [`grid_replay`]: the grid particle filter (SLAM, localization) on CARMEN lidar logs.
+//! - [`global_localize`]: global localization trials (no start pose) on a saved map.
 #![deny(missing_docs)]
 
 pub mod camera;
@@ -24,6 +25,7 @@ pub mod cli;
 pub mod config;
 pub mod datasets;
 pub mod faults;
+pub mod global_localize;
 pub mod grid_replay;
 pub mod hil;
 pub mod metrics;

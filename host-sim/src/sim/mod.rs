@@ -179,6 +179,16 @@ pub fn run_cli(args: &SimArgs, quiet: bool) -> Result<()> {
     };
     let out = args.out.join("grid");
     let (slam, loc) = grid::run_and_write(&rec, config, args.grid_particles, &out)?;
+    if args.global.global {
+        crate::global_localize::sim_cli(
+            &rec,
+            config,
+            args.grid_particles,
+            &args.global,
+            &out,
+            quiet,
+        )?;
+    }
     if !quiet {
         println!(
             "{}: {} scans, {} particles, dead reckoning ATE {:.3} m",
