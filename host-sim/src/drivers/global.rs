@@ -7,6 +7,8 @@
 //! within the tolerance of the reference and stays there up to the last of those scans;
 //! `scans_to_converge` is the first scan (1-based) from which it stays.
 
+use super::grid::GridInput;
+use crate::domain::grid::{GlobalOptions, MAX_BEAMS};
 use anyhow::{Result, anyhow, bail};
 use microslam::geometry::{Pose2, wrap_angle};
 use microslam::grid::{GridView, MaxPoolLayers};
@@ -15,17 +17,6 @@ use microslam::pf::{GridLocalizer, GridPfConfig, LocalizerState, RelocalizationC
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
 use rand_core::{RngCore, SeedableRng};
 use std::time::Instant;
-
-/// One scan of a recording with the odometry pose at that instant.
-#[derive(Clone, Copy, Debug)]
-pub struct Frame<'a> {
-    /// Time stamp, seconds.
-    pub stamp: f64,
-    /// Cumulative odometry pose (only differences between frames are used).
-    pub odometry: Pose2<f32>,
-    /// Ranges of the scan.
-    pub ranges: &'a [f32],
-}
 
 /// How the trials run.
 #[derive(Clone, Debug)]
@@ -154,20 +145,20 @@ macro_rules! dispatch {
 }
 
 /// Most beams per scan.
-const BEAMS: usize = crate::grid_replay::MAX_BEAMS;
+const BEAMS: usize = MAX_BEAMS;
 
 /// Feeds `frames[i]` (predicting from `previous`).
 fn step<const P: usize>(
     loc: &mut GridLocalizer<'_, P, BEAMS>,
     previous: &mut Option<Pose2<f32>>,
-    frame: &Frame<'_>,
+    frame: &GridInput<'_>,
     lidar: &LidarGeometry,
 ) -> Result<()> {
-    if frame.odometry.is_finite() {
-        if let Some(p) = previous.replace(frame.odometry) {
-            loc.predict_odometry(&p, &frame.odometry)
-                .map_err(|e| anyhow!("prediction at {}: {e}", frame.stamp))?;
-        }
+    if frame.odometry.is_finite()
+        && let Some(p) = previous.replace(frame.odometry)
+    {
+        loc.predict_odometry(&p, &frame.odometry)
+            .map_err(|e| anyhow!("prediction at {}: {e}", frame.stamp))?;
     }
     // A scan without a usable beam is skipped (the search, if pending, waits).
     let _ = loc.observe(&LidarScan::new(frame.ranges, *lidar));
@@ -177,7 +168,7 @@ fn step<const P: usize>(
 /// The localizer tracked from `start` over all frames, with lost detection reporting only
 /// (no automatic relocalization).
 pub fn reference_run(
-    frames: &[Frame<'_>],
+    frames: &[GridInput<'_>],
     map: &GridView<'_>,
     layers: &[u8],
     start: Pose2<f32>,
@@ -195,7 +186,7 @@ pub fn reference_run(
 }
 
 fn reference_p<const P: usize>(
-    frames: &[Frame<'_>],
+    frames: &[GridInput<'_>],
     map: &GridView<'_>,
     layers: &[u8],
     start: Pose2<f32>,
@@ -242,7 +233,7 @@ pub fn start_scans(frames: usize, settings: &TrialSettings) -> Vec<usize> {
 
 /// Runs the trials (each from a start scan of [`start_scans`]) against `reference`.
 pub fn run_trials(
-    frames: &[Frame<'_>],
+    frames: &[GridInput<'_>],
     map: &GridView<'_>,
     layers: &[u8],
     reference: &[Pose2<f32>],
@@ -274,7 +265,7 @@ fn errors(a: &Pose2<f32>, b: &Pose2<f32>) -> (f64, f64) {
 }
 
 fn trial_p<const P: usize>(
-    frames: &[Frame<'_>],
+    frames: &[GridInput<'_>],
     map: &GridView<'_>,
     layers: &[u8],
     reference: &[Pose2<f32>],
@@ -340,127 +331,9 @@ fn trial_p<const P: usize>(
     Ok(trial)
 }
 
-/// The `global` section of `metrics.json`.
-pub fn metrics(
-    trials: &[Trial],
-    reference: &Reference,
-    settings: &TrialSettings,
-    layers_bytes: usize,
-) -> serde_json::Value {
-    let successes = trials
-        .iter()
-        .filter(|t| t.scans_to_converge.is_some())
-        .count();
-    let mut hits: Vec<f32> = reference.hit_fractions.clone();
-    hits.sort_by(f32::total_cmp);
-    let pct = |p: f64| -> f64 {
-        if hits.is_empty() {
-            return f64::NAN;
-        }
-        let i = ((hits.len() - 1) as f64 * p).round() as usize;
-        f64::from(hits.get(i).copied().unwrap_or(f32::NAN))
-    };
-    let searches: Vec<&SearchSummary> = trials.iter().filter_map(|t| t.search.as_ref()).collect();
-    let max_nodes = searches.iter().map(|s| s.nodes).max().unwrap_or(0);
-    let max_instr = searches
-        .iter()
-        .map(|s| s.estimated_m4_instructions)
-        .max()
-        .unwrap_or(0);
-    let r = &settings.relocalization;
-    serde_json::json!({
-        "trials": trials.len(),
-        "successes": successes,
-        "scans_to_converge": trials.iter().map(|t| t.scans_to_converge).collect::<Vec<_>>(),
-        "tolerance_m": settings.tolerance_m,
-        "tolerance_deg": settings.tolerance_deg,
-        "max_scans": settings.max_scans,
-        "particles": settings.particles,
-        "seed": settings.seed,
-        "reference": "the localizer tracked from the true start pose",
-        "searches_complete": searches.iter().filter(|s| s.complete).count(),
-        "max_nodes": max_nodes,
-        "max_estimated_m4_instructions": max_instr,
-        "layers": {
-            "levels": settings.levels,
-            "bytes": layers_bytes,
-        },
-        "search": {
-            "max_range_m": r.search.max_range,
-            "max_beams": r.search.max_beams,
-            "min_score_fraction": r.search.min_score_fraction,
-            "relative_score": r.search.relative_score,
-            "node_budget": r.search.node_budget,
-            "hypotheses": r.hypotheses,
-        },
-        "lost_detection": {
-            "ratio": r.lost.ratio,
-            "scans": r.lost.scans,
-            "reference_lost_events": reference.lost_events,
-            "reference_lost_scans": reference.lost_scans,
-            "reference_expected_hit_fraction": reference.expected_hit_fraction,
-            "reference_hit_fraction_p01": pct(0.01),
-            "reference_hit_fraction_p05": pct(0.05),
-            "reference_hit_fraction_median": pct(0.5),
-        },
-        "per_trial": trials,
-    })
-}
-
-/// `host-sim localize --global --map map.yaml --dataset carmen:<file>`: the trials on a
-/// CARMEN log; the reference starts at the log's first scan (the map's origin).
-pub fn localize_cli(args: &crate::cli::LocalizeArgs, quiet: bool) -> Result<()> {
-    let started = Instant::now();
-    let crate::readers::DatasetSpec::Carmen(file) = &args.dataset else {
-        bail!("localize --global needs a lidar dataset (carmen:<file>)");
-    };
-    let path = crate::grid_replay::resolve_log(file)?;
-    let log = crate::grid_replay::read_log(&path)?;
-    let options = crate::grid_replay::options_from(args.config.as_deref(), &args.grid, &log)?;
-    let (cells, geometry) = crate::output::grid_map::read_map(&args.map, &options.config.log_odds)?;
-    if (geometry.resolution - options.config.resolution).abs() > 1e-6 {
-        bail!(
-            "{}: map resolution {} differs from the configured {}",
-            args.map.display(),
-            geometry.resolution,
-            options.config.resolution
-        );
-    }
-    let view = GridView::new(&cells, geometry, options.config.log_odds.occupied_above)
-        .map_err(|e| anyhow!("{}: {e}", args.map.display()))?;
-    let scans = crate::grid_replay::front_scans(&log);
-    let frames: Vec<Frame<'_>> = scans
-        .iter()
-        .map(|l| Frame {
-            stamp: l.stamp,
-            odometry: Pose2::new(l.odom[0] as f32, l.odom[1] as f32, l.odom[2] as f32),
-            ranges: &l.ranges,
-        })
-        .collect();
-    let name = path
-        .file_name()
-        .map_or_else(|| file.clone(), |n| n.to_string_lossy().to_string());
-    let settings = settings_from(
-        &args.global,
-        options.particles,
-        options.config,
-        options.lidar,
-    )?;
-    run_and_write(
-        &name,
-        &frames,
-        &view,
-        Pose2::IDENTITY,
-        &settings,
-        &args.out,
-        quiet,
-        started,
-    )
-}
-
-/// Trial settings from the command line.
+/// Trial settings from the options.
 pub fn settings_from(
-    args: &crate::cli::GlobalArgs,
+    args: &GlobalOptions,
     particles: usize,
     config: GridPfConfig,
     lidar: LidarGeometry,
@@ -500,107 +373,4 @@ pub fn settings_from(
         relocalization,
         lidar,
     })
-}
-
-/// Builds the layers, runs the reference and the trials, writes `out/metrics.json`.
-#[allow(clippy::too_many_arguments)]
-pub fn run_and_write(
-    name: &str,
-    frames: &[Frame<'_>],
-    view: &GridView<'_>,
-    start: Pose2<f32>,
-    settings: &TrialSettings,
-    out: &std::path::Path,
-    quiet: bool,
-    started: Instant,
-) -> Result<()> {
-    let layers = build_layers(view, &settings.config, settings.levels)?;
-    let reference = reference_run(frames, view, &layers, start, settings)?;
-    let pb = crate::grid_replay::progress_bar(settings.trials, quiet);
-    let trials = run_trials(frames, view, &layers, &reference.poses, settings, &|i| {
-        pb.set_position(i as u64 + 1)
-    })?;
-    pb.finish_and_clear();
-    let global = metrics(&trials, &reference, settings, layers.len());
-    let g = view.geometry();
-    let doc = serde_json::json!({
-        "dataset": name,
-        "map_cells": [g.width, g.height],
-        "scans": frames.len(),
-        "wall_time_s": started.elapsed().as_secs_f64(),
-        "global": global,
-    });
-    std::fs::create_dir_all(out)?;
-    std::fs::write(
-        out.join("metrics.json"),
-        serde_json::to_string_pretty(&doc)? + "\n",
-    )?;
-    if !quiet {
-        let g = &doc["global"];
-        println!(
-            "{name}: global localization {}/{} within {} m / {}° after ≤ {} scans (P = {}); scans to converge {}",
-            g["successes"],
-            g["trials"],
-            settings.tolerance_m,
-            settings.tolerance_deg,
-            settings.max_scans,
-            settings.particles,
-            g["scans_to_converge"]
-        );
-        println!(
-            "  searches complete {}/{}, most nodes {}, most estimated M4 instructions {}; reference lost events {}",
-            g["searches_complete"],
-            g["trials"],
-            g["max_nodes"],
-            g["max_estimated_m4_instructions"],
-            g["lost_detection"]["reference_lost_events"]
-        );
-        println!("  outputs in {}", out.display());
-    }
-    Ok(())
-}
-
-/// `host-sim sim --global`: the trials in the simulator's lidar world on the grid SLAM map
-/// it wrote (`grid_out/slam/map.yaml`, read back as a user would), into
-/// `grid_out/global/`; the reference starts at the true start pose.
-pub fn sim_cli(
-    rec: &crate::sim::lidar_world::LidarRecording,
-    config: GridPfConfig,
-    particles: usize,
-    args: &crate::cli::GlobalArgs,
-    grid_out: &std::path::Path,
-    quiet: bool,
-) -> Result<()> {
-    let started = Instant::now();
-    let map_path = grid_out.join("slam").join("map.yaml");
-    let (cells, geometry) = crate::output::grid_map::read_map(&map_path, &config.log_odds)?;
-    let view = GridView::new(&cells, geometry, config.log_odds.occupied_above)
-        .map_err(|e| anyhow!("{}: {e}", map_path.display()))?;
-    let f32_pose = |p: &Pose2<f64>| Pose2::new(p.x as f32, p.y as f32, p.theta as f32);
-    let frames: Vec<Frame<'_>> = rec
-        .scans
-        .iter()
-        .map(|s| Frame {
-            stamp: s.stamp,
-            odometry: f32_pose(&s.odometry),
-            ranges: &s.ranges,
-        })
-        .collect();
-    let start = rec
-        .scans
-        .first()
-        .map(|s| f32_pose(&s.truth))
-        .ok_or_else(|| anyhow!("no scans"))?;
-    let settings = settings_from(args, particles, config, rec.lidar)?;
-    let name = format!("{} (grid SLAM map)", rec.name);
-    run_and_write(
-        &name,
-        &frames,
-        &view,
-        start,
-        &settings,
-        &grid_out.join("global"),
-        quiet,
-        started,
-    )
 }
