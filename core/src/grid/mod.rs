@@ -13,12 +13,17 @@
 //!   256 × 256), which makes the particle filter's shift search sparse.
 //! - [`GridView`]: a borrowed read-only map (`&[i8]` + geometry), e.g. a `&'static` map in
 //!   flash, which is what the particle filter scores scans against.
+//! - [`MaxPoolLayers`]: max-pooled copies of a map (any occupied cell in each `2^k × 2^k`
+//!   window) and its free blocks, in one byte image for flash or RAM: the bounds of the
+//!   global search ([`crate::pf::global`]).
 
 mod bresenham;
+pub mod layers;
 mod occupancy;
 mod view;
 
 pub use bresenham::Bresenham;
+pub use layers::{LayersError, MaxPoolLayers};
 pub use occupancy::{OccupancyGrid, ScanIntegration};
 pub use view::{GridView, fill_occupancy_bits};
 

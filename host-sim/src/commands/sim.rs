@@ -7,7 +7,7 @@ use super::replay::run_and_report;
 use crate::domain::AssociationMode;
 use crate::domain::Precision;
 use crate::domain::config::Settings;
-use crate::domain::grid::Preset;
+use crate::domain::grid::{GlobalOptions, Preset};
 use crate::drivers::grid::{GridRunOptions, f32_pose, run_localizer, run_slam, sim_inputs};
 use crate::inputs::sim::lidar_world::{LidarRecording, SIM_GRID_CELLS, true_map};
 use crate::inputs::sim::simulate;
@@ -42,6 +42,8 @@ pub struct SimOptions {
     /// Grid filter settings (TOML, [`crate::domain::grid::GridToml`]) laid over the
     /// preset.
     pub grid_config: Option<PathBuf>,
+    /// Global localization trials on the grid SLAM map (when enabled).
+    pub global: GlobalOptions,
 }
 
 impl Default for SimOptions {
@@ -56,6 +58,7 @@ impl Default for SimOptions {
             grid_particles: 200,
             grid_preset: None,
             grid_config: None,
+            global: GlobalOptions::default(),
         }
     }
 }
@@ -96,6 +99,9 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
     };
     let out = args.out.join("grid");
     let (slam, loc) = run_and_write(&rec, config, args.grid_particles, &out)?;
+    if args.global.enabled {
+        super::global::sim_cli(&rec, config, args.grid_particles, &args.global, &out, quiet)?;
+    }
     if !quiet {
         println!(
             "{}: {} scans, {} particles, dead reckoning ATE {:.3} m",
