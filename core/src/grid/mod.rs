@@ -13,12 +13,21 @@
 //!   256 × 256), which makes the particle filter's shift search sparse.
 //! - [`GridView`]: a borrowed read-only map (`&[i8]` + geometry), e.g. a `&'static` map in
 //!   flash, which is what the particle filter scores scans against.
+//! - [`map_image`] (feature `map-image`): a map as one versioned, checksummed binary image
+//!   for flash, read in place.
+//! - [`ros_map`] (feature `std`): reading a ROS `map_server` map (`map.yaml` + PGM).
 
 mod bresenham;
+#[cfg(feature = "map-image")]
+pub mod map_image;
 mod occupancy;
+#[cfg(feature = "std")]
+pub mod ros_map;
 mod view;
 
 pub use bresenham::Bresenham;
+#[cfg(feature = "map-image")]
+pub use map_image::{MapImage, MapImageError};
 pub use occupancy::{OccupancyGrid, ScanIntegration};
 pub use view::{GridView, fill_occupancy_bits};
 
