@@ -12,14 +12,15 @@ use crate::association::KnownIds;
 use crate::association::{Observed, observe_known};
 use crate::ekf::{EkfConfig, EkfSlam, UpdateOutcome};
 use crate::geometry::Pose2;
-use crate::pf::{GridSlam, PfError, StepReport};
+use crate::pf::{GridLocalizer, GridSlam, PfError, StepReport};
 use crate::sensors::lidar::{LidarGeometry, LidarScan};
 use crate::sensors::range_bearing::RangeBearing;
 use crate::sensors::wheel_odometry::{DiffDriveGeometry, WheelTicks};
 
 use super::frame::{FrameDecoder, FrameError, MAX_FRAME_LEN};
 use super::messages::{
-    Command, Estimate, EstimatorKind, Odometry, ScanChunk, Status, StepResult, ToDevice, ToHost,
+    Command, Estimate, EstimatorKind, LocalizerReport, Odometry, Refusal, ScanChunk, Status,
+    StepResult, ToDevice, ToHost,
 };
 use super::scan::ScanAssembler;
 
@@ -75,6 +76,52 @@ impl<const W: usize, const H: usize, const P: usize, const B: usize, const BITMA
     }
     fn pose_covariance(&self) -> [f32; 6] {
         self.filter().pose_covariance()
+    }
+}
+
+/// A localizer on a fixed map as a [`Session`] drives it: a [`GridEstimator`] (reset puts
+/// every particle at the pose and the state to tracking) that can also be sent looking
+/// for itself and reports where it stands. Implemented by [`GridLocalizer`].
+pub trait LocalizerEstimator: GridEstimator {
+    /// Forget the pose: lost, the global search runs on a coming scan.
+    fn relocalize(&mut self) -> Result<(), PfError>;
+    /// Tracking, lost or relocalized, with its counters.
+    fn report(&self) -> LocalizerReport;
+}
+
+impl<const P: usize, const B: usize> GridEstimator for GridLocalizer<'_, P, B> {
+    fn reset(&mut self, start: Pose2<f32>) -> Result<(), PfError> {
+        self.reset_around(start, 0.0, 0.0)
+    }
+    fn predict_increment(&mut self, increment: &Pose2<f32>) -> Result<(), PfError> {
+        self.predict_odometry(&Pose2::new(0.0, 0.0, 0.0), increment)
+    }
+    fn predict_arc(&mut self, distance: f32, heading_change: f32) -> Result<(), PfError> {
+        self.predict(distance, heading_change)
+    }
+    fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError> {
+        GridLocalizer::predict_velocity(self, v, omega, dt)
+    }
+    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
+        GridLocalizer::observe(self, scan)
+    }
+    fn pose(&self) -> Pose2<f32> {
+        GridLocalizer::pose(self)
+    }
+    fn resamples(&self) -> u32 {
+        self.filter().resample_count()
+    }
+    fn pose_covariance(&self) -> [f32; 6] {
+        self.filter().pose_covariance()
+    }
+}
+
+impl<const P: usize, const B: usize> LocalizerEstimator for GridLocalizer<'_, P, B> {
+    fn relocalize(&mut self) -> Result<(), PfError> {
+        Err(PfError::InvalidConfig)
+    }
+    fn report(&self) -> LocalizerReport {
+        LocalizerReport::default()
     }
 }
 
@@ -148,6 +195,7 @@ pub struct Session<'a, const N: usize, const L: usize> {
     ids: KnownIds<L>,
     grid: Option<&'a mut dyn GridEstimator>,
     grid_setup: Option<GridSetup>,
+    localizer: Result<&'a mut dyn LocalizerEstimator, Refusal>,
     assembler: ScanAssembler<MAX_SCAN_BEAMS>,
     ranges: [f32; MAX_SCAN_BEAMS],
     active: EstimatorKind,
@@ -165,6 +213,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
             ids: KnownIds::new(),
             grid: None,
             grid_setup: None,
+            localizer: Err(Refusal::NoMap),
             assembler: ScanAssembler::new(),
             ranges: [0.0; MAX_SCAN_BEAMS],
             active: EstimatorKind::Ekf,
@@ -186,6 +235,36 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
         session.grid = Some(grid);
         session.grid_setup = Some(setup);
         session
+    }
+
+    /// The same session with a localizer on a map in flash — or, when the map was
+    /// refused at boot, the reason, which [`Command::SelectEstimator`]`(Localizer)` then
+    /// answers with [`ToHost::Refused`]. Scans and odometry reach the localizer as they
+    /// reach the grid estimator (`setup` replaces the grid's when both are given: one
+    /// robot, one lidar).
+    pub fn with_localizer(
+        mut self,
+        localizer: Result<&'a mut dyn LocalizerEstimator, Refusal>,
+        setup: GridSetup,
+    ) -> Self {
+        self.localizer = localizer;
+        self.grid_setup = Some(setup);
+        self.reset(Pose2::new(0.0, 0.0, 0.0));
+        self
+    }
+
+    /// The grid estimator or localizer the active mode feeds, with the setup.
+    fn active_grid(&mut self) -> Option<(&mut dyn GridEstimator, GridSetup)> {
+        let setup = self.grid_setup?;
+        let grid: &mut dyn GridEstimator = match self.active {
+            EstimatorKind::Grid => self.grid.as_deref_mut()?,
+            EstimatorKind::Localizer => match &mut self.localizer {
+                Ok(l) => &mut **l,
+                Err(_) => return None,
+            },
+            EstimatorKind::Ekf => return None,
+        };
+        Some((grid, setup))
     }
 
     /// The counters.
@@ -239,11 +318,18 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
         if let StepResult::Rejected { .. } = result {
             self.status.rejected = self.status.rejected.saturating_add(1);
         }
-        ToHost::Estimate(self.estimate(seq, stamp_us, result))
+        let estimate = self.estimate(seq, stamp_us, result);
+        match (&self.localizer, self.active) {
+            (Ok(l), EstimatorKind::Localizer) => ToHost::Localization {
+                estimate,
+                localizer: l.report(),
+            },
+            _ => ToHost::Estimate(estimate),
+        }
     }
 
     fn grid_odometry(&mut self, odometry: &Odometry) -> StepResult {
-        let (Some(grid), Some(setup)) = (self.grid.as_deref_mut(), self.grid_setup) else {
+        let Some((grid, setup)) = self.active_grid() else {
             return StepResult::Ignored;
         };
         let r = match *odometry {
@@ -281,10 +367,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
     }
 
     fn scan(&mut self, chunk: &ScanChunk) -> StepResult {
-        if self.active != EstimatorKind::Grid {
-            return StepResult::Ignored;
-        }
-        let (Some(grid), Some(setup)) = (self.grid.as_deref_mut(), self.grid_setup) else {
+        let Some((_, setup)) = self.active_grid() else {
             return StepResult::Ignored;
         };
         let scan = match self.assembler.push(chunk) {
@@ -312,6 +395,12 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
             ..setup.lidar
         };
         let ranges = self.ranges.get(..n).unwrap_or(&[]);
+        let grid: &mut dyn GridEstimator = match (self.active, &mut self.grid, &mut self.localizer)
+        {
+            (EstimatorKind::Grid, Some(g), _) => &mut **g,
+            (EstimatorKind::Localizer, _, Ok(l)) => &mut **l,
+            _ => return StepResult::Ignored,
+        };
         match grid.observe(&LidarScan::new(ranges, geometry)) {
             Ok(_) => StepResult::Applied,
             Err(e) => StepResult::Rejected { reason: e as u8 },
@@ -319,7 +408,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
     }
 
     fn odometry(&mut self, odometry: &Odometry) -> StepResult {
-        if self.active == EstimatorKind::Grid {
+        if self.active != EstimatorKind::Ekf {
             return self.grid_odometry(odometry);
         }
         let r = match *odometry {
@@ -358,6 +447,17 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
     fn command(&mut self, seq: u32, command: &Command) -> ToHost {
         match *command {
             Command::Reset { x, y, theta } => self.reset(Pose2::new(x, y, theta)),
+            Command::SelectEstimator(EstimatorKind::Localizer) => {
+                if let Err(reason) = &self.localizer {
+                    return ToHost::Refused {
+                        seq,
+                        reason: *reason,
+                        estimator: self.active,
+                    };
+                }
+                self.active = EstimatorKind::Localizer;
+                self.reset(Pose2::new(0.0, 0.0, 0.0));
+            }
             Command::SelectEstimator(kind) => {
                 // Without a grid estimator the session stays on the EKF.
                 self.active = if self.grid.is_some() {
@@ -366,6 +466,21 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
                     EstimatorKind::Ekf
                 };
                 self.reset(Pose2::new(0.0, 0.0, 0.0));
+            }
+            Command::Relocalize => {
+                let relocalized = match (&mut self.localizer, self.active) {
+                    (Ok(l), EstimatorKind::Localizer) => l.relocalize().map_err(|e| e as u8),
+                    _ => {
+                        return ToHost::Refused {
+                            seq,
+                            reason: Refusal::NotLocalizing,
+                            estimator: self.active,
+                        };
+                    }
+                };
+                if relocalized.is_err() {
+                    self.status.rejected = self.status.rejected.saturating_add(1);
+                }
             }
             Command::ReportStatus => {}
             Command::ConfigureEkf(settings) => {
@@ -403,6 +518,11 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
         {
             let _ = grid.reset(Pose2::new(0.0, 0.0, 0.0));
         }
+        if let Ok(localizer) = &mut self.localizer
+            && localizer.reset(pose).is_err()
+        {
+            let _ = localizer.reset(Pose2::new(0.0, 0.0, 0.0));
+        }
         let (ok, bad) = (self.status.frames_ok, self.status.frames_bad);
         self.status = Status {
             frames_ok: ok,
@@ -412,9 +532,12 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
     }
 
     fn estimate(&mut self, seq: u32, stamp_us: u64, result: StepResult) -> Estimate {
-        if self.active == EstimatorKind::Grid
-            && let Some(grid) = self.grid.as_deref()
-        {
+        let grid: Option<&dyn GridEstimator> = match (self.active, &self.grid, &self.localizer) {
+            (EstimatorKind::Grid, Some(g), _) => Some(&**g),
+            (EstimatorKind::Localizer, _, Ok(l)) => Some(&**l),
+            _ => None,
+        };
+        if let Some(grid) = grid {
             let pose = grid.pose();
             self.status.resamples = grid.resamples();
             return Estimate {
@@ -769,6 +892,7 @@ mod tests {
             .map(|r| match r {
                 ToHost::Estimate(e) => (e.seq, e.estimator, e.result),
                 ToHost::Status { seq, estimator, .. } => (*seq, *estimator, StepResult::Ignored),
+                other => panic!("{other:?}"),
             })
             .collect();
         use EstimatorKind::{Ekf, Grid};
