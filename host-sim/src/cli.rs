@@ -37,6 +37,9 @@ pub enum Command {
     /// Localize on a saved grid map (`map.yaml` from `replay --filter grid-slam`) with the
     /// grid particle filter.
     Localize(LocalizeArgs),
+    /// Convert a ROS map (`map.yaml` + PGM) into the firmware's map image (what
+    /// `MICROSLAM_MAP=<map.yaml>` embeds in the firmware).
+    ExportMap(ExportMapArgs),
     /// Coloured floor map from simulated RGB-D frames (`--dataset sim`), scored against the
     /// simulator's true floor texture.
     Texture(crate::camera::TextureArgs),
@@ -70,6 +73,17 @@ pub struct GridArgs {
     /// Benchmark relations file (default: a `*.relations` file next to the log).
     #[arg(long)]
     pub relations: Option<PathBuf>,
+}
+
+/// Options of `host-sim export-map`.
+#[derive(Debug, Clone, Args)]
+pub struct ExportMapArgs {
+    /// The map: `map.yaml` (ROS map_server) next to its PGM.
+    #[arg(long)]
+    pub map: PathBuf,
+    /// The map image to write.
+    #[arg(long, short, default_value = "out/map.bin")]
+    pub out: PathBuf,
 }
 
 /// Options of `host-sim localize`.
@@ -216,9 +230,17 @@ pub struct HilArgs {
     /// Baud rate of the serial port.
     #[arg(long, default_value_t = 115_200)]
     pub baud: u32,
-    /// Dataset: `mrclam:<dir>`, as for `replay`.
+    /// Dataset: `mrclam:<dir>` (EKF), as for `replay`, or `carmen:<log>` (the localizer
+    /// on the map in the firmware's flash; needs `--map`).
     #[arg(long, short)]
     pub dataset: DatasetSpec,
+    /// With `carmen:`: the map the firmware was built with (`MICROSLAM_MAP`), for the
+    /// host reference.
+    #[arg(long)]
+    pub map: Option<PathBuf>,
+    /// With `carmen:`: stream only the first N scans.
+    #[arg(long)]
+    pub scans: Option<usize>,
     /// Robot whose log is streamed.
     #[arg(long, default_value_t = 1)]
     pub robot: u8,
@@ -252,6 +274,9 @@ pub fn run(cli: &Cli) -> Result<()> {
         Some(Command::Sim(args)) => crate::sim::run_cli(args, cli.quiet),
         Some(Command::Hil(args)) => crate::hil::run_cli(args, cli.quiet),
         Some(Command::Localize(args)) => crate::grid_replay::localize_cli(args, cli.quiet),
+        Some(Command::ExportMap(args)) => {
+            crate::hil_localizer::export_cli(&args.map, &args.out, cli.quiet)
+        }
         Some(Command::Texture(args)) => crate::camera::texture_cli(args, cli.quiet),
         Some(Command::Detections(args)) => crate::camera::detections_cli(args, cli.quiet),
         None => crate::sim::run_cli(&SimArgs::default(), cli.quiet),

@@ -390,6 +390,9 @@ pub fn device_ate(replies: &[ToHost], truth: &[crate::readers::TruePose]) -> (Op
 
 /// `host-sim hil`.
 pub fn run_cli(args: &HilArgs, quiet: bool) -> Result<()> {
+    if let crate::readers::DatasetSpec::Carmen(file) = &args.dataset {
+        return crate::hil_localizer::run_cli(args, file, quiet);
+    }
     let recording = crate::readers::read(&args.dataset, args.robot)?;
     let settings = if args.dataset_settings {
         let family = args.dataset.family();

@@ -26,6 +26,7 @@ pub mod datasets;
 pub mod faults;
 pub mod grid_replay;
 pub mod hil;
+pub mod hil_localizer;
 pub mod metrics;
 pub mod output;
 pub mod readers;
