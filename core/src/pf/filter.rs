@@ -81,18 +81,39 @@ impl<const P: usize> ParticleFilter<P> {
         std_xy: f32,
         std_theta: f32,
     ) -> Result<(), PfError> {
-        if !(pose.is_finite() && std_xy.is_finite() && std_theta.is_finite()) {
+        self.reset_among(core::slice::from_ref(&pose), std_xy, std_theta)
+    }
+
+    /// Spreads the particles over several poses: particle `i` around `centres[i % n]`
+    /// (Gaussian, `std_xy` m, `std_theta` rad), equal weights. Nothing changes when
+    /// `centres` is empty or an input is not finite.
+    pub fn reset_among(
+        &mut self,
+        centres: &[Pose2<f32>],
+        std_xy: f32,
+        std_theta: f32,
+    ) -> Result<(), PfError> {
+        if centres.is_empty()
+            || !(centres.iter().all(Pose2::is_finite)
+                && std_xy.is_finite()
+                && std_theta.is_finite())
+        {
             return Err(PfError::NonFiniteInput);
         }
         let w = -libm::logf(P as f32);
-        for (p, lw) in self.poses.iter_mut().zip(self.log_weights.iter_mut()) {
+        for ((p, lw), c) in self
+            .poses
+            .iter_mut()
+            .zip(self.log_weights.iter_mut())
+            .zip(centres.iter().cycle())
+        {
             let nx: f32 = StandardNormal.sample(&mut self.rng);
             let ny: f32 = StandardNormal.sample(&mut self.rng);
             let nt: f32 = StandardNormal.sample(&mut self.rng);
             *p = Pose2::new(
-                pose.x + std_xy.abs() * nx,
-                pose.y + std_xy.abs() * ny,
-                super::prediction::wrap(pose.theta + std_theta.abs() * nt),
+                c.x + std_xy.abs() * nx,
+                c.y + std_xy.abs() * ny,
+                super::prediction::wrap(c.theta + std_theta.abs() * nt),
             );
             *lw = w;
         }

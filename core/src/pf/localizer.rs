@@ -1,11 +1,181 @@
-//! Localization against a fixed map: the grid filter without map writes.
+//! Localization against a fixed map: the grid filter without map writes, with lost
+//! detection and global relocalization ([`super::global`]).
+//!
+//! **Lost detection.** After every scan the localizer computes the *hit fraction*: the
+//! best particle's correlation divided by the total weight of the scan's beams (1.0: every
+//! beam ends in an occupied cell). While tracking it keeps a running mean of it, the
+//! *expected* hit fraction of this map and lidar. A scan whose hit fraction is below
+//! [`LostDetection::ratio`] × expected is *low*; [`LostDetection::scans`] consecutive low
+//! scans declare the robot lost ([`LocalizerState::Lost`]).
+//!
+//! **Relocalization.** With max-pooled layers of the map
+//! ([`GridLocalizer::with_layers`]), a lost robot (automatically, or on
+//! [`GridLocalizer::relocalize`], or from the start with
+//! [`GridLocalizer::without_pose`]) runs the global search on its next scan, spreads the
+//! particles over the best hypotheses and goes on filtering from there
+//! ([`LocalizerState::Relocalized`]); [`LostDetection::confirm_scans`] scans that are not
+//! low make it [`LocalizerState::Tracking`] again. [`GridLocalizer::status`] reports the
+//! state and counters for the estimates.
 
 use super::correlation::ScanPoints;
+use super::global::{self, GlobalError, GlobalSearchConfig, Hypotheses, Hypothesis, SearchReport};
 use super::prediction::arc_between;
 use super::{GridPfConfig, ParticleFilter, PfError, StepReport};
 use crate::geometry::Pose2;
-use crate::grid::{GridView, ScanIntegration};
+use crate::grid::{GridView, MaxPoolLayers, ScanIntegration};
 use crate::sensors::lidar::LidarScan;
+
+/// Most hypotheses the localizer seeds its particles around.
+pub const MAX_HYPOTHESES: usize = 8;
+
+/// Where the localizer stands.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LocalizerState {
+    /// The scans fit the map at the estimate.
+    #[default]
+    Tracking,
+    /// The scans stopped fitting (or no pose was ever given, or a relocalization was
+    /// asked for): the estimate is not to be trusted. With layers, the next scan runs the
+    /// global search.
+    Lost,
+    /// The particles were seeded from a global search; not yet confirmed by
+    /// [`LostDetection::confirm_scans`] good scans.
+    Relocalized,
+}
+
+/// When the localizer declares itself lost.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LostDetection {
+    /// A scan is low when its hit fraction is below `ratio` × the expected one (0..1).
+    pub ratio: f32,
+    /// Consecutive low scans that declare the robot lost (0: never).
+    pub scans: u8,
+    /// Expected hit fraction before the first tracked scans have measured it (0..1].
+    pub initial_expected: f32,
+    /// Weight of each tracked scan in the running expected hit fraction (0..1].
+    pub learning_rate: f32,
+    /// Consecutive scans that are not low after which a relocalized (or lost) localizer
+    /// is tracking again.
+    pub confirm_scans: u8,
+}
+
+impl LostDetection {
+    /// Settings measured on the Intel log and the simulator's office (see
+    /// `docs/global-localization.md`).
+    pub const DEFAULT: Self = Self {
+        ratio: 0.5,
+        scans: 5,
+        initial_expected: 0.7,
+        learning_rate: 0.05,
+        confirm_scans: 5,
+    };
+
+    /// `true` when every setting is finite and in range.
+    pub fn is_valid(&self) -> bool {
+        self.ratio.is_finite()
+            && (0.0..=1.0).contains(&self.ratio)
+            && self.initial_expected.is_finite()
+            && self.initial_expected > 0.0
+            && self.initial_expected <= 1.0
+            && self.learning_rate.is_finite()
+            && self.learning_rate > 0.0
+            && self.learning_rate <= 1.0
+    }
+}
+
+/// Settings of lost detection and relocalization.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RelocalizationConfig {
+    /// The global search.
+    pub search: GlobalSearchConfig,
+    /// When the robot is lost.
+    pub lost: LostDetection,
+    /// Search by itself when lost (otherwise only on [`GridLocalizer::relocalize`]).
+    pub automatic: bool,
+    /// Hypotheses the particles are spread over (1..=[`MAX_HYPOTHESES`]).
+    pub hypotheses: u8,
+    /// Position spread of the particles around each hypothesis, metres (0: one cell).
+    pub spread_m: f32,
+    /// Heading spread around each hypothesis, radians (0: the search's heading step).
+    pub spread_rad: f32,
+}
+
+impl RelocalizationConfig {
+    /// Automatic relocalization with [`GlobalSearchConfig::DEFAULT`] and
+    /// [`LostDetection::DEFAULT`], particles over the 4 best hypotheses.
+    pub const DEFAULT: Self = Self {
+        search: GlobalSearchConfig::DEFAULT,
+        lost: LostDetection::DEFAULT,
+        automatic: true,
+        hypotheses: 4,
+        spread_m: 0.0,
+        spread_rad: 0.0,
+    };
+
+    /// `true` when every setting is finite and in range.
+    pub fn is_valid(&self) -> bool {
+        self.search.is_valid()
+            && self.lost.is_valid()
+            && self.hypotheses >= 1
+            && usize::from(self.hypotheses) <= MAX_HYPOTHESES
+            && self.spread_m.is_finite()
+            && self.spread_m >= 0.0
+            && self.spread_rad.is_finite()
+            && self.spread_rad >= 0.0
+    }
+}
+
+impl Default for RelocalizationConfig {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// State and counters of lost detection and relocalization (for the estimates).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LocalizerStatus {
+    /// Tracking, lost or relocalized.
+    pub state: LocalizerState,
+    /// Hit fraction of the last scan (best particle's correlation / total beam weight).
+    pub hit_fraction: f32,
+    /// Running expected hit fraction while tracking.
+    pub expected_hit_fraction: f32,
+    /// Consecutive low scans so far.
+    pub low_scans: u8,
+    /// Consecutive scans that were not low.
+    pub good_scans: u8,
+    /// Times the localizer declared itself lost.
+    pub lost_events: u32,
+    /// Global searches that seeded the particles.
+    pub relocalizations: u32,
+    /// Global searches that found no hypothesis above the minimum score.
+    pub failed_searches: u32,
+    /// `true` when the next scan runs the global search.
+    pub search_pending: bool,
+    /// The last global search, if any.
+    pub last_search: Option<SearchReport>,
+}
+
+impl LocalizerStatus {
+    const fn new(state: LocalizerState, expected: f32) -> Self {
+        Self {
+            state,
+            hit_fraction: 0.0,
+            expected_hit_fraction: expected,
+            low_scans: 0,
+            good_scans: 0,
+            lost_events: 0,
+            relocalizations: 0,
+            failed_searches: 0,
+            search_pending: false,
+            last_search: None,
+        }
+    }
+}
 
 /// Localizer with `P` particles and at most `B` beams per scan on a borrowed map (owned
 /// grid's [`crate::grid::OccupancyGrid::view`] or a `&'static` map in flash).
@@ -16,13 +186,21 @@ use crate::sensors::lidar::LidarScan;
 /// [`crate::grid::occupancy_bytes`] bytes, or kept in flash next to the map): the shift
 /// search is then the sparse one, a third of the instructions for the same scores.
 ///
-/// RAM: `28·P + 24·B` bytes plus ~100; the map is not copied.
+/// For global localization give it the map's max-pooled layers
+/// ([`GridLocalizer::with_layers`]; see the module documentation).
+///
+/// RAM: `28·P + 24·B` bytes plus ~400; the map and its layers are not copied. A global
+/// search adds ≈ 1.8 KB of stack.
 pub struct GridLocalizer<'m, const P: usize, const B: usize> {
     map: GridView<'m>,
     filter: ParticleFilter<P>,
     points: ScanPoints<B>,
     config: GridPfConfig,
     pose: Pose2<f32>,
+    layers: Option<MaxPoolLayers<'m>>,
+    relocalization: RelocalizationConfig,
+    status: LocalizerStatus,
+    hypotheses: Hypotheses<MAX_HYPOTHESES>,
 }
 
 impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
@@ -36,13 +214,107 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
         if !config.is_valid() {
             return Err(PfError::InvalidConfig);
         }
+        let relocalization = RelocalizationConfig::DEFAULT;
         Ok(Self {
             map,
             filter: ParticleFilter::new(config.filter, start)?,
             points: ScanPoints::new(),
             config,
             pose: start,
+            layers: None,
+            relocalization,
+            status: LocalizerStatus::new(
+                LocalizerState::Tracking,
+                relocalization.lost.initial_expected,
+            ),
+            hypotheses: Hypotheses::new(),
         })
+    }
+
+    /// A localizer that knows no pose: it is [`LocalizerState::Lost`] and its first scan
+    /// runs the global search over `layers` (made from `map`).
+    pub fn without_pose(
+        map: GridView<'m>,
+        config: GridPfConfig,
+        layers: MaxPoolLayers<'m>,
+        relocalization: RelocalizationConfig,
+    ) -> Result<Self, GlobalError> {
+        let (cx, cy) = map.geometry().cell_centre(
+            map.geometry().width as i32 / 2,
+            map.geometry().height as i32 / 2,
+        );
+        let mut loc = Self::new(map, config, Pose2::new(cx, cy, 0.0))
+            .map_err(|_| GlobalError::InvalidConfig)?
+            .with_layers(layers, relocalization)?;
+        loc.status.state = LocalizerState::Lost;
+        loc.status.search_pending = true;
+        Ok(loc)
+    }
+
+    /// The same localizer able to search globally: `layers` are the max-pooled layers of
+    /// its map ([`MaxPoolLayers::build`] or [`MaxPoolLayers::from_bytes`]), refused when
+    /// made for another map.
+    pub fn with_layers(
+        mut self,
+        layers: MaxPoolLayers<'m>,
+        relocalization: RelocalizationConfig,
+    ) -> Result<Self, GlobalError> {
+        if !relocalization.is_valid() {
+            return Err(GlobalError::InvalidConfig);
+        }
+        if !layers.matches(&self.map) {
+            return Err(GlobalError::LayersMismatch);
+        }
+        self.layers = Some(layers);
+        self.set_relocalization(relocalization)?;
+        Ok(self)
+    }
+
+    /// Changes the lost-detection and relocalization settings (the running expected hit
+    /// fraction is kept).
+    pub fn set_relocalization(
+        &mut self,
+        relocalization: RelocalizationConfig,
+    ) -> Result<(), GlobalError> {
+        if !relocalization.is_valid() {
+            return Err(GlobalError::InvalidConfig);
+        }
+        self.relocalization = relocalization;
+        Ok(())
+    }
+
+    /// Asks for a global relocalization (e.g. after the robot was carried): the state
+    /// becomes [`LocalizerState::Lost`] and the next scan runs the global search.
+    /// Refused with [`GlobalError::NoLayers`] when the localizer has no layers.
+    pub fn relocalize(&mut self) -> Result<(), GlobalError> {
+        if self.layers.is_none() {
+            return Err(GlobalError::NoLayers);
+        }
+        self.status.state = LocalizerState::Lost;
+        self.status.search_pending = true;
+        self.status.low_scans = 0;
+        self.status.good_scans = 0;
+        Ok(())
+    }
+
+    /// State and counters of lost detection and relocalization.
+    pub fn status(&self) -> &LocalizerStatus {
+        &self.status
+    }
+
+    /// Tracking, lost or relocalized.
+    pub fn state(&self) -> LocalizerState {
+        self.status.state
+    }
+
+    /// The hypotheses of the last global search, best first.
+    pub fn hypotheses(&self) -> &[Hypothesis] {
+        self.hypotheses.as_slice()
+    }
+
+    /// The max-pooled layers, when the localizer has them.
+    pub fn layers(&self) -> Option<&MaxPoolLayers<'m>> {
+        self.layers.as_ref()
     }
 
     /// Spreads the particles around `pose` (Gaussian, `std_xy` m, `std_theta` rad).
@@ -91,7 +363,10 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
         self.filter.predict(d, t)
     }
 
-    /// Scores the scan against the map, shifts, reweights and resamples.
+    /// Scores the scan against the map, shifts, reweights and resamples; before that, when
+    /// a search is pending (lost, [`GridLocalizer::relocalize`], no pose), runs the global
+    /// search on the scan and spreads the particles over its hypotheses. Then updates the
+    /// lost detection ([`GridLocalizer::status`]).
     pub fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
         if !scan.geometry.is_valid() {
             return Err(PfError::InvalidScan);
@@ -104,8 +379,12 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
         if beams == 0 {
             return Err(PfError::EmptyScan);
         }
+        if self.status.search_pending {
+            self.search_and_seed();
+        }
         let u = self.filter.update(&self.map, self.points.as_slice())?;
         self.pose = u.best_pose;
+        self.track_score(u.best_shift.score);
         Ok(StepReport {
             pose: u.best_pose,
             n_eff: u.n_eff,
@@ -114,5 +393,102 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
             score: u.best_shift.score,
             map: ScanIntegration::default(),
         })
+    }
+}
+
+impl<const P: usize, const B: usize> GridLocalizer<'_, P, B> {
+    /// Runs the global search on the loaded points and, when it finds hypotheses, spreads
+    /// the particles over them.
+    fn search_and_seed(&mut self) {
+        let Some(layers) = self.layers else {
+            self.status.search_pending = false;
+            return;
+        };
+        let r = &self.relocalization;
+        let mut found = Hypotheses::<MAX_HYPOTHESES>::new();
+        let report = match global::search(
+            &self.map,
+            &layers,
+            self.points.as_slice(),
+            &r.search,
+            &mut found,
+        ) {
+            Ok(report) => report,
+            Err(_) => {
+                self.status.failed_searches = self.status.failed_searches.wrapping_add(1);
+                return;
+            }
+        };
+        self.status.last_search = Some(report);
+        let used = found
+            .as_slice()
+            .get(..usize::from(r.hypotheses))
+            .unwrap_or(found.as_slice());
+        let mut centres = [Pose2::new(0.0f32, 0.0, 0.0); MAX_HYPOTHESES];
+        for (c, h) in centres.iter_mut().zip(used) {
+            *c = h.pose;
+        }
+        let centres = centres.get(..used.len()).unwrap_or(&[]);
+        let spread_m = if r.spread_m > 0.0 {
+            r.spread_m
+        } else {
+            self.map.geometry().resolution
+        };
+        let spread_rad = if r.spread_rad > 0.0 {
+            r.spread_rad
+        } else {
+            report.heading_step
+        };
+        self.hypotheses = found;
+        if self
+            .filter
+            .reset_among(centres, spread_m, spread_rad)
+            .is_err()
+        {
+            self.status.failed_searches = self.status.failed_searches.wrapping_add(1);
+            return;
+        }
+        self.status.search_pending = false;
+        self.status.state = LocalizerState::Relocalized;
+        self.status.relocalizations = self.status.relocalizations.wrapping_add(1);
+        self.status.low_scans = 0;
+        self.status.good_scans = 0;
+    }
+
+    /// Lost detection after an update whose best particle scored `score`.
+    fn track_score(&mut self, score: u32) {
+        let total: u64 = self
+            .points
+            .as_slice()
+            .iter()
+            .map(|p| u64::from(p.weight))
+            .sum();
+        let fraction = if total > 0 {
+            (score as f32 / total as f32).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let lost = self.relocalization.lost;
+        let s = &mut self.status;
+        s.hit_fraction = fraction;
+        let low = fraction < lost.ratio * s.expected_hit_fraction;
+        if low {
+            s.low_scans = s.low_scans.saturating_add(1);
+            s.good_scans = 0;
+        } else {
+            s.low_scans = 0;
+            s.good_scans = s.good_scans.saturating_add(1);
+            if s.state == LocalizerState::Tracking {
+                s.expected_hit_fraction +=
+                    lost.learning_rate * (fraction - s.expected_hit_fraction);
+            } else if s.good_scans >= lost.confirm_scans && !s.search_pending {
+                s.state = LocalizerState::Tracking;
+            }
+        }
+        if lost.scans > 0 && s.low_scans >= lost.scans && s.state != LocalizerState::Lost {
+            s.state = LocalizerState::Lost;
+            s.lost_events = s.lost_events.wrapping_add(1);
+            s.search_pending = self.layers.is_some() && self.relocalization.automatic;
+        }
     }
 }

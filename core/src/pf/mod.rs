@@ -11,12 +11,14 @@
 //! - [`GridSlam`]: the seed's SLAM: the best particle writes each scan into the one shared
 //!   grid, which starts from the first scan.
 //! - [`GridLocalizer`]: the same filter against a fixed map ([`crate::grid::GridView`],
-//!   e.g. in flash); it never writes the map.
+//!   e.g. in flash); it never writes the map. It detects when it is lost and finds
+//!   itself again anywhere in the map with [`global`], the exact correlative search.
 //!
 //! All settings are in [`GridPfConfig`]; [`GridPfConfig::SEED`] is the seed exactly.
 
 pub mod correlation;
 mod filter;
+pub mod global;
 mod localizer;
 pub mod prediction;
 pub mod resampling;
@@ -24,7 +26,10 @@ mod slam;
 
 pub use correlation::{ScanPoint, ScanPoints, ShiftScore};
 pub use filter::{ParticleFilter, UpdateReport};
-pub use localizer::GridLocalizer;
+pub use localizer::{
+    GridLocalizer, LocalizerState, LocalizerStatus, LostDetection, MAX_HYPOTHESES,
+    RelocalizationConfig,
+};
 pub use prediction::MotionNoise;
 pub use resampling::Resampling;
 pub use slam::{GridSlam, StepReport};
@@ -201,5 +206,7 @@ impl fmt::Display for PfError {
 
 impl core::error::Error for PfError {}
 
+#[cfg(test)]
+mod relocalization_tests;
 #[cfg(test)]
 mod tests;

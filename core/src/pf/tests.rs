@@ -26,7 +26,7 @@ const WALLS: [[f32; 4]; 13] = [
     [1.7, 1.6, 2.2, 1.0],
 ];
 
-const LIDAR: LidarGeometry = LidarGeometry {
+pub(super) const LIDAR: LidarGeometry = LidarGeometry {
     first_angle: -2.35,
     angle_increment: 4.7 / 180.0,
     min_range: 0.1,
@@ -54,15 +54,15 @@ fn cast(x: f32, y: f32, a: f32) -> f32 {
     best
 }
 
-struct Sim {
-    truth: Vec<Pose2<f32>>,
-    odometry: Vec<Pose2<f32>>,
-    scans: Vec<Vec<f32>>,
+pub(super) struct Sim {
+    pub(super) truth: Vec<Pose2<f32>>,
+    pub(super) odometry: Vec<Pose2<f32>>,
+    pub(super) scans: Vec<Vec<f32>>,
 }
 
 /// One and a half laps of a loop around the partition, 10 cm steps, with odometry that drifts
 /// (heading bias 2°/m plus noise) and 1 cm range noise.
-fn simulate(seed: u64) -> Sim {
+pub(super) fn simulate(seed: u64) -> Sim {
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     let range_noise = Normal::new(0.0f32, 0.01).unwrap();
     let step_noise = Normal::new(0.0f32, 0.01).unwrap();
@@ -126,7 +126,7 @@ fn ate(est: &[Pose2<f32>], truth: &[Pose2<f32>]) -> f32 {
     (s / est.len() as f32).sqrt()
 }
 
-type Grid = OccupancyGrid<256, 256>;
+pub(super) type Grid = OccupancyGrid<256, 256>;
 
 fn run_slam(sim: &Sim, config: GridPfConfig) -> (Vec<Pose2<f32>>, Box<Grid>) {
     let mut grid = Box::new(Grid::centred(config.resolution, config.log_odds));
@@ -366,7 +366,8 @@ fn memory_per_capacity_is_as_documented() {
         slam <= filter + 24 * 90 + 100 + size_of::<GridPfConfig>(),
         "{slam}"
     );
-    assert!(slam < 3400 && loc < 3400, "{slam} {loc}");
+    // The localizer's lost detection and relocalization state add ~400 B (measured 3672).
+    assert!(slam < 3400 && loc < 3700, "{slam} {loc}");
 }
 
 #[test]

@@ -367,6 +367,8 @@ pub enum Refusal {
     },
     /// The command needs the localizer to be the active estimator.
     NotLocalizing,
+    /// The map carries no max-pooled layers: the localizer cannot search globally.
+    NoGlobalSearch,
 }
 
 /// Messages from the device to the host.

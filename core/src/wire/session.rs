@@ -12,7 +12,7 @@ use crate::association::KnownIds;
 use crate::association::{Observed, observe_known};
 use crate::ekf::{EkfConfig, EkfSlam, UpdateOutcome};
 use crate::geometry::Pose2;
-use crate::pf::{GridLocalizer, GridSlam, PfError, StepReport};
+use crate::pf::{GridLocalizer, GridSlam, LocalizerState, PfError, StepReport};
 use crate::sensors::lidar::{LidarGeometry, LidarScan};
 use crate::sensors::range_bearing::RangeBearing;
 use crate::sensors::wheel_odometry::{DiffDriveGeometry, WheelTicks};
@@ -20,7 +20,7 @@ use crate::sensors::wheel_odometry::{DiffDriveGeometry, WheelTicks};
 use super::frame::{FrameDecoder, FrameError, MAX_FRAME_LEN};
 use super::messages::{
     Command, Estimate, EstimatorKind, LocalizerReport, Odometry, Refusal, ScanChunk, Status,
-    StepResult, ToDevice, ToHost,
+    StepResult, ToDevice, ToHost, TrackingState,
 };
 use super::scan::ScanAssembler;
 
@@ -83,8 +83,9 @@ impl<const W: usize, const H: usize, const P: usize, const B: usize, const BITMA
 /// every particle at the pose and the state to tracking) that can also be sent looking
 /// for itself and reports where it stands. Implemented by [`GridLocalizer`].
 pub trait LocalizerEstimator: GridEstimator {
-    /// Forget the pose: lost, the global search runs on a coming scan.
-    fn relocalize(&mut self) -> Result<(), PfError>;
+    /// Forget the pose: lost, the global search runs on the next scan. Refused with
+    /// [`Refusal::NoGlobalSearch`] when the map has no layers for it.
+    fn relocalize(&mut self) -> Result<(), Refusal>;
     /// Tracking, lost or relocalized, with its counters.
     fn report(&self) -> LocalizerReport;
 }
@@ -117,11 +118,21 @@ impl<const P: usize, const B: usize> GridEstimator for GridLocalizer<'_, P, B> {
 }
 
 impl<const P: usize, const B: usize> LocalizerEstimator for GridLocalizer<'_, P, B> {
-    fn relocalize(&mut self) -> Result<(), PfError> {
-        Err(PfError::InvalidConfig)
+    fn relocalize(&mut self) -> Result<(), Refusal> {
+        GridLocalizer::relocalize(self).map_err(|_| Refusal::NoGlobalSearch)
     }
     fn report(&self) -> LocalizerReport {
-        LocalizerReport::default()
+        let s = self.status();
+        LocalizerReport {
+            state: match s.state {
+                LocalizerState::Tracking => TrackingState::Tracking,
+                LocalizerState::Lost => TrackingState::Lost,
+                LocalizerState::Relocalized => TrackingState::Relocalized,
+            },
+            hit_fraction: s.hit_fraction,
+            lost_events: s.lost_events,
+            relocalizations: s.relocalizations,
+        }
     }
 }
 
@@ -469,17 +480,15 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
             }
             Command::Relocalize => {
                 let relocalized = match (&mut self.localizer, self.active) {
-                    (Ok(l), EstimatorKind::Localizer) => l.relocalize().map_err(|e| e as u8),
-                    _ => {
-                        return ToHost::Refused {
-                            seq,
-                            reason: Refusal::NotLocalizing,
-                            estimator: self.active,
-                        };
-                    }
+                    (Ok(l), EstimatorKind::Localizer) => l.relocalize(),
+                    _ => Err(Refusal::NotLocalizing),
                 };
-                if relocalized.is_err() {
-                    self.status.rejected = self.status.rejected.saturating_add(1);
+                if let Err(reason) = relocalized {
+                    return ToHost::Refused {
+                        seq,
+                        reason,
+                        estimator: self.active,
+                    };
                 }
             }
             Command::ReportStatus => {}
@@ -927,5 +936,147 @@ mod tests {
         assert_eq!(last.status.resamples, direct.filter().resample_count());
         assert_eq!(last.covariance, direct.filter().pose_covariance());
         assert!(last.covariance[0] > 0.0 && last.covariance[3] > 0.0 && last.covariance[5] > 0.0);
+    }
+
+    #[test]
+    fn localizer_mode_matches_direct_calls_and_refusals_are_explicit() {
+        use crate::grid::{GridGeometry, GridView, MaxPoolLayers};
+        use crate::pf::{GridPfConfig, RelocalizationConfig};
+        use crate::wire::{LocalizerReport, Refusal, ScanChunk, TrackingState};
+        let config = GridPfConfig::MICROCONTROLLER;
+        // A square room, walls at ±1.2 m, on a 64 × 64 map of 5 cm cells.
+        let g = GridGeometry::centred(64, 64, 0.05);
+        let cells: std::vec::Vec<i8> = (0..64 * 64)
+            .map(|i| {
+                let (x, y) = g.cell_centre(i % 64, i / 64);
+                let d = x.abs().max(y.abs());
+                if (1.175..1.25).contains(&d) {
+                    100
+                } else if d < 1.175 {
+                    -100
+                } else {
+                    0
+                }
+            })
+            .collect();
+        let view = GridView::new(&cells, g, config.log_odds.occupied_above).unwrap();
+        let mut layers = vec![0u8; MaxPoolLayers::bytes_for(64, 64, 3).unwrap()];
+        let layers =
+            MaxPoolLayers::build(&view, config.log_odds.free_below, 3, &mut layers).unwrap();
+        let inc = core::f32::consts::TAU / 40.0;
+        let ranges_mm: std::vec::Vec<u16> = (0..40)
+            .map(|i| {
+                let a = -core::f32::consts::PI + inc * i as f32;
+                let r = 1.2 / libm::fabsf(libm::cosf(a)).max(libm::fabsf(libm::sinf(a)));
+                (r * 1000.0) as u16
+            })
+            .collect();
+        let chunk = |seq: u32, offset: usize| {
+            ToDevice::Scan(ScanChunk {
+                seq,
+                stamp_us: 0,
+                scan_id: seq as u16,
+                beam_offset: offset as u16,
+                beam_total: 40,
+                angle_min: -core::f32::consts::PI,
+                angle_increment: inc,
+                ranges_mm: heapless::Vec::from_slice(&ranges_mm[offset..(offset + 32).min(40)])
+                    .unwrap(),
+            })
+        };
+        let command = |seq, command| ToDevice::Command { seq, command };
+        let msgs = [
+            command(1, Command::Relocalize),
+            command(2, Command::SelectEstimator(EstimatorKind::Localizer)),
+            command(
+                3,
+                Command::Reset {
+                    x: 0.05,
+                    y: 0.0,
+                    theta: 0.0,
+                },
+            ),
+            chunk(4, 0),
+            chunk(4, 32),
+            velocity(5, 0.0, 0.0),
+            command(6, Command::Relocalize),
+            chunk(7, 0),
+            chunk(7, 32),
+        ];
+        let bytes = frames(&msgs);
+        let setup = GridSetup::EXAMPLE;
+
+        // Without a map: both commands refused, the EKF stays.
+        let mut ekf = EkfSlam::<f32, { state_dim(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut plain = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+        let replies: std::vec::Vec<_> = bytes.iter().filter_map(|&b| plain.receive(b)).collect();
+        let refused = |seq, reason| ToHost::Refused {
+            seq,
+            reason,
+            estimator: EstimatorKind::Ekf,
+        };
+        assert_eq!(replies[0], refused(1, Refusal::NotLocalizing));
+        assert_eq!(replies[1], refused(2, Refusal::NoMap));
+        drop(plain);
+        let mut bad = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32)
+            .with_localizer(Err(Refusal::BadMap { code: 6 }), setup);
+        let replies: std::vec::Vec<_> = bytes.iter().filter_map(|&b| bad.receive(b)).collect();
+        assert_eq!(replies[1], refused(2, Refusal::BadMap { code: 6 }));
+        drop(bad);
+
+        // With the map and its layers.
+        let start = Pose2::new(0.0, 0.0, 0.0);
+        let mut loc = GridLocalizer::<16, 40>::new(view, config, start)
+            .unwrap()
+            .with_layers(layers, RelocalizationConfig::DEFAULT)
+            .unwrap();
+        let mut session = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32)
+            .with_localizer(Ok(&mut loc), setup);
+        let replies: std::vec::Vec<_> = bytes.iter().filter_map(|&b| session.receive(b)).collect();
+        drop(session);
+        assert_eq!(replies.len(), msgs.len());
+        assert_eq!(replies[0], refused(1, Refusal::NotLocalizing));
+        assert!(matches!(
+            replies[1],
+            ToHost::Status {
+                seq: 2,
+                estimator: EstimatorKind::Localizer,
+                ..
+            }
+        ));
+        let localization = |r: &ToHost| match r {
+            ToHost::Localization {
+                estimate,
+                localizer,
+            } => (*estimate, *localizer),
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(localization(&replies[3]).0.result, StepResult::Ignored);
+        let (after_scan, report) = localization(&replies[4]);
+        assert_eq!(after_scan.result, StepResult::Applied);
+        assert_eq!(report.state, TrackingState::Tracking);
+        assert!(report.hit_fraction > 0.5, "{report:?}");
+
+        // The same steps on a twin, called directly.
+        let mut twin = GridLocalizer::<16, 40>::new(view, config, start).unwrap();
+        twin.reset_around(Pose2::new(0.05, 0.0, 0.0), 0.0, 0.0)
+            .unwrap();
+        let ranges: std::vec::Vec<f32> =
+            ranges_mm.iter().map(|&mm| f32::from(mm) * 0.001).collect();
+        let lidar = LidarGeometry {
+            first_angle: -core::f32::consts::PI,
+            angle_increment: inc,
+            ..setup.lidar
+        };
+        twin.observe(&LidarScan::new(&ranges, lidar)).unwrap();
+        let pose = twin.pose();
+        assert_eq!(after_scan.pose, [pose.x, pose.y, pose.theta]);
+        assert_eq!(after_scan.covariance, twin.filter().pose_covariance());
+
+        // Relocalize: answered with a status; the next scan runs the global search.
+        assert!(matches!(replies[6], ToHost::Status { seq: 6, .. }));
+        let (_, report) = localization(&replies[8]);
+        assert_eq!(report.relocalizations, 1, "{report:?}");
+        assert_ne!(report, LocalizerReport::default());
     }
 }

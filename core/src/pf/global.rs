@@ -1,0 +1,1028 @@
+//! Global localization: where in the whole map was this scan taken? An exact
+//! correlative search (Olson 2009, "Real-time correlative scan matching"; Cartographer's
+//! fast correlative scan matcher) by branch and bound.
+//!
+//! **Score.** The particle filter's correlation ([`super::correlation`]): a candidate
+//! pose's score is `Σ_i w_i · 1[end cell of beam i is occupied]`, with the beams' fixed
+//! point weights ([`ScanPoint::weight`]). For each candidate heading `θ_j` the end cells
+//! `c_i` are computed once for the robot at the centre of cell `(0, 0)`; the robot at the
+//! centre of cell `(x, y)` then scores `Σ_i w_i · occ(c_i + (x, y))` — the shift search's
+//! formula, over every cell of the map.
+//!
+//! **Candidates.** Headings `θ_j = j · δ` over the full turn, with
+//! `δ = acos(1 − r² / (2 d²))` for cells of `r` metres and the farthest beam used at `d`
+//! metres (that beam's end then moves by at most one cell between neighbouring headings),
+//! unless a step is configured; positions: every cell of the map whose log-odds is below
+//! the free threshold (the robot stands in free space).
+//!
+//! **Branch and bound.** A node is a heading and an aligned block of `2^k × 2^k` positions.
+//! Its bound is the score against max-pooled level `k` of the map
+//! ([`MaxPoolLayers`]): each beam counts when any cell of its `2^k` window is occupied,
+//! which no position of the block can beat. Per heading, the blocks of the top level are
+//! visited in row order, depth first, the four children of a node in decreasing order of
+//! bound; a node whose bound does not exceed the acceptance threshold is dropped with all
+//! its positions, and so is a block without a free cell. Leaves (`k = 0`) are exact
+//! scores. The threshold is the larger of the minimum score and, once `N` hypotheses are
+//! held, the `N`-th best score. With the node budget not exhausted
+//! ([`SearchReport::complete`]), the best hypothesis is the highest-scoring candidate of
+//! the whole map (the first found among equal scores) — the same answer as the
+//! brute-force reference [`search_brute_force`].
+//!
+//! **Hypotheses.** The `N` best candidates that are pairwise apart by more than the
+//! configured separation (a better candidate nearby replaces a worse one), best first.
+//!
+//! **Cost.** One node costs one load, shift and add per beam (≈ 10 Cortex-M4F instructions
+//! per beam with the bookkeeping); one heading costs a rotation and a floor per beam
+//! (≈ 30 instructions per beam). [`SearchReport`] counts both; the node budget stops the
+//! search (the best found so far is returned, [`SearchReport::complete`] is `false`).
+//!
+//! No allocation: the end cells of at most [`MAX_SEARCH_BEAMS`] beams (12 bytes each) and
+//! the depth-first stack live on the stack (≈ 1.8 KB in all).
+
+use super::correlation::{ScanPoint, end_cell};
+use crate::geometry::{Pose2, wrap_angle};
+use crate::grid::{GridView, MaxPoolLayers};
+use core::fmt;
+
+/// Most beams the search uses (more are thinned evenly).
+pub const MAX_SEARCH_BEAMS: usize = 128;
+/// Most candidate headings (a finer configured or derived step is coarsened to this).
+pub const MAX_HEADINGS: u32 = 8192;
+
+/// Settings of the global search.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct GlobalSearchConfig {
+    /// Beams measured farther than this are left out, metres: the farthest beam used sets
+    /// the heading step, so this bounds the number of headings.
+    pub max_range: f32,
+    /// Use at most this many beams, thinned evenly (≤ [`MAX_SEARCH_BEAMS`]).
+    pub max_beams: u16,
+    /// Heading step, radians; 0: derived from the farthest beam used (see the module).
+    pub heading_step: f32,
+    /// A candidate is a hypothesis only when its score is at least this fraction of the
+    /// total weight of the beams used (0..1).
+    pub min_score_fraction: f32,
+    /// A hypothesis must score at least this fraction of the best one (0..1); the
+    /// search prunes with it too.
+    pub relative_score: f32,
+    /// Node evaluations (bounds and leaf scores) after which the search stops.
+    pub node_budget: u32,
+    /// Hypotheses closer than this in position (metres) …
+    pub separation_m: f32,
+    /// … and in heading (radians) are the same hypothesis: the better one is kept.
+    pub separation_rad: f32,
+}
+
+impl GlobalSearchConfig {
+    /// Settings for a lidar indoors on a 5 cm map (see `docs/global-localization.md` for
+    /// how they were chosen and what they cost).
+    pub const DEFAULT: Self = Self {
+        max_range: 8.0,
+        max_beams: 60,
+        heading_step: 0.0,
+        min_score_fraction: 0.5,
+        relative_score: 0.8,
+        node_budget: 40_000,
+        separation_m: 0.5,
+        separation_rad: 0.35,
+    };
+
+    /// `true` when every setting is finite and in range.
+    pub fn is_valid(&self) -> bool {
+        self.max_range.is_finite()
+            && self.max_range > 0.0
+            && self.max_beams > 0
+            && usize::from(self.max_beams) <= MAX_SEARCH_BEAMS
+            && self.heading_step.is_finite()
+            && self.heading_step >= 0.0
+            && self.min_score_fraction.is_finite()
+            && (0.0..=1.0).contains(&self.min_score_fraction)
+            && self.relative_score.is_finite()
+            && (0.0..=1.0).contains(&self.relative_score)
+            && self.node_budget > 0
+            && self.separation_m.is_finite()
+            && self.separation_m >= 0.0
+            && self.separation_rad.is_finite()
+            && self.separation_rad >= 0.0
+    }
+}
+
+impl Default for GlobalSearchConfig {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// A candidate pose of the robot with its correlation score.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Hypothesis {
+    /// Robot pose in the map frame (at a cell centre, at a candidate heading).
+    pub pose: Pose2<f32>,
+    /// Correlation (fixed point, [`super::correlation::WEIGHT_ONE`] = 1.0).
+    pub score: u32,
+}
+
+/// Up to `N` hypotheses, best first.
+#[derive(Clone, Copy, Debug)]
+pub struct Hypotheses<const N: usize> {
+    items: [Hypothesis; N],
+    len: usize,
+}
+
+impl<const N: usize> Default for Hypotheses<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> Hypotheses<N> {
+    /// None.
+    pub const fn new() -> Self {
+        Self {
+            items: [Hypothesis {
+                pose: Pose2::new(0.0, 0.0, 0.0),
+                score: 0,
+            }; N],
+            len: 0,
+        }
+    }
+
+    /// The hypotheses, best first.
+    pub fn as_slice(&self) -> &[Hypothesis] {
+        self.items.get(..self.len).unwrap_or(&[])
+    }
+
+    /// The best one.
+    pub fn best(&self) -> Option<&Hypothesis> {
+        self.as_slice().first()
+    }
+
+    /// Number held.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// `true` when none is held.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Drops all.
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    /// Lowest score that still enters: the `N`-th best when full, else 0.
+    fn floor(&self) -> u32 {
+        if self.len >= N {
+            self.items
+                .get(N.wrapping_sub(1))
+                .map_or(u32::MAX, |h| h.score)
+        } else {
+            0
+        }
+    }
+
+    /// Drops the hypotheses scoring `threshold` or less.
+    fn keep_above(&mut self, threshold: u32) {
+        self.len = self
+            .as_slice()
+            .iter()
+            .take_while(|h| h.score > threshold)
+            .count();
+    }
+
+    /// Offers a candidate: kept when it beats every held hypothesis within the
+    /// separation (those are dropped) and the `N`-th best.
+    fn offer(&mut self, h: Hypothesis, sep_m: f32, sep_rad: f32) {
+        if N == 0 || (self.len >= N && h.score <= self.floor()) {
+            return;
+        }
+        let near = |o: &Hypothesis| {
+            libm::hypotf(o.pose.x - h.pose.x, o.pose.y - h.pose.y) < sep_m
+                && libm::fabsf(wrap_angle(o.pose.theta - h.pose.theta)) < sep_rad
+        };
+        if self
+            .as_slice()
+            .iter()
+            .any(|o| near(o) && o.score >= h.score)
+        {
+            return;
+        }
+        // Drop the worse ones nearby, then insert in order.
+        let mut kept = 0;
+        for i in 0..self.len {
+            if let Some(o) = self.items.get(i).copied()
+                && !near(&o)
+            {
+                if let Some(slot) = self.items.get_mut(kept) {
+                    *slot = o;
+                }
+                kept += 1;
+            }
+        }
+        self.len = kept;
+        let at = self
+            .as_slice()
+            .iter()
+            .position(|o| o.score < h.score)
+            .unwrap_or(self.len);
+        if at >= N {
+            return;
+        }
+        let last = self.len.min(N - 1);
+        let mut i = last;
+        while i > at {
+            if let Some(prev) = self.items.get(i - 1).copied()
+                && let Some(slot) = self.items.get_mut(i)
+            {
+                *slot = prev;
+            }
+            i -= 1;
+        }
+        if let Some(slot) = self.items.get_mut(at) {
+            *slot = h;
+        }
+        self.len = (self.len + 1).min(N);
+    }
+}
+
+/// What one search did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SearchReport {
+    /// Beams used.
+    pub beams: u16,
+    /// Farthest beam used, metres.
+    pub extent_m: f32,
+    /// Heading step, radians.
+    pub heading_step: f32,
+    /// Headings searched (all of them when complete).
+    pub headings: u32,
+    /// Node evaluations: bounds and leaf scores (each one pass over the beams).
+    pub nodes: u32,
+    /// Of those, leaf scores.
+    pub leaves: u32,
+    /// End-cell computations (one rotation of every beam each).
+    pub rotations: u32,
+    /// Node evaluations per level (index k: blocks of `2^k × 2^k` positions).
+    pub nodes_per_level: [u32; crate::grid::layers::MAX_LEVELS as usize + 1],
+    /// Total weight of the beams used (the score of a perfect match).
+    pub total_weight: u32,
+    /// Score a hypothesis needs.
+    pub min_score: u32,
+    /// `false` when the node budget stopped the search: the hypotheses are the best
+    /// found, not proven best.
+    pub complete: bool,
+}
+
+impl SearchReport {
+    /// Estimated Cortex-M4F instructions of the search: 20 per beam and node, 30 per beam
+    /// and rotation, plus 200 per node and 400 per rotation of bookkeeping (the constants
+    /// of `docs/global-localization.md`).
+    pub fn estimated_instructions(&self) -> u64 {
+        let b = u64::from(self.beams);
+        u64::from(self.nodes) * (20 * b + 200) + u64::from(self.rotations) * (30 * b + 400)
+    }
+}
+
+/// Why a search was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum GlobalError {
+    /// A setting is out of range or not finite.
+    InvalidConfig,
+    /// No beam of the scan is usable within the search's range.
+    EmptyScan,
+    /// The max-pooled layers were made for another map (size or threshold).
+    LayersMismatch,
+    /// The localizer has no max-pooled layers: it cannot search globally.
+    NoLayers,
+}
+
+impl fmt::Display for GlobalError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::InvalidConfig => "global search setting out of range",
+            Self::EmptyScan => "scan has no usable beam for the global search",
+            Self::LayersMismatch => "max-pool layers do not belong to this map",
+            Self::NoLayers => "no max-pool layers: global localization is not available",
+        })
+    }
+}
+
+impl core::error::Error for GlobalError {}
+
+/// Beams chosen for the search, robot frame.
+struct Selected {
+    points: [ScanPoint; MAX_SEARCH_BEAMS],
+    /// Distance of each point from the robot origin, in cells.
+    rho_cells: [f32; MAX_SEARCH_BEAMS],
+    len: usize,
+    extent: f32,
+    total: u32,
+}
+
+fn select(points: &[ScanPoint], config: &GlobalSearchConfig) -> Selected {
+    let mut s = Selected {
+        points: [ScanPoint::default(); MAX_SEARCH_BEAMS],
+        rho_cells: [0.0; MAX_SEARCH_BEAMS],
+        len: 0,
+        extent: 0.0,
+        total: 0,
+    };
+    let usable = |p: &&ScanPoint| p.range.is_finite() && p.range <= config.max_range;
+    let n = points.iter().filter(usable).count();
+    let cap = usize::from(config.max_beams).min(MAX_SEARCH_BEAMS);
+    if n == 0 || cap == 0 {
+        return s;
+    }
+    let step = n.div_ceil(cap);
+    for p in points.iter().filter(usable).step_by(step) {
+        if let Some(slot) = s.points.get_mut(s.len) {
+            *slot = *p;
+            s.len += 1;
+            s.extent = s.extent.max(p.range);
+            s.total = s.total.saturating_add(p.weight);
+        }
+    }
+    s
+}
+
+/// The heading step for cells of `resolution` metres and the farthest beam at `extent`
+/// metres: `acos(1 − r² / (2 d²))`, the turn that moves that beam's end by one cell.
+pub fn heading_step_for(resolution: f32, extent: f32) -> f32 {
+    let d = extent.max(resolution);
+    libm::acosf(1.0 - resolution * resolution / (2.0 * d * d))
+}
+
+/// End cells of the selected beams for the robot at the centre of cell (0, 0) facing
+/// `theta`, with their weights.
+fn end_cells(
+    map: &GridView<'_>,
+    sel: &Selected,
+    theta: f32,
+    out: &mut [(i32, i32, u32); MAX_SEARCH_BEAMS],
+) {
+    let (bx, by) = map.geometry().cell_centre(0, 0);
+    let base = Pose2::new(bx, by, theta);
+    let (sin, cos) = libm::sincosf(theta);
+    for (slot, p) in out.iter_mut().zip(sel.points.iter().take(sel.len)) {
+        let (cx, cy) = end_cell(map, &base, sin, cos, p);
+        *slot = (cx, cy, p.weight);
+    }
+}
+
+/// The beams' end cells for one reference heading, recomputed only when the heading
+/// changes (the depth-first search visits many nodes of one heading in a row).
+struct EndCells {
+    heading: u32,
+    cells: [(i32, i32, u32); MAX_SEARCH_BEAMS],
+}
+
+impl EndCells {
+    /// The end cells for heading index `j` (computed when not held already).
+    fn at(
+        &mut self,
+        map: &GridView<'_>,
+        sel: &Selected,
+        step: f32,
+        j: u32,
+        report: &mut SearchReport,
+    ) -> &[(i32, i32, u32)] {
+        if self.heading != j {
+            end_cells(map, sel, heading_angle(j, step), &mut self.cells);
+            self.heading = j;
+            report.rotations += 1;
+        }
+        self.cells.get(..sel.len).unwrap_or(&[])
+    }
+}
+
+/// Heading `j` of the candidate set, radians in (−π, π].
+fn heading_angle(j: u32, step: f32) -> f32 {
+    wrap_angle(j as f32 * step)
+}
+
+/// Cells an end cell may move, at most, when the heading moves by up to `delta` radians
+/// from the reference: `ρ · δ / r` rounded up, plus one for the rounding of the cell
+/// index (|⌊u⌋ − ⌊v⌋| ≤ ⌈|u − v|⌉) and float error.
+#[inline]
+fn dilation(rho_cells: f32, delta: f32) -> i32 {
+    (rho_cells * delta) as i32 + 2
+}
+
+/// Bound of the node `(headings [j0, j0 + 2^a), block 2^k × 2^k at (x, y))` given the
+/// end cells at the reference heading `j0 + 2^(a−1)` (`j0` for `a = 0`): each beam counts
+/// when any cell is occupied in its window grown by the cells its end may move over the
+/// headings of the node. With `a = 0` and `k = 0`: the exact score.
+#[allow(clippy::too_many_arguments)]
+fn bound(
+    map: &GridView<'_>,
+    layers: &MaxPoolLayers<'_>,
+    sel: &Selected,
+    cells: &[(i32, i32, u32)],
+    step: f32,
+    a: u8,
+    k: u8,
+    x: i32,
+    y: i32,
+) -> u32 {
+    if a == 0 {
+        if k == 0 {
+            return leaf_score(map, cells, x, y);
+        }
+        let mut s = 0u32;
+        for (cx, cy, w) in cells {
+            if layers.any_occupied(k, cx.wrapping_add(x), cy.wrapping_add(y)) {
+                s = s.wrapping_add(*w);
+            }
+        }
+        return s;
+    }
+    let delta = (1u32 << (a - 1)) as f32 * step;
+    let top = layers.levels();
+    let mut s = 0u32;
+    for ((cx, cy, w), rho) in cells.iter().zip(sel.rho_cells.iter()) {
+        let e = dilation(*rho, delta);
+        let size = (1i32 << k).saturating_add(e.saturating_mul(2));
+        let level = (32 - (size.max(1) as u32 - 1).leading_zeros()) as u8;
+        if level > top
+            || layers.any_occupied(
+                level,
+                cx.wrapping_add(x).wrapping_sub(e),
+                cy.wrapping_add(y).wrapping_sub(e),
+            )
+        {
+            s = s.wrapping_add(*w);
+        }
+    }
+    s
+}
+
+/// Exact score of the robot at cell `(x, y)` given the end cells (level 0).
+fn leaf_score(map: &GridView<'_>, cells: &[(i32, i32, u32)], x: i32, y: i32) -> u32 {
+    let mut s = 0u32;
+    for (cx, cy, w) in cells {
+        if map.is_occupied(cx.wrapping_add(x), cy.wrapping_add(y)) {
+            s = s.wrapping_add(*w);
+        }
+    }
+    s
+}
+
+/// `true` when the robot may stand somewhere in the level-`k` block at `(x, y)`.
+fn block_free(map: &GridView<'_>, layers: &MaxPoolLayers<'_>, k: u8, x: i32, y: i32) -> bool {
+    if k == 0 {
+        return map.log_odds(x, y).is_some_and(|v| v < layers.free_below());
+    }
+    x >= 0 && y >= 0 && layers.any_free(k, (x >> k) as usize, (y >> k) as usize)
+}
+
+/// A node of the search: headings `[j0, j0 + 2^a)`, positions `[x, x + 2^k) × [y, y + 2^k)`.
+#[derive(Clone, Copy, Default)]
+struct Node {
+    x: i32,
+    y: i32,
+    j0: u32,
+    bound: u32,
+    a: u8,
+    k: u8,
+}
+
+impl Node {
+    /// The heading the node's end cells are computed at.
+    fn reference(&self) -> u32 {
+        if self.a == 0 {
+            self.j0
+        } else {
+            self.j0 + (1 << (self.a - 1))
+        }
+    }
+}
+
+/// Checks the inputs and prepares the beams: `(selection, step, headings)`.
+fn prepare(
+    map: &GridView<'_>,
+    layers: &MaxPoolLayers<'_>,
+    points: &[ScanPoint],
+    config: &GlobalSearchConfig,
+) -> Result<(Selected, f32, u32), GlobalError> {
+    if !config.is_valid() {
+        return Err(GlobalError::InvalidConfig);
+    }
+    if !layers.matches(map) {
+        return Err(GlobalError::LayersMismatch);
+    }
+    let mut sel = select(points, config);
+    if sel.len == 0 || sel.total == 0 {
+        return Err(GlobalError::EmptyScan);
+    }
+    let res = map.geometry().resolution;
+    for (rho, p) in sel
+        .rho_cells
+        .iter_mut()
+        .zip(sel.points.iter().take(sel.len))
+    {
+        *rho = libm::hypotf(p.x, p.y) / res;
+    }
+    let wanted = if config.heading_step > 0.0 {
+        config.heading_step
+    } else {
+        heading_step_for(res, sel.extent)
+    };
+    let turn = 2.0 * core::f32::consts::PI;
+    let n = libm::ceilf(turn / wanted.max(1e-6));
+    let n = if n.is_finite() && n >= 1.0 {
+        (n as u32).min(MAX_HEADINGS)
+    } else {
+        MAX_HEADINGS
+    };
+    Ok((sel, turn / n as f32, n))
+}
+
+/// Deepest stack of the search: four children per level of headings and of positions.
+const STACK: usize = 4 * (14 + crate::grid::layers::MAX_LEVELS as usize + 1);
+
+/// The global search: the best `N` hypotheses for the scan `points` (robot frame, as
+/// [`super::ScanPoints`] loads them) anywhere in `map`, bounded by `layers` (built from
+/// the same map). See the module documentation for the method and its guarantees.
+pub fn search<const N: usize>(
+    map: &GridView<'_>,
+    layers: &MaxPoolLayers<'_>,
+    points: &[ScanPoint],
+    config: &GlobalSearchConfig,
+    out: &mut Hypotheses<N>,
+) -> Result<SearchReport, GlobalError> {
+    let (sel, step, headings) = prepare(map, layers, points, config)?;
+    out.clear();
+    let min_score = libm::ceilf(config.min_score_fraction * sel.total as f32) as u32;
+    let mut report = SearchReport {
+        beams: sel.len as u16,
+        extent_m: sel.extent,
+        heading_step: step,
+        headings,
+        nodes: 0,
+        leaves: 0,
+        rotations: 0,
+        nodes_per_level: [0; crate::grid::layers::MAX_LEVELS as usize + 1],
+        total_weight: sel.total,
+        min_score,
+        complete: true,
+    };
+    let g = *map.geometry();
+    let (w, h) = (g.width as i32, g.height as i32);
+    let top = layers.levels();
+    let size = 1i32 << top;
+    // All headings in one interval of 2^A at the root.
+    let all = (32 - headings.saturating_sub(1).leading_zeros()) as u8;
+    let rho_max = sel
+        .rho_cells
+        .iter()
+        .take(sel.len)
+        .copied()
+        .fold(0.0f32, f32::max);
+    let mut end = EndCells {
+        heading: u32::MAX,
+        cells: [(0, 0, 0); MAX_SEARCH_BEAMS],
+    };
+    let mut stack = [Node::default(); STACK];
+    let threshold = |out: &Hypotheses<N>| {
+        below_relative(config, out.best())
+            .max(min_score.saturating_sub(1))
+            .max(out.floor())
+    };
+    let mut ry = 0;
+    'search: while ry < h {
+        let mut rx = 0;
+        while rx < w {
+            let root = Node {
+                x: rx,
+                y: ry,
+                j0: 0,
+                bound: sel.total,
+                a: all,
+                k: top,
+            };
+            rx += size;
+            if !block_free(map, layers, top, root.x, root.y) {
+                continue;
+            }
+            let mut sp = 0usize;
+            if let Some(slot) = stack.get_mut(sp) {
+                *slot = root;
+                sp += 1;
+            }
+            while sp > 0 {
+                sp -= 1;
+                let Some(node) = stack.get(sp).copied() else {
+                    break;
+                };
+                if node.bound <= threshold(out) {
+                    continue;
+                }
+                if node.a == 0 && node.k == 0 {
+                    out.offer(
+                        Hypothesis {
+                            pose: pose_at(&g, node.x, node.y, heading_angle(node.j0, step)),
+                            score: node.bound,
+                        },
+                        config.separation_m,
+                        config.separation_rad,
+                    );
+                    continue;
+                }
+                // Split the headings while their spread moves the far beams' ends by
+                // more than half the block, else the block.
+                let split_heading = node.a > 0
+                    && (node.k == 0
+                        || 2 * dilation(rho_max, (1u32 << (node.a - 1)) as f32 * step)
+                            >= 1 << node.k);
+                let mut children = [Node::default(); 4];
+                let mut n = 0;
+                if split_heading {
+                    let a = node.a - 1;
+                    for j0 in [node.j0, node.j0 + (1 << a)] {
+                        if j0 >= headings {
+                            continue;
+                        }
+                        if let Some(c) = children.get_mut(n) {
+                            *c = Node { j0, a, ..node };
+                            n += 1;
+                        }
+                    }
+                } else {
+                    let k = node.k - 1;
+                    let half = 1i32 << k;
+                    for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                        let (x, y) = (node.x + dx * half, node.y + dy * half);
+                        if x >= w || y >= h || !block_free(map, layers, k, x, y) {
+                            continue;
+                        }
+                        if let Some(c) = children.get_mut(n) {
+                            *c = Node { x, y, k, ..node };
+                            n += 1;
+                        }
+                    }
+                }
+                let mut kept = 0;
+                for i in 0..n {
+                    let Some(mut c) = children.get(i).copied() else {
+                        break;
+                    };
+                    if report.nodes >= config.node_budget {
+                        report.complete = false;
+                        break 'search;
+                    }
+                    report.nodes += 1;
+                    if let Some(count) = report.nodes_per_level.get_mut(usize::from(c.k)) {
+                        *count += 1;
+                    }
+                    if c.a == 0 && c.k == 0 {
+                        report.leaves += 1;
+                    }
+                    let cells = end.at(map, &sel, step, c.reference(), &mut report);
+                    c.bound = bound(map, layers, &sel, cells, step, c.a, c.k, c.x, c.y);
+                    if c.bound > threshold(out)
+                        && let Some(slot) = children.get_mut(kept)
+                    {
+                        *slot = c;
+                        kept += 1;
+                    }
+                }
+                // Decreasing bound, equal bounds in child order (insertion sort of at
+                // most four); pushed in reverse so the best is visited first.
+                let kids = children.get_mut(..kept).unwrap_or(&mut []);
+                sort_decreasing(kids);
+                for kid in kids.iter().rev() {
+                    if let Some(slot) = stack.get_mut(sp) {
+                        *slot = *kid;
+                        sp += 1;
+                    }
+                }
+            }
+        }
+        ry += size;
+    }
+    out.keep_above(below_relative(config, out.best()).max(min_score.saturating_sub(1)));
+    Ok(report)
+}
+
+/// The highest score below [`GlobalSearchConfig::relative_score`] × the best score.
+fn below_relative(config: &GlobalSearchConfig, best: Option<&Hypothesis>) -> u32 {
+    let best = best.map_or(0, |b| b.score);
+    (libm::ceilf(config.relative_score * best as f32) as u32).saturating_sub(1)
+}
+
+/// Stable insertion sort by decreasing bound.
+fn sort_decreasing(nodes: &mut [Node]) {
+    for i in 1..nodes.len() {
+        let mut j = i;
+        while j > 0 {
+            let (Some(a), Some(b)) = (nodes.get(j - 1), nodes.get(j)) else {
+                break;
+            };
+            if a.bound >= b.bound {
+                break;
+            }
+            nodes.swap(j - 1, j);
+            j -= 1;
+        }
+    }
+}
+
+/// The robot pose at the centre of cell `(x, y)` facing `theta`.
+fn pose_at(g: &crate::grid::GridGeometry, x: i32, y: i32, theta: f32) -> Pose2<f32> {
+    let (px, py) = g.cell_centre(x, y);
+    Pose2::new(px, py, theta)
+}
+
+/// The brute-force reference of [`search`]: every heading, every free cell, every beam
+/// (no bounds, no budget). Same candidates and scores; for tests on small maps.
+pub fn search_brute_force<const N: usize>(
+    map: &GridView<'_>,
+    layers: &MaxPoolLayers<'_>,
+    points: &[ScanPoint],
+    config: &GlobalSearchConfig,
+    out: &mut Hypotheses<N>,
+) -> Result<SearchReport, GlobalError> {
+    let (sel, step, headings) = prepare(map, layers, points, config)?;
+    out.clear();
+    let min_score = libm::ceilf(config.min_score_fraction * sel.total as f32) as u32;
+    let g = *map.geometry();
+    let mut cells = [(0i32, 0i32, 0u32); MAX_SEARCH_BEAMS];
+    let mut nodes = 0u32;
+    for j in 0..headings {
+        let theta = wrap_angle(j as f32 * step);
+        end_cells(map, &sel, theta, &mut cells);
+        let cells = cells.get(..sel.len).unwrap_or(&[]);
+        for y in 0..g.height as i32 {
+            for x in 0..g.width as i32 {
+                if !block_free(map, layers, 0, x, y) {
+                    continue;
+                }
+                nodes = nodes.saturating_add(1);
+                let s = leaf_score(map, cells, x, y);
+                if s >= min_score.max(1) {
+                    out.offer(
+                        Hypothesis {
+                            pose: pose_at(&g, x, y, theta),
+                            score: s,
+                        },
+                        config.separation_m,
+                        config.separation_rad,
+                    );
+                }
+            }
+        }
+    }
+    out.keep_above(below_relative(config, out.best()).max(min_score.saturating_sub(1)));
+    Ok(SearchReport {
+        beams: sel.len as u16,
+        extent_m: sel.extent,
+        heading_step: step,
+        headings,
+        nodes,
+        leaves: nodes,
+        rotations: headings,
+        nodes_per_level: [nodes, 0, 0, 0, 0, 0, 0, 0, 0],
+        total_weight: sel.total,
+        min_score,
+        complete: true,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::{GridGeometry, MaxPoolLayers};
+    use crate::pf::ScanPoints;
+    use crate::sensors::lidar::{LidarGeometry, LidarScan};
+    use rand::{Rng, SeedableRng};
+
+    /// A random `w × h` map: free inside, rectangles of wall, unknown cells sprinkled.
+    fn random_map(rng: &mut rand::rngs::StdRng, w: usize, h: usize) -> Vec<i8> {
+        let mut cells = vec![-60i8; w * h];
+        for _ in 0..(w * h / 150).max(3) {
+            let (x0, y0) = (rng.random_range(0..w), rng.random_range(0..h));
+            let (lx, ly) = (rng.random_range(1..8), rng.random_range(1..3));
+            let (lx, ly) = if rng.random_bool(0.5) {
+                (lx, ly)
+            } else {
+                (ly, lx)
+            };
+            for y in y0..(y0 + ly).min(h) {
+                for x in x0..(x0 + lx).min(w) {
+                    cells[y * w + x] = 60;
+                }
+            }
+        }
+        for c in cells.iter_mut() {
+            if *c < 0 && rng.random_bool(0.1) {
+                *c = 0;
+            }
+        }
+        cells
+    }
+
+    const LIDAR: LidarGeometry = LidarGeometry {
+        first_angle: -3.0,
+        angle_increment: 6.0 / 60.0,
+        min_range: 0.05,
+        max_range: 5.0,
+        no_return_range: 5.0,
+        mount: Pose2::new(0.0, 0.0, 0.0),
+    };
+
+    /// Ranges seen from `pose` on `view` by marching each beam in quarter cells.
+    fn ray_cast(view: &GridView<'_>, pose: &Pose2<f32>) -> Vec<f32> {
+        let res = view.geometry().resolution;
+        (0..60)
+            .map(|i| {
+                let a = pose.theta + LIDAR.beam_angle(i);
+                let mut r = 0.0f32;
+                while r < 4.0 {
+                    r += res * 0.25;
+                    let (x, y) = (pose.x + r * a.cos(), pose.y + r * a.sin());
+                    let (u, v) = view.geometry().world_to_grid(x, y);
+                    if view.is_occupied(u.floor() as i32, v.floor() as i32) {
+                        return r;
+                    }
+                }
+                f32::INFINITY
+            })
+            .collect()
+    }
+
+    fn config() -> GlobalSearchConfig {
+        GlobalSearchConfig {
+            heading_step: 0.25,
+            node_budget: u32::MAX,
+            ..GlobalSearchConfig::DEFAULT
+        }
+    }
+
+    /// Score of `pose` recomputed the brute-force way (its heading and cell).
+    fn rescore(
+        view: &GridView<'_>,
+        points: &[ScanPoint],
+        c: &GlobalSearchConfig,
+        h: &Hypothesis,
+    ) -> u32 {
+        let sel = select(points, c);
+        let mut cells = [(0, 0, 0); MAX_SEARCH_BEAMS];
+        end_cells(view, &sel, h.pose.theta, &mut cells);
+        let (x, y) = view.geometry().world_to_cell(h.pose.x, h.pose.y).unwrap();
+        leaf_score(view, &cells[..sel.len], x as i32, y as i32)
+    }
+
+    #[test]
+    fn exact_search_equals_brute_force_on_random_maps() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        let mut pruned = 0u64;
+        let mut total = 0u64;
+        for trial in 0..40 {
+            let (w, h) = (rng.random_range(20..56), rng.random_range(16..48));
+            let cells = random_map(&mut rng, w, h);
+            let g = GridGeometry::centred(w, h, 0.05);
+            let view = GridView::new(&cells, g, 20).unwrap();
+            let levels = rng.random_range(1..=5);
+            let mut buf = vec![0u8; MaxPoolLayers::bytes_for(w, h, levels).unwrap()];
+            let layers = MaxPoolLayers::build(&view, -20, levels, &mut buf).unwrap();
+            // A scan from a random free cell: its own pose scores all its hits.
+            let pose = loop {
+                let (x, y) = (rng.random_range(0..w), rng.random_range(0..h));
+                if cells[y * w + x] < -20 {
+                    let (px, py) = g.cell_centre(x as i32, y as i32);
+                    break Pose2::new(px, py, rng.random_range(-3.1..3.1));
+                }
+            };
+            let ranges = ray_cast(&view, &pose);
+            let mut pts = ScanPoints::<60>::new();
+            pts.load(&LidarScan::new(&ranges, LIDAR), 1, [0.0, 1.0][trial % 2]);
+            if pts.as_slice().is_empty() {
+                continue;
+            }
+            let c = GlobalSearchConfig {
+                min_score_fraction: [0.0, 0.3, 0.6][trial % 3],
+                ..config()
+            };
+            let (mut fast, mut slow) = (Hypotheses::<3>::new(), Hypotheses::<3>::new());
+            let rf = search(&view, &layers, pts.as_slice(), &c, &mut fast).unwrap();
+            let rs = search_brute_force(&view, &layers, pts.as_slice(), &c, &mut slow).unwrap();
+            assert!(rf.complete);
+            assert_eq!(rf.headings, rs.headings);
+            assert_eq!(
+                fast.best().map(|b| b.score),
+                slow.best().map(|b| b.score),
+                "trial {trial}: {fast:?} vs {slow:?}"
+            );
+            for hyp in fast.as_slice() {
+                assert_eq!(
+                    rescore(&view, pts.as_slice(), &c, hyp),
+                    hyp.score,
+                    "trial {trial}"
+                );
+                assert!(hyp.score >= rf.min_score.max(1));
+            }
+            assert!(!fast.is_empty() || slow.is_empty());
+            pruned += u64::from(rs.nodes.saturating_sub(rf.leaves));
+            total += u64::from(rs.nodes);
+        }
+        // Branch and bound must skip most of the leaves the brute force scores.
+        assert!(pruned * 2 > total, "{pruned} of {total}");
+    }
+
+    #[test]
+    fn budget_stops_the_search_and_bad_inputs_are_refused() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let cells = random_map(&mut rng, 40, 40);
+        let g = GridGeometry::centred(40, 40, 0.05);
+        let view = GridView::new(&cells, g, 20).unwrap();
+        let mut buf = vec![0u8; MaxPoolLayers::bytes_for(40, 40, 3).unwrap()];
+        let layers = MaxPoolLayers::build(&view, -20, 3, &mut buf).unwrap();
+        let ranges = ray_cast(&view, &Pose2::new(0.0, 0.0, 0.3));
+        let mut pts = ScanPoints::<60>::new();
+        pts.load(&LidarScan::new(&ranges, LIDAR), 1, 0.0);
+        let mut out = Hypotheses::<2>::new();
+        let c = GlobalSearchConfig {
+            node_budget: 50,
+            ..config()
+        };
+        let r = search(&view, &layers, pts.as_slice(), &c, &mut out).unwrap();
+        assert!(!r.complete && r.nodes == 50, "{r:?}");
+        // No beam, bad settings, layers of another map.
+        assert_eq!(
+            search(&view, &layers, &[], &config(), &mut out).err(),
+            Some(GlobalError::EmptyScan)
+        );
+        let far: Vec<_> = pts
+            .as_slice()
+            .iter()
+            .map(|p| ScanPoint { range: 9.0, ..*p })
+            .collect();
+        assert_eq!(
+            search(&view, &layers, &far, &config(), &mut out).err(),
+            Some(GlobalError::EmptyScan)
+        );
+        let nan: Vec<_> = pts
+            .as_slice()
+            .iter()
+            .map(|p| ScanPoint {
+                range: f32::NAN,
+                ..*p
+            })
+            .collect();
+        assert_eq!(
+            search(&view, &layers, &nan, &config(), &mut out).err(),
+            Some(GlobalError::EmptyScan)
+        );
+        for bad in [
+            GlobalSearchConfig {
+                max_range: f32::NAN,
+                ..config()
+            },
+            GlobalSearchConfig {
+                max_beams: 0,
+                ..config()
+            },
+            GlobalSearchConfig {
+                max_beams: 500,
+                ..config()
+            },
+            GlobalSearchConfig {
+                min_score_fraction: 1.5,
+                ..config()
+            },
+            GlobalSearchConfig {
+                heading_step: -1.0,
+                ..config()
+            },
+            GlobalSearchConfig {
+                node_budget: 0,
+                ..config()
+            },
+        ] {
+            assert_eq!(
+                search(&view, &layers, pts.as_slice(), &bad, &mut out).err(),
+                Some(GlobalError::InvalidConfig)
+            );
+        }
+        let other_cells = vec![0i8; 40 * 41];
+        let other = GridView::new(&other_cells, GridGeometry::centred(40, 41, 0.05), 20).unwrap();
+        assert_eq!(
+            search(&other, &layers, pts.as_slice(), &config(), &mut out).err(),
+            Some(GlobalError::LayersMismatch)
+        );
+    }
+
+    #[test]
+    fn heading_step_follows_the_extent() {
+        // One cell at 8 m: 0.05 / 8 rad (to first order).
+        let s = heading_step_for(0.05, 8.0);
+        assert!((s - 0.05 / 8.0).abs() < 1e-4, "{s}");
+        assert!(heading_step_for(0.05, 2.0) > 3.9 * s);
+    }
+}

@@ -1,0 +1,215 @@
+//! Global localization and lost detection in the simulated room of [`super::tests`]: the
+//! map is drawn from one simulated run's true poses, the scans come from another run with
+//! other noise.
+
+use super::global::{self, GlobalSearchConfig, Hypotheses};
+use super::tests::{Grid, LIDAR, Sim, simulate};
+use super::*;
+use crate::geometry::{Pose2, wrap_angle};
+use crate::grid::{GridView, MaxPoolLayers};
+use crate::sensors::lidar::LidarScan;
+
+const LEVELS: u8 = 6;
+
+/// The room's map (from run 5's true poses) and its max-pooled layers.
+fn room_map() -> (Box<Grid>, Vec<u8>) {
+    let sim = simulate(5);
+    let config = GridPfConfig::DEFAULT;
+    let mut map = Box::new(Grid::centred(config.resolution, config.log_odds));
+    for (p, r) in sim.truth.iter().zip(&sim.scans).step_by(5) {
+        map.integrate_scan(p, &LidarScan::new(r, LIDAR), 1).unwrap();
+    }
+    let view = map.view();
+    let mut layers = vec![0u8; MaxPoolLayers::bytes_for(256, 256, LEVELS).unwrap()];
+    MaxPoolLayers::build(&view, config.log_odds.free_below, LEVELS, &mut layers).unwrap();
+    (map, layers)
+}
+
+fn close(a: &Pose2<f32>, b: &Pose2<f32>, m: f32, rad: f32) -> bool {
+    (a.x - b.x).hypot(a.y - b.y) <= m && wrap_angle(a.theta - b.theta).abs() <= rad
+}
+
+#[test]
+fn known_pose_is_found_from_a_simulated_scan() {
+    let (map, layers) = room_map();
+    let view = map.view();
+    let layers = MaxPoolLayers::from_bytes(&layers).unwrap();
+    let sim = simulate(7);
+    let mut worst_nodes = 0;
+    for k in (0..sim.scans.len()).step_by(37) {
+        let mut pts = ScanPoints::<180>::new();
+        pts.load(&LidarScan::new(&sim.scans[k], LIDAR), 1, 1.0);
+        let mut found = Hypotheses::<4>::new();
+        let r = global::search(
+            &view,
+            &layers,
+            pts.as_slice(),
+            &GlobalSearchConfig {
+                node_budget: u32::MAX,
+                ..GlobalSearchConfig::DEFAULT
+            },
+            &mut found,
+        )
+        .unwrap();
+        let best = found.best().unwrap();
+        std::println!(
+            "scan {k}: {:?} truth {:?}; {} nodes {:?}, {} headings, complete {}",
+            best,
+            sim.truth[k],
+            r.nodes,
+            r.nodes_per_level,
+            r.headings,
+            r.complete
+        );
+        assert!(
+            close(&best.pose, &sim.truth[k], 0.1, 0.05),
+            "scan {k}: {best:?} vs {:?}",
+            sim.truth[k]
+        );
+        worst_nodes = worst_nodes.max(r.nodes);
+    }
+    std::println!("most nodes {worst_nodes}");
+}
+
+/// Runs a localizer over scans `from..to` of `sim` (odometry between them).
+fn drive<const P: usize>(loc: &mut GridLocalizer<'_, P, 180>, sim: &Sim, from: usize, to: usize) {
+    for i in from..to {
+        if i > from {
+            loc.predict_odometry(&sim.odometry[i - 1], &sim.odometry[i])
+                .unwrap();
+        }
+        loc.observe(&LidarScan::new(&sim.scans[i], LIDAR)).unwrap();
+    }
+}
+
+#[test]
+fn global_localization_converges_within_ten_scans() {
+    let (map, layers) = room_map();
+    let layers = MaxPoolLayers::from_bytes(&layers).unwrap();
+    let sim = simulate(7);
+    for start in (0..sim.scans.len() - 10).step_by(29) {
+        let mut loc = GridLocalizer::<64, 180>::without_pose(
+            map.view(),
+            GridPfConfig::DEFAULT,
+            layers,
+            RelocalizationConfig::DEFAULT,
+        )
+        .unwrap();
+        assert_eq!(loc.state(), LocalizerState::Lost);
+        drive(&mut loc, &sim, start, start + 10);
+        let (pose, truth) = (loc.pose(), sim.truth[start + 9]);
+        std::println!("start {start}: {pose:?} truth {truth:?} {:?}", loc.status());
+        assert!(
+            close(&pose, &truth, 0.3, 10f32.to_radians()),
+            "start {start}: {pose:?} vs {truth:?}"
+        );
+        assert_eq!(loc.status().relocalizations, 1);
+        assert_ne!(loc.state(), LocalizerState::Lost);
+    }
+}
+
+#[test]
+fn lost_detection_fires_on_a_kidnapped_robot_and_not_on_a_normal_run() {
+    let (map, layers) = room_map();
+    let layers = MaxPoolLayers::from_bytes(&layers).unwrap();
+    let sim = simulate(7);
+    // A normal run: never lost.
+    let mut loc = GridLocalizer::<64, 180>::new(map.view(), GridPfConfig::DEFAULT, sim.truth[0])
+        .unwrap()
+        .with_layers(layers, RelocalizationConfig::DEFAULT)
+        .unwrap();
+    let mut lowest = 1.0f32;
+    for i in 0..sim.scans.len() {
+        if i > 0 {
+            loc.predict_odometry(&sim.odometry[i - 1], &sim.odometry[i])
+                .unwrap();
+        }
+        loc.observe(&LidarScan::new(&sim.scans[i], LIDAR)).unwrap();
+        lowest = lowest.min(loc.status().hit_fraction);
+    }
+    let s = *loc.status();
+    std::println!("normal run: {s:?}, lowest hit fraction {lowest}");
+    assert_eq!(s.lost_events, 0, "{s:?}");
+    assert_eq!(s.state, LocalizerState::Tracking);
+
+    // Kidnapped after scan 99: the scans jump to the other side of the room (scan 200
+    // on), the odometry goes on as if nothing happened.
+    let mut loc = GridLocalizer::<64, 180>::new(map.view(), GridPfConfig::DEFAULT, sim.truth[0])
+        .unwrap()
+        .with_layers(layers, RelocalizationConfig::DEFAULT)
+        .unwrap();
+    drive(&mut loc, &sim, 0, 100);
+    assert_eq!(loc.state(), LocalizerState::Tracking);
+    let mut lost_at = None;
+    let mut odom = sim.odometry[99];
+    for (n, i) in (200..260).enumerate() {
+        let next = odom.compose(&sim.odometry[i - 1].between(&sim.odometry[i]));
+        loc.predict_odometry(&odom, &next).unwrap();
+        odom = next;
+        loc.observe(&LidarScan::new(&sim.scans[i], LIDAR)).unwrap();
+        if lost_at.is_none() && loc.status().lost_events > 0 {
+            lost_at = Some(n);
+        }
+    }
+    let s = *loc.status();
+    std::println!(
+        "kidnapped: lost after {lost_at:?} scans, {s:?}, pose {:?} truth {:?}",
+        loc.pose(),
+        sim.truth[259]
+    );
+    assert!(lost_at.is_some_and(|n| n < 10), "{lost_at:?}");
+    assert!(s.relocalizations >= 1);
+    assert_eq!(s.state, LocalizerState::Tracking);
+    assert!(close(&loc.pose(), &sim.truth[259], 0.3, 10f32.to_radians()));
+}
+
+#[test]
+fn bad_inputs_give_errors() {
+    let (map, layers) = room_map();
+    let view = map.view();
+    let config = GridPfConfig::DEFAULT;
+    let good = MaxPoolLayers::from_bytes(&layers).unwrap();
+    // No layers: no relocalization.
+    let mut plain = GridLocalizer::<8, 180>::new(view, config, Pose2::IDENTITY).unwrap();
+    assert_eq!(plain.relocalize(), Err(global::GlobalError::NoLayers));
+    // Layers of another map (another occupied threshold).
+    let other = GridView::new(map.cells(), *map.geometry(), 5).unwrap();
+    let mut other_layers = vec![0u8; layers.len()];
+    let other_layers = MaxPoolLayers::build(
+        &other,
+        config.log_odds.free_below,
+        LEVELS,
+        &mut other_layers,
+    )
+    .unwrap();
+    assert_eq!(
+        GridLocalizer::<8, 180>::new(view, config, Pose2::IDENTITY)
+            .unwrap()
+            .with_layers(other_layers, RelocalizationConfig::DEFAULT)
+            .err(),
+        Some(global::GlobalError::LayersMismatch)
+    );
+    // Bad settings.
+    let bad = RelocalizationConfig {
+        hypotheses: 0,
+        ..RelocalizationConfig::DEFAULT
+    };
+    assert_eq!(
+        GridLocalizer::<8, 180>::without_pose(view, config, good, bad).err(),
+        Some(global::GlobalError::InvalidConfig)
+    );
+    // Empty and NaN scans: refused, the search stays pending.
+    let mut loc =
+        GridLocalizer::<8, 180>::without_pose(view, config, good, RelocalizationConfig::DEFAULT)
+            .unwrap();
+    for ranges in [vec![], vec![f32::NAN; 180], vec![f32::INFINITY; 180]] {
+        assert_eq!(
+            loc.observe(&LidarScan::new(&ranges, LIDAR)).err(),
+            Some(PfError::EmptyScan)
+        );
+        assert_eq!(loc.state(), LocalizerState::Lost);
+        assert!(loc.status().search_pending);
+    }
+    // Truncated layers image.
+    assert!(MaxPoolLayers::from_bytes(&layers[..layers.len() - 3]).is_err());
+}
