@@ -5,8 +5,10 @@
 //! same code as `host-sim export-map`) at `$OUT_DIR/map.bin`, which the firmware embeds
 //! with `include_bytes!`, and sets `cfg(microslam_map)`: the firmware then carries the
 //! localizer instead of the grid SLAM. Without the variable `map.bin` is empty and the
-//! firmware refuses localizer requests (`Refusal::NoMap`).
-use microslam::grid::map_image::encode_map_image;
+//! firmware refuses localizer requests (`Refusal::NoMap`). The image carries the map's
+//! max-pooled layers for the global search: `MICROSLAM_MAP_LEVELS` levels (default 5,
+//! 0 for none).
+use microslam::grid::map_image::{DEFAULT_LAYER_LEVELS, encode_map_image_with_layers};
 use microslam::grid::ros_map::RosMap;
 use microslam::pf::GridPfConfig;
 use std::{env, fs, path::PathBuf};
@@ -52,21 +54,29 @@ fn embed_map(out: &std::path::Path) {
                     MAP_CONFIG.resolution
                 );
             }
+            // Levels of the global search's layers: MICROSLAM_MAP_LEVELS, default 5 (0: no
+            // layers, no global search; the map alone).
+            println!("cargo:rerun-if-env-changed=MICROSLAM_MAP_LEVELS");
+            let levels = env::var("MICROSLAM_MAP_LEVELS").map_or(DEFAULT_LAYER_LEVELS, |v| {
+                v.parse()
+                    .unwrap_or_else(|_| panic!("MICROSLAM_MAP_LEVELS={v}: not a number 0..=8"))
+            });
             let log_odds = MAP_CONFIG.log_odds;
-            let image = encode_map_image(
+            let image = encode_map_image_with_layers(
                 &map.cells,
                 &map.geometry,
                 log_odds.occupied_above,
                 log_odds.free_below,
-                &[],
+                levels,
             )
             .unwrap_or_else(|e| panic!("MICROSLAM_MAP: {}: {e}", yaml.display()));
             println!("cargo:rustc-cfg=microslam_map");
             println!(
-                "cargo:warning=map {} embedded: {} x {} cells, {} bytes",
+                "cargo:warning=map {} embedded: {} x {} cells, {} layer levels, {} bytes",
                 yaml.display(),
                 map.geometry.width,
                 map.geometry.height,
+                levels,
                 image.len()
             );
             image

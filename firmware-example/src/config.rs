@@ -5,7 +5,7 @@ use microslam::gate::ChiSquareGate;
 use microslam::geometry::Pose2;
 use microslam::grid::{OccupancyGrid, occupancy_bytes};
 use microslam::motion::{IncrementNoise, VelocityNoise};
-use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam};
+use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam, RelocalizationConfig};
 use microslam::sensors::range_bearing::RangeBearingSensor;
 use microslam::wire::GridSetup;
 
@@ -79,6 +79,10 @@ pub const LOCALIZER_PARTICLES: usize = 64;
 /// Settings of the localizer: the grid estimator's (the map image is made with its
 /// log-odds thresholds by `build.rs`).
 pub const LOCALIZER_CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
+
+/// Lost detection and global relocalization of the localizer (used when the map image
+/// carries max-pooled layers).
+pub const RELOCALIZATION: RelocalizationConfig = RelocalizationConfig::DEFAULT;
 
 /// The localizer on the `&'static` map image in flash.
 pub type Localizer = GridLocalizer<'static, LOCALIZER_PARTICLES, GRID_BEAMS>;

@@ -71,9 +71,11 @@ mod grid {
 #[cfg(microslam_map)]
 mod grid {
     use super::*;
-    use firmware_example::config::{LOCALIZER_CONFIG, LOCALIZER_PARTICLES, Localizer, MAP_IMAGE};
+    use firmware_example::config::{
+        LOCALIZER_CONFIG, LOCALIZER_PARTICLES, Localizer, MAP_IMAGE, RELOCALIZATION,
+    };
     use microslam::geometry::Pose2;
-    use microslam::grid::MapImage;
+    use microslam::grid::{MapImage, MapImageError};
     use microslam::wire::{LocalizerEstimator, Refusal};
     use static_cell::StaticCell;
 
@@ -93,12 +95,22 @@ mod grid {
                     image.len_bytes(),
                     image.checksum()
                 );
-                match Localizer::new(image.view(), LOCALIZER_CONFIG, Pose2::new(0.0, 0.0, 0.0)) {
-                    Ok(l) => Ok(LOCALIZER.init(l) as &mut dyn LocalizerEstimator),
-                    Err(_) => {
-                        defmt::error!("localizer configuration invalid");
-                        board::halt(4)
-                    }
+                let Ok(localizer) =
+                    Localizer::new(image.view(), LOCALIZER_CONFIG, Pose2::new(0.0, 0.0, 0.0))
+                else {
+                    defmt::error!("localizer configuration invalid");
+                    board::halt(4)
+                };
+                // With the map's layers it can search the whole map (Relocalize, lost).
+                match image.layers() {
+                    None => Ok(LOCALIZER.init(localizer) as &mut dyn LocalizerEstimator),
+                    Some(Ok(layers)) => match localizer.with_layers(layers, RELOCALIZATION) {
+                        Ok(l) => Ok(LOCALIZER.init(l) as &mut dyn LocalizerEstimator),
+                        Err(_) => Err(Refusal::BadMap {
+                            code: MapImageError::BadLayers as u8,
+                        }),
+                    },
+                    Some(Err(e)) => Err(Refusal::BadMap { code: e as u8 }),
                 }
             }
             Err(e) => {

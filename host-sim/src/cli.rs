@@ -84,6 +84,9 @@ pub struct ExportMapArgs {
     /// The map image to write.
     #[arg(long, short, default_value = "out/map.bin")]
     pub out: PathBuf,
+    /// Levels of the global search's max-pooled layers in the image (0: none).
+    #[arg(long, default_value_t = microslam::grid::map_image::DEFAULT_LAYER_LEVELS)]
+    pub levels: u8,
 }
 
 /// Options of `host-sim localize`.
@@ -275,7 +278,7 @@ pub fn run(cli: &Cli) -> Result<()> {
         Some(Command::Hil(args)) => crate::hil::run_cli(args, cli.quiet),
         Some(Command::Localize(args)) => crate::grid_replay::localize_cli(args, cli.quiet),
         Some(Command::ExportMap(args)) => {
-            crate::hil_localizer::export_cli(&args.map, &args.out, cli.quiet)
+            crate::hil_localizer::export_cli(&args.map, &args.out, args.levels, cli.quiet)
         }
         Some(Command::Texture(args)) => crate::camera::texture_cli(args, cli.quiet),
         Some(Command::Detections(args)) => crate::camera::detections_cli(args, cli.quiet),

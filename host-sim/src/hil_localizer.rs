@@ -16,9 +16,9 @@ use anyhow::{Context, Result, bail};
 use microslam::ekf::{EkfConfig, EkfSlam, state_dim};
 use microslam::geometry::Pose2;
 use microslam::grid::MapImage;
-use microslam::grid::map_image::encode_map_image;
+use microslam::grid::map_image::{DEFAULT_LAYER_LEVELS, encode_map_image_with_layers};
 use microslam::grid::ros_map::RosMap;
-use microslam::pf::{GridLocalizer, GridPfConfig};
+use microslam::pf::{GridLocalizer, GridPfConfig, RelocalizationConfig};
 use microslam::wire::{
     Command as WireCommand, EstimatorKind, LocalizerEstimator, Odometry, SCAN_CHUNK_BEAMS,
     ScanChunk, Session, ToDevice, ToHost,
@@ -40,8 +40,14 @@ pub const FIRMWARE_LOCALIZER_CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLE
 pub type FirmwareLocalizer<'m> =
     GridLocalizer<'m, FIRMWARE_LOCALIZER_PARTICLES, FIRMWARE_LOCALIZER_BEAMS>;
 
-/// The map image of `yaml` as the firmware's build script makes it.
+/// The map image of `yaml` as the firmware's build script makes it (with
+/// [`DEFAULT_LAYER_LEVELS`] levels of layers).
 pub fn map_image_of(yaml: &Path) -> Result<Vec<u8>> {
+    map_image_with_levels(yaml, DEFAULT_LAYER_LEVELS)
+}
+
+/// The map image of `yaml` with `levels` levels of max-pooled layers (0: none).
+pub fn map_image_with_levels(yaml: &Path, levels: u8) -> Result<Vec<u8>> {
     let config = FIRMWARE_LOCALIZER_CONFIG;
     let map = RosMap::read(yaml, &config.log_odds)?;
     if (map.geometry.resolution - config.resolution).abs() > 1e-6 {
@@ -52,18 +58,18 @@ pub fn map_image_of(yaml: &Path) -> Result<Vec<u8>> {
             config.resolution
         );
     }
-    Ok(encode_map_image(
+    Ok(encode_map_image_with_layers(
         &map.cells,
         &map.geometry,
         config.log_odds.occupied_above,
         config.log_odds.free_below,
-        &[],
+        levels,
     )?)
 }
 
 /// `host-sim export-map`.
-pub fn export_cli(map: &Path, out: &Path, quiet: bool) -> Result<()> {
-    let image = map_image_of(map)?;
+pub fn export_cli(map: &Path, out: &Path, levels: u8, quiet: bool) -> Result<()> {
+    let image = map_image_with_levels(map, levels)?;
     let parsed = MapImage::parse(&image)?;
     std::fs::write(out, &image).with_context(|| format!("writing {}", out.display()))?;
     if !quiet {
@@ -174,10 +180,15 @@ pub fn host_localizer_replies(bytes: &[u8], image: &[u8]) -> Result<Vec<ToHost>>
     let mut ekf = Box::new(EkfSlam::<f32, { state_dim(FIRMWARE_LANDMARKS) }>::new(
         EkfConfig::MICROCONTROLLER,
     ));
-    let mut localizer = Box::new(
+    let mut localizer =
         FirmwareLocalizer::new(map.view(), FIRMWARE_LOCALIZER_CONFIG, Pose2::IDENTITY)
-            .map_err(|e| anyhow::anyhow!("localizer: {e}"))?,
-    );
+            .map_err(|e| anyhow::anyhow!("localizer: {e}"))?;
+    if let Some(layers) = map.layers() {
+        localizer = localizer
+            .with_layers(layers?, RelocalizationConfig::DEFAULT)
+            .map_err(|e| anyhow::anyhow!("localizer layers: {e}"))?;
+    }
+    let mut localizer = Box::new(localizer);
     let mut session = Session::<_, FIRMWARE_LANDMARKS>::new(&mut ekf, EkfConfig::MICROCONTROLLER)
         .with_localizer(
             Ok(&mut *localizer as &mut dyn LocalizerEstimator),
