@@ -129,20 +129,21 @@ pub fn localizer_messages(
             laser.odom[1] as f32,
             laser.odom[2] as f32,
         );
-        if odom.is_finite() {
-            if let Some(from) = previous.replace(odom) {
-                let d = from.between(&odom);
-                out.push(ToDevice::Odometry {
-                    seq,
-                    stamp_us,
-                    odometry: Odometry::Increment {
-                        dx: d.x,
-                        dy: d.y,
-                        dtheta: d.theta,
-                    },
-                });
-                seq = seq.wrapping_add(1);
-            }
+        // A pose that is not finite is skipped: the next good one predicts the whole motion.
+        if odom.is_finite()
+            && let Some(from) = previous.replace(odom)
+        {
+            let d = from.between(&odom);
+            out.push(ToDevice::Odometry {
+                seq,
+                stamp_us,
+                odometry: Odometry::Increment {
+                    dx: d.x,
+                    dy: d.y,
+                    dtheta: d.theta,
+                },
+            });
+            seq = seq.wrapping_add(1);
         }
         let n = laser.ranges.len();
         let increment = core::f32::consts::PI / n.max(1) as f32;
@@ -216,6 +217,8 @@ pub struct LocalizerHil {
     pub seconds: f64,
     /// Relation error of the device's trajectory (when a relations file was found).
     pub relation_error: Option<crate::metrics::relations::RelationError>,
+    /// The localizer's state after the last scan (lost events, relocalizations).
+    pub final_localizer: Option<microslam::wire::LocalizerReport>,
     /// The full comparison (pose and covariance differences).
     pub comparison: crate::hil::Comparison,
 }
@@ -288,6 +291,10 @@ pub fn run_cli(args: &HilArgs, file: &str, quiet: bool) -> Result<()> {
         stack_peak_bytes: comparison.stack_peak_bytes,
         seconds: comparison.seconds,
         relation_error,
+        final_localizer: run.replies.iter().rev().find_map(|r| match r {
+            ToHost::Localization { localizer, .. } => Some(*localizer),
+            _ => None,
+        }),
         comparison,
     };
     std::fs::create_dir_all(&args.out)

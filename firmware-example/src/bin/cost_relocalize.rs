@@ -54,9 +54,8 @@ const fn room_cell(x: f32, y: f32) -> i8 {
     let room = if ax > ay { ax } else { ay };
     let in_pillar = x >= 1.0 && x <= 1.6 && y >= -0.5 && y <= 0.5;
     let pillar_inner = x >= 1.0 + h && x <= 1.6 - h && y >= -0.5 + h && y <= 0.5 - h;
-    if room >= 3.0 - h / 2.0 && room <= 3.0 + h {
-        100
-    } else if in_pillar && !pillar_inner {
+    let wall = room >= 3.0 - h / 2.0 && room <= 3.0 + h;
+    if wall || (in_pillar && !pillar_inner) {
         100
     } else if room < 3.0 && !in_pillar {
         -100
