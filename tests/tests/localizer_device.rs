@@ -4,10 +4,12 @@
 //! scan's pose. This is the reply stream the firmware under QEMU must equal bit for bit
 //! (`firmware_qemu.rs`); here its accuracy is checked against the benchmark relations.
 
-use host_sim::datasets::dataset_path;
-use host_sim::grid_replay::{self, GridRunOptions};
-use host_sim::hil::encode_all;
-use host_sim::hil_localizer::{host_localizer_replies, localizer_messages, map_image_of};
+use host_sim::domain::datasets::dataset_path;
+use host_sim::domain::grid::{GRID_CELLS, carmen_lidar};
+use host_sim::drivers::grid::{GridRunOptions, carmen_inputs, run_slam};
+use host_sim::drivers::hil::encode_all;
+use host_sim::drivers::hil_localizer::{host_localizer_replies, localizer_messages, map_image_of};
+use host_sim::inputs::readers::carmen::{front_scans, read_log};
 use host_sim::metrics::relations;
 use microslam::geometry::Pose2;
 use microslam::grid::MapImage;
@@ -16,17 +18,23 @@ use microslam::wire::{StepResult, ToHost, TrackingState};
 
 #[test]
 fn device_localizer_on_the_intel_slam_map_meets_the_relation_error_bar() {
-    let log = grid_replay::read_log(&dataset_path("intel/intel-raw-part.clf").expect("Intel log"))
-        .expect("read");
+    let log =
+        read_log(&dataset_path("intel/intel-raw-part.clf").expect("Intel log")).expect("read");
     let rels =
         relations::read(&dataset_path("intel/intel.relations").expect("relations")).expect("read");
     // The map `host-sim replay --filter grid-slam` writes (P = 200, default settings).
     let options = GridRunOptions {
         particles: 200,
         config: GridPfConfig::DEFAULT,
-        lidar: grid_replay::carmen_lidar(180),
+        lidar: carmen_lidar(180),
     };
-    let slam = grid_replay::run_slam(&log, &options, &|_| {}).expect("SLAM run");
+    let slam = run_slam::<GRID_CELLS>(
+        &carmen_inputs(&front_scans(&log)),
+        Pose2::IDENTITY,
+        &options,
+        &|_| {},
+    )
+    .expect("SLAM run");
     let dir = tempfile::tempdir().expect("temporary folder");
     host_sim::output::grid_map::write_map(
         dir.path(),
@@ -43,7 +51,7 @@ fn device_localizer_on_the_intel_slam_map_meets_the_relation_error_bar() {
         "layers for the global search"
     );
 
-    let scans = grid_replay::front_scans(&log);
+    let scans = front_scans(&log);
     let (messages, last_chunks) = localizer_messages(&scans, Pose2::IDENTITY);
     let replies = host_localizer_replies(&encode_all(&messages), &image).expect("host session");
     assert_eq!(replies.len(), messages.len(), "one reply per message");

@@ -2,10 +2,11 @@
 //! settings (`host-sim/configs/mrclam.toml`). Bounds are the figures measured when the
 //! settings were chosen, plus a small margin (see README, "Landmark SLAM on real data").
 
-use host_sim::cli::{AssociationMode, Precision};
-use host_sim::config::Settings;
+use host_sim::domain::config::Settings;
+use host_sim::domain::recording::Recording;
+use host_sim::domain::{AssociationMode, Precision};
+use host_sim::inputs::readers::{self, DatasetSpec};
 use host_sim::metrics::{Metrics, evaluate};
-use host_sim::readers::{self, DatasetSpec, Recording};
 use std::sync::OnceLock;
 
 fn dataset6() -> &'static Recording {
@@ -18,7 +19,7 @@ fn dataset6() -> &'static Recording {
 fn run(mode: AssociationMode, precision: Precision) -> Metrics {
     let settings = Settings::load_for("mrclam", None, Some(mode)).unwrap();
     let rec = dataset6();
-    let run = host_sim::replay::replay(rec, &settings, mode, precision, None).unwrap();
+    let run = host_sim::drivers::ekf::replay(rec, &settings, mode, precision, None).unwrap();
     evaluate(rec, &run)
 }
 

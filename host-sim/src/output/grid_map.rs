@@ -1,9 +1,11 @@
 //! Occupancy maps as files: PGM + YAML in the ROS `map_server` convention, a PNG with the
 //! trajectory, TUM trajectories — and reading a saved map back for localization.
 
-use anyhow::{Context, Result, bail};
+use crate::drivers::grid::GridRun;
+use anyhow::{Context, Result};
 use microslam::geometry::Pose2;
 use microslam::grid::{GridGeometry, LogOdds};
+use microslam::pf::GridPfConfig;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -99,88 +101,33 @@ pub fn write_tum(path: &Path, traj: &[(f64, Pose2<f32>)]) -> Result<()> {
 }
 
 /// A map read back from `map.yaml` + its PGM: log-odds cells (row 0 at the bottom) and
-/// geometry. Grey levels become log-odds through `p = 1 − grey/255` (the inverse of
-/// [`write_map`]), quantised with `log_odds`' unit and clamped to its limits.
+/// geometry, through [`microslam::grid::ros_map::RosMap`] (the reader the firmware's
+/// build script uses too): grey levels become log-odds through `p = 1 − grey/255` (the
+/// inverse of [`write_map`]), quantised with `log_odds`' unit and clamped to its limits.
 pub fn read_map(yaml_path: &Path, log_odds: &LogOdds) -> Result<(Vec<i8>, GridGeometry)> {
-    let text = std::fs::read_to_string(yaml_path)
-        .with_context(|| format!("reading {}", yaml_path.display()))?;
-    let mut image = None;
-    let mut resolution = None;
-    let mut origin = None;
-    for line in text.lines() {
-        let Some((k, v)) = line.split_once(':') else {
-            continue;
-        };
-        let v = v.trim();
-        match k.trim() {
-            "image" => image = Some(v.trim_matches('"').to_string()),
-            "resolution" => resolution = v.parse::<f32>().ok(),
-            "origin" => {
-                let n: Vec<f32> = v
-                    .trim_matches(|c| c == '[' || c == ']')
-                    .split(',')
-                    .filter_map(|s| s.trim().parse().ok())
-                    .collect();
-                origin = (n.len() >= 2).then(|| (n[0], n[1]));
-            }
-            _ => {}
-        }
-    }
-    let (Some(image), Some(resolution), Some((ox, oy))) = (image, resolution, origin) else {
-        bail!(
-            "{}: needs image, resolution and origin",
-            yaml_path.display()
-        );
-    };
-    let pgm_path = yaml_path.parent().unwrap_or(Path::new(".")).join(image);
-    let bytes =
-        std::fs::read(&pgm_path).with_context(|| format!("reading {}", pgm_path.display()))?;
-    // Binary PGM header: P5, width, height, maxval, one whitespace byte, then pixels.
-    let mut fields = Vec::new();
-    let mut i = 0;
-    while fields.len() < 4 && i < bytes.len() {
-        while i < bytes.len() && bytes[i].is_ascii_whitespace() {
-            i += 1;
-        }
-        if bytes.get(i) == Some(&b'#') {
-            while i < bytes.len() && bytes[i] != b'\n' {
-                i += 1;
-            }
-            continue;
-        }
-        let s = i;
-        while i < bytes.len() && !bytes[i].is_ascii_whitespace() {
-            i += 1;
-        }
-        fields.push(String::from_utf8_lossy(&bytes[s..i]).to_string());
-    }
-    i += 1;
-    if fields.first().map(String::as_str) != Some("P5") || fields.len() < 4 {
-        bail!("{}: not a binary PGM", pgm_path.display());
-    }
-    let w: usize = fields[1].parse()?;
-    let h: usize = fields[2].parse()?;
-    let pixels = bytes.get(i..i + w * h).context("PGM is truncated")?;
-    let unit = f64::from(log_odds.nats_per_unit());
-    let mut cells = vec![0i8; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let grey = f64::from(pixels[(h - 1 - y) * w + x]);
-            let p = (1.0 - grey / 255.0).clamp(1e-6, 1.0 - 1e-6);
-            let l = (p / (1.0 - p)).ln() / unit;
-            cells[y * w + x] =
-                l.round()
-                    .clamp(f64::from(log_odds.min), f64::from(log_odds.max)) as i8;
-        }
-    }
-    Ok((
-        cells,
-        GridGeometry {
-            width: w,
-            height: h,
-            resolution,
-            origin_x: ox,
-            origin_y: oy,
-        },
-    ))
+    let map = microslam::grid::ros_map::RosMap::read(yaml_path, log_odds)?;
+    Ok((map.cells, map.geometry))
+}
+
+/// Writes the outputs of a run into `out`.
+pub fn write_outputs(
+    out: &Path,
+    run: &GridRun,
+    config: &GridPfConfig,
+    metrics: &serde_json::Value,
+) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    write_map(
+        out,
+        &run.cells,
+        &run.geometry,
+        &config.log_odds,
+        &run.trajectory,
+    )?;
+    write_tum(&out.join("trajectory.tum"), &run.trajectory)?;
+    std::fs::write(
+        out.join("metrics.json"),
+        serde_json::to_string_pretty(metrics)? + "\n",
+    )?;
+    Ok(())
 }
