@@ -147,7 +147,8 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
                 1e-3,
             ))
         })
-        .transpose()?;
+        .transpose()?
+        .filter(|e| e.used > 0);
     let report = LocalizerHil {
         replies_identical: comparison.identical,
         replies_expected: comparison.expected,
