@@ -9,7 +9,7 @@ use crate::commands::replay::ReplayOptions;
 use crate::commands::sim::SimOptions;
 use crate::commands::texture::TextureOptions;
 use crate::commands::{detections, hil, localize, replay, sim, texture};
-use crate::domain::grid::GridOptions;
+use crate::domain::grid::{GlobalOptions, GridOptions};
 use crate::domain::{AssociationMode, FilterKind, Precision};
 use crate::inputs::faults::FaultRates;
 use crate::inputs::readers::DatasetSpec;
@@ -94,6 +94,64 @@ pub struct LocalizeArgs {
     /// Output folder.
     #[arg(long, short, default_value = "out/localize")]
     pub out: PathBuf,
+    /// Global localization trials instead of one tracked run.
+    #[command(flatten)]
+    pub global: GlobalArgs,
+}
+
+/// Options of global localization trials (`host-sim localize --global`,
+/// `host-sim sim --global`).
+#[derive(Debug, Clone, Args)]
+pub struct GlobalArgs {
+    /// Run global localizations from random start scans without a pose, scored against
+    /// the localizer tracked from the true start; writes `metrics.json` with `global`.
+    #[arg(long)]
+    pub global: bool,
+    /// Number of trials.
+    #[arg(long, default_value_t = 20)]
+    pub trials: usize,
+    /// Seed of the random start scans.
+    #[arg(long, default_value_t = 1)]
+    pub trial_seed: u64,
+    /// Scans a trial may take to converge.
+    #[arg(long, default_value_t = 10)]
+    pub max_scans: usize,
+    /// Levels of the max-pooled map layers (windows up to 2^levels cells).
+    #[arg(long, default_value_t = 6)]
+    pub levels: u8,
+    /// Node budget of the global search (default: the core's).
+    #[arg(long)]
+    pub node_budget: Option<u32>,
+    /// Smallest score of a hypothesis, a fraction of the beams' total weight (default:
+    /// the core's).
+    #[arg(long)]
+    pub min_score: Option<f32>,
+    /// Beams farther than this are left out of the search, metres (default: the core's).
+    #[arg(long)]
+    pub search_range: Option<f32>,
+    /// Beams the search uses at most (default: the core's).
+    #[arg(long)]
+    pub search_beams: Option<u16>,
+    /// Particles spread over this many hypotheses (default: the core's).
+    #[arg(long)]
+    pub hypotheses: Option<u8>,
+}
+
+impl From<&GlobalArgs> for GlobalOptions {
+    fn from(a: &GlobalArgs) -> Self {
+        Self {
+            enabled: a.global,
+            trials: a.trials,
+            trial_seed: a.trial_seed,
+            max_scans: a.max_scans,
+            levels: a.levels,
+            node_budget: a.node_budget,
+            min_score: a.min_score,
+            search_range: a.search_range,
+            search_beams: a.search_beams,
+            hypotheses: a.hypotheses,
+        }
+    }
 }
 
 /// Options of `host-sim replay`.
@@ -169,6 +227,10 @@ pub struct SimArgs {
     /// grid scenario).
     #[arg(long, default_value_t = 200)]
     pub grid_particles: usize,
+    /// Global localization trials on the grid SLAM map of the lidar world (written to
+    /// `out/grid/global/`).
+    #[command(flatten)]
+    pub global: GlobalArgs,
 }
 
 /// Options of `host-sim hil`.
@@ -315,6 +377,7 @@ impl From<&LocalizeArgs> for LocalizeOptions {
             config: a.config.clone(),
             grid: (&a.grid).into(),
             out: a.out.clone(),
+            global: (&a.global).into(),
         }
     }
 }
@@ -329,6 +392,7 @@ impl From<&SimArgs> for SimOptions {
             precision: a.precision,
             no_plots: a.no_plots,
             grid_particles: a.grid_particles,
+            global: (&a.global).into(),
         }
     }
 }

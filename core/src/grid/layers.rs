@@ -313,7 +313,7 @@ impl<'a> MaxPoolLayers<'a> {
     }
 
     /// The bitmap of occupied level `k` (1 ≤ k ≤ L).
-    fn occupied_level(&self, k: u8) -> Option<&'a [u8]> {
+    pub(crate) fn occupied_level(&self, k: u8) -> Option<&'a [u8]> {
         if k == 0 || k > self.levels {
             return None;
         }

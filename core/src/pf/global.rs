@@ -39,9 +39,9 @@
 //! No allocation: the end cells of at most [`MAX_SEARCH_BEAMS`] beams (12 bytes each) and
 //! the depth-first stack live on the stack (≈ 1.8 KB in all).
 
-use super::correlation::{ScanPoint, end_cell};
+use super::correlation::ScanPoint;
 use crate::geometry::{Pose2, wrap_angle};
-use crate::grid::{GridView, MaxPoolLayers};
+use crate::grid::{GridView, MaxPoolLayers, floor_i32};
 use core::fmt;
 
 /// Most beams the search uses (more are thinned evenly).
@@ -66,6 +66,11 @@ pub struct GlobalSearchConfig {
     /// A hypothesis must score at least this fraction of the best one (0..1); the
     /// search prunes with it too.
     pub relative_score: f32,
+    /// Minimum score (fraction of the total weight) of the first pass; each pass that
+    /// finds nothing is followed by one `pass_step` lower, down to `min_score_fraction`.
+    pub first_pass_fraction: f32,
+    /// Step between the passes' minimum scores (0..1].
+    pub pass_step: f32,
     /// Node evaluations (bounds and leaf scores) after which the search stops.
     pub node_budget: u32,
     /// Hypotheses closer than this in position (metres) …
@@ -79,11 +84,13 @@ impl GlobalSearchConfig {
     /// how they were chosen and what they cost).
     pub const DEFAULT: Self = Self {
         max_range: 8.0,
-        max_beams: 60,
+        max_beams: 45,
         heading_step: 0.0,
         min_score_fraction: 0.5,
         relative_score: 0.8,
-        node_budget: 40_000,
+        first_pass_fraction: 0.9,
+        pass_step: 0.1,
+        node_budget: 8_000,
         separation_m: 0.5,
         separation_rad: 0.35,
     };
@@ -100,6 +107,11 @@ impl GlobalSearchConfig {
             && (0.0..=1.0).contains(&self.min_score_fraction)
             && self.relative_score.is_finite()
             && (0.0..=1.0).contains(&self.relative_score)
+            && self.first_pass_fraction.is_finite()
+            && (0.0..=1.0).contains(&self.first_pass_fraction)
+            && self.pass_step.is_finite()
+            && self.pass_step > 0.0
+            && self.pass_step <= 1.0
             && self.node_budget > 0
             && self.separation_m.is_finite()
             && self.separation_m >= 0.0
@@ -271,20 +283,22 @@ pub struct SearchReport {
     pub nodes_per_level: [u32; crate::grid::layers::MAX_LEVELS as usize + 1],
     /// Total weight of the beams used (the score of a perfect match).
     pub total_weight: u32,
-    /// Score a hypothesis needs.
+    /// Score a hypothesis needs (that of the last pass).
     pub min_score: u32,
+    /// Passes run (see [`GlobalSearchConfig::first_pass_fraction`]).
+    pub passes: u8,
     /// `false` when the node budget stopped the search: the hypotheses are the best
     /// found, not proven best.
     pub complete: bool,
 }
 
 impl SearchReport {
-    /// Estimated Cortex-M4F instructions of the search: 20 per beam and node, 30 per beam
-    /// and rotation, plus 200 per node and 400 per rotation of bookkeeping (the constants
-    /// of `docs/global-localization.md`).
+    /// Estimated Cortex-M4F instructions of the search: `nodes · (72 · beams + 2560)`
+    /// (end-cell rotations, about one per two nodes, folded in) — fitted to QEMU
+    /// instruction counts of 1000-node searches with 30 and 45 beams on a 128 × 128 map
+    /// (4.72 M and 5.80 M instructions); see `docs/global-localization.md`.
     pub fn estimated_instructions(&self) -> u64 {
-        let b = u64::from(self.beams);
-        u64::from(self.nodes) * (20 * b + 200) + u64::from(self.rotations) * (30 * b + 400)
+        u64::from(self.nodes) * (72 * u64::from(self.beams) + 2560)
     }
 }
 
@@ -320,6 +334,8 @@ struct Selected {
     points: [ScanPoint; MAX_SEARCH_BEAMS],
     /// Distance of each point from the robot origin, in cells.
     rho_cells: [f32; MAX_SEARCH_BEAMS],
+    /// Each point divided by the cell size (cells, robot frame).
+    scaled: [(f32, f32); MAX_SEARCH_BEAMS],
     len: usize,
     extent: f32,
     total: u32,
@@ -329,6 +345,7 @@ fn select(points: &[ScanPoint], config: &GlobalSearchConfig) -> Selected {
     let mut s = Selected {
         points: [ScanPoint::default(); MAX_SEARCH_BEAMS],
         rho_cells: [0.0; MAX_SEARCH_BEAMS],
+        scaled: [(0.0, 0.0); MAX_SEARCH_BEAMS],
         len: 0,
         extent: 0.0,
         total: 0,
@@ -360,17 +377,19 @@ pub fn heading_step_for(resolution: f32, extent: f32) -> f32 {
 
 /// End cells of the selected beams for the robot at the centre of cell (0, 0) facing
 /// `theta`, with their weights.
-fn end_cells(
-    map: &GridView<'_>,
-    sel: &Selected,
-    theta: f32,
-    out: &mut [(i32, i32, u32); MAX_SEARCH_BEAMS],
-) {
-    let (bx, by) = map.geometry().cell_centre(0, 0);
-    let base = Pose2::new(bx, by, theta);
+///
+/// The robot at the centre of cell (0, 0) puts a robot-frame point `p` at grid
+/// coordinates `0.5 + R(θ) p / r` (cells of `r` metres): two products and a sum per
+/// axis, with `p / r` computed once per search.
+fn end_cells(sel: &Selected, theta: f32, out: &mut [(i32, i32, u32); MAX_SEARCH_BEAMS]) {
     let (sin, cos) = libm::sincosf(theta);
-    for (slot, p) in out.iter_mut().zip(sel.points.iter().take(sel.len)) {
-        let (cx, cy) = end_cell(map, &base, sin, cos, p);
+    for ((slot, p), (u, v)) in out
+        .iter_mut()
+        .zip(sel.points.iter().take(sel.len))
+        .zip(sel.scaled.iter())
+    {
+        let cx = floor_i32(0.5 + (cos * u - sin * v));
+        let cy = floor_i32(0.5 + (sin * u + cos * v));
         *slot = (cx, cy, p.weight);
     }
 }
@@ -386,14 +405,13 @@ impl EndCells {
     /// The end cells for heading index `j` (computed when not held already).
     fn at(
         &mut self,
-        map: &GridView<'_>,
         sel: &Selected,
         step: f32,
         j: u32,
         report: &mut SearchReport,
     ) -> &[(i32, i32, u32)] {
         if self.heading != j {
-            end_cells(map, sel, heading_angle(j, step), &mut self.cells);
+            end_cells(sel, heading_angle(j, step), &mut self.cells);
             self.heading = j;
             report.rotations += 1;
         }
@@ -407,11 +425,12 @@ fn heading_angle(j: u32, step: f32) -> f32 {
 }
 
 /// Cells an end cell may move, at most, when the heading moves by up to `delta` radians
-/// from the reference: `ρ · δ / r` rounded up, plus one for the rounding of the cell
-/// index (|⌊u⌋ − ⌊v⌋| ≤ ⌈|u − v|⌉) and float error.
+/// from the reference: the end moves along a chord of at most `ρ · δ` cells, and
+/// `|⌊u⌋ − ⌊v⌋| ≤ ⌈|u − v|⌉`; 0.01 cell more covers the float rounding.
 #[inline]
 fn dilation(rho_cells: f32, delta: f32) -> i32 {
-    (rho_cells * delta) as i32 + 2
+    // trunc(v) + 1 ≥ ⌈v⌉ (equal unless v is a whole number), without a call to ceilf.
+    (rho_cells * delta + 0.01) as i32 + 1
 }
 
 /// Bound of the node `(headings [j0, j0 + 2^a), block 2^k × 2^k at (x, y))` given the
@@ -421,7 +440,7 @@ fn dilation(rho_cells: f32, delta: f32) -> i32 {
 #[allow(clippy::too_many_arguments)]
 fn bound(
     map: &GridView<'_>,
-    layers: &MaxPoolLayers<'_>,
+    levels: &Levels<'_>,
     sel: &Selected,
     cells: &[(i32, i32, u32)],
     step: f32,
@@ -436,21 +455,20 @@ fn bound(
         }
         let mut s = 0u32;
         for (cx, cy, w) in cells {
-            if layers.any_occupied(k, cx.wrapping_add(x), cy.wrapping_add(y)) {
+            if levels.any(k, cx.wrapping_add(x), cy.wrapping_add(y)) {
                 s = s.wrapping_add(*w);
             }
         }
         return s;
     }
     let delta = (1u32 << (a - 1)) as f32 * step;
-    let top = layers.levels();
     let mut s = 0u32;
     for ((cx, cy, w), rho) in cells.iter().zip(sel.rho_cells.iter()) {
         let e = dilation(*rho, delta);
         let size = (1i32 << k).saturating_add(e.saturating_mul(2));
         let level = (32 - (size.max(1) as u32 - 1).leading_zeros()) as u8;
-        if level > top
-            || layers.any_occupied(
+        if level > levels.top
+            || levels.any(
                 level,
                 cx.wrapping_add(x).wrapping_sub(e),
                 cy.wrapping_add(y).wrapping_sub(e),
@@ -460,6 +478,46 @@ fn bound(
         }
     }
     s
+}
+
+/// The occupied levels' bitmaps, looked up once per search (the bound's inner loop).
+struct Levels<'a> {
+    bits: [&'a [u8]; crate::grid::layers::MAX_LEVELS as usize + 1],
+    stride: usize,
+    width: i32,
+    height: i32,
+    top: u8,
+}
+
+impl<'a> Levels<'a> {
+    fn new(layers: &MaxPoolLayers<'a>) -> Self {
+        let mut bits: [&'a [u8]; crate::grid::layers::MAX_LEVELS as usize + 1] =
+            [&[]; crate::grid::layers::MAX_LEVELS as usize + 1];
+        for (k, b) in bits.iter_mut().enumerate().skip(1) {
+            *b = layers.occupied_level(k as u8).unwrap_or(&[]);
+        }
+        Self {
+            bits,
+            stride: layers.width().div_ceil(8),
+            width: layers.width() as i32,
+            height: layers.height() as i32,
+            top: layers.levels(),
+        }
+    }
+
+    /// [`MaxPoolLayers::any_occupied`] without recomputing the level's place.
+    #[inline]
+    fn any(&self, k: u8, x: i32, y: i32) -> bool {
+        let size = 1i32 << (k & 15);
+        if x >= self.width || y >= self.height || x <= -size || y <= -size {
+            return false;
+        }
+        let (x, y) = (x.max(0) as usize, y.max(0) as usize);
+        self.bits
+            .get(usize::from(k))
+            .and_then(|b| b.get(y * self.stride + x / 8))
+            .is_some_and(|b| (b >> (x % 8)) & 1 == 1)
+    }
 }
 
 /// Exact score of the robot at cell `(x, y)` given the end cells (level 0).
@@ -521,12 +579,14 @@ fn prepare(
         return Err(GlobalError::EmptyScan);
     }
     let res = map.geometry().resolution;
-    for (rho, p) in sel
+    for ((rho, scaled), p) in sel
         .rho_cells
         .iter_mut()
+        .zip(sel.scaled.iter_mut())
         .zip(sel.points.iter().take(sel.len))
     {
         *rho = libm::hypotf(p.x, p.y) / res;
+        *scaled = (p.x / res, p.y / res);
     }
     let wanted = if config.heading_step > 0.0 {
         config.heading_step
@@ -570,6 +630,7 @@ pub fn search<const N: usize>(
         nodes_per_level: [0; crate::grid::layers::MAX_LEVELS as usize + 1],
         total_weight: sel.total,
         min_score,
+        passes: 0,
         complete: true,
     };
     let g = *map.geometry();
@@ -589,124 +650,139 @@ pub fn search<const N: usize>(
         cells: [(0, 0, 0); MAX_SEARCH_BEAMS],
     };
     let mut stack = [Node::default(); STACK];
-    let threshold = |out: &Hypotheses<N>| {
+    let levels = Levels::new(layers);
+    let threshold = |out: &Hypotheses<N>, pass_min: u32| {
         below_relative(config, out.best())
-            .max(min_score.saturating_sub(1))
+            .max(pass_min.saturating_sub(1))
             .max(out.floor())
     };
-    let mut ry = 0;
-    'search: while ry < h {
-        let mut rx = 0;
-        while rx < w {
-            let root = Node {
-                x: rx,
-                y: ry,
-                j0: 0,
-                bound: sel.total,
-                a: all,
-                k: top,
-            };
-            rx += size;
-            if !block_free(map, layers, top, root.x, root.y) {
-                continue;
-            }
-            let mut sp = 0usize;
-            if let Some(slot) = stack.get_mut(sp) {
-                *slot = root;
-                sp += 1;
-            }
-            while sp > 0 {
-                sp -= 1;
-                let Some(node) = stack.get(sp).copied() else {
-                    break;
+    // Passes at decreasing minimum scores: a high one prunes hard and finds a good match
+    // cheaply; a lower one runs only when the higher found nothing.
+    let mut fraction = config.first_pass_fraction.max(config.min_score_fraction);
+    'passes: loop {
+        let pass_min = libm::ceilf(fraction * sel.total as f32) as u32;
+        report.passes += 1;
+        report.min_score = pass_min;
+        let mut thr = threshold(out, pass_min);
+        let mut ry = 0;
+        while ry < h {
+            let mut rx = 0;
+            while rx < w {
+                let root = Node {
+                    x: rx,
+                    y: ry,
+                    j0: 0,
+                    bound: sel.total,
+                    a: all,
+                    k: top,
                 };
-                if node.bound <= threshold(out) {
+                rx += size;
+                if !block_free(map, layers, top, root.x, root.y) {
                     continue;
                 }
-                if node.a == 0 && node.k == 0 {
-                    out.offer(
-                        Hypothesis {
-                            pose: pose_at(&g, node.x, node.y, heading_angle(node.j0, step)),
-                            score: node.bound,
-                        },
-                        config.separation_m,
-                        config.separation_rad,
-                    );
-                    continue;
+                let mut sp = 0usize;
+                if let Some(slot) = stack.get_mut(sp) {
+                    *slot = root;
+                    sp += 1;
                 }
-                // Split the headings while their spread moves the far beams' ends by
-                // more than half the block, else the block.
-                let split_heading = node.a > 0
-                    && (node.k == 0
-                        || 2 * dilation(rho_max, (1u32 << (node.a - 1)) as f32 * step)
-                            >= 1 << node.k);
-                let mut children = [Node::default(); 4];
-                let mut n = 0;
-                if split_heading {
-                    let a = node.a - 1;
-                    for j0 in [node.j0, node.j0 + (1 << a)] {
-                        if j0 >= headings {
-                            continue;
-                        }
-                        if let Some(c) = children.get_mut(n) {
-                            *c = Node { j0, a, ..node };
-                            n += 1;
-                        }
-                    }
-                } else {
-                    let k = node.k - 1;
-                    let half = 1i32 << k;
-                    for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                        let (x, y) = (node.x + dx * half, node.y + dy * half);
-                        if x >= w || y >= h || !block_free(map, layers, k, x, y) {
-                            continue;
-                        }
-                        if let Some(c) = children.get_mut(n) {
-                            *c = Node { x, y, k, ..node };
-                            n += 1;
-                        }
-                    }
-                }
-                let mut kept = 0;
-                for i in 0..n {
-                    let Some(mut c) = children.get(i).copied() else {
+                while sp > 0 {
+                    sp -= 1;
+                    let Some(node) = stack.get(sp).copied() else {
                         break;
                     };
-                    if report.nodes >= config.node_budget {
-                        report.complete = false;
-                        break 'search;
+                    if node.bound <= thr {
+                        continue;
                     }
-                    report.nodes += 1;
-                    if let Some(count) = report.nodes_per_level.get_mut(usize::from(c.k)) {
-                        *count += 1;
+                    if node.a == 0 && node.k == 0 {
+                        out.offer(
+                            Hypothesis {
+                                pose: pose_at(&g, node.x, node.y, heading_angle(node.j0, step)),
+                                score: node.bound,
+                            },
+                            config.separation_m,
+                            config.separation_rad,
+                        );
+                        thr = threshold(out, pass_min);
+                        continue;
                     }
-                    if c.a == 0 && c.k == 0 {
-                        report.leaves += 1;
+                    // Split the headings while their spread moves the far beams' ends by
+                    // more than half the block, else the block.
+                    let split_heading = node.a > 0
+                        && (node.k == 0
+                            || 2 * dilation(rho_max, (1u32 << (node.a - 1)) as f32 * step)
+                                >= 1 << node.k);
+                    let mut children = [Node::default(); 4];
+                    let mut n = 0;
+                    if split_heading {
+                        let a = node.a - 1;
+                        for j0 in [node.j0, node.j0 + (1 << a)] {
+                            if j0 >= headings {
+                                continue;
+                            }
+                            if let Some(c) = children.get_mut(n) {
+                                *c = Node { j0, a, ..node };
+                                n += 1;
+                            }
+                        }
+                    } else {
+                        let k = node.k - 1;
+                        let half = 1i32 << k;
+                        for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                            let (x, y) = (node.x + dx * half, node.y + dy * half);
+                            if x >= w || y >= h || !block_free(map, layers, k, x, y) {
+                                continue;
+                            }
+                            if let Some(c) = children.get_mut(n) {
+                                *c = Node { x, y, k, ..node };
+                                n += 1;
+                            }
+                        }
                     }
-                    let cells = end.at(map, &sel, step, c.reference(), &mut report);
-                    c.bound = bound(map, layers, &sel, cells, step, c.a, c.k, c.x, c.y);
-                    if c.bound > threshold(out)
-                        && let Some(slot) = children.get_mut(kept)
-                    {
-                        *slot = c;
-                        kept += 1;
+                    let mut kept = 0;
+                    for i in 0..n {
+                        let Some(mut c) = children.get(i).copied() else {
+                            break;
+                        };
+                        if report.nodes >= config.node_budget {
+                            report.complete = false;
+                            break 'passes;
+                        }
+                        report.nodes += 1;
+                        if let Some(count) = report.nodes_per_level.get_mut(usize::from(c.k)) {
+                            *count += 1;
+                        }
+                        if c.a == 0 && c.k == 0 {
+                            report.leaves += 1;
+                        }
+                        let cells = end.at(&sel, step, c.reference(), &mut report);
+                        c.bound = bound(map, &levels, &sel, cells, step, c.a, c.k, c.x, c.y);
+                        if c.bound > thr
+                            && let Some(slot) = children.get_mut(kept)
+                        {
+                            *slot = c;
+                            kept += 1;
+                        }
                     }
-                }
-                // Decreasing bound, equal bounds in child order (insertion sort of at
-                // most four); pushed in reverse so the best is visited first.
-                let kids = children.get_mut(..kept).unwrap_or(&mut []);
-                sort_decreasing(kids);
-                for kid in kids.iter().rev() {
-                    if let Some(slot) = stack.get_mut(sp) {
-                        *slot = *kid;
-                        sp += 1;
+                    // Decreasing bound, equal bounds in child order (insertion sort of at
+                    // most four); pushed in reverse so the best is visited first.
+                    let kids = children.get_mut(..kept).unwrap_or(&mut []);
+                    sort_decreasing(kids);
+                    for kid in kids.iter().rev() {
+                        if let Some(slot) = stack.get_mut(sp) {
+                            *slot = *kid;
+                            sp += 1;
+                        }
                     }
                 }
             }
+            ry += size;
         }
-        ry += size;
+        if !out.is_empty() || fraction <= config.min_score_fraction {
+            break 'passes;
+        }
+        fraction = (fraction - config.pass_step).max(config.min_score_fraction);
     }
-    out.keep_above(below_relative(config, out.best()).max(min_score.saturating_sub(1)));
+    out.keep_above(below_relative(config, out.best()).max(report.min_score.saturating_sub(1)));
     Ok(report)
 }
 
@@ -756,7 +832,7 @@ pub fn search_brute_force<const N: usize>(
     let mut nodes = 0u32;
     for j in 0..headings {
         let theta = wrap_angle(j as f32 * step);
-        end_cells(map, &sel, theta, &mut cells);
+        end_cells(&sel, theta, &mut cells);
         let cells = cells.get(..sel.len).unwrap_or(&[]);
         for y in 0..g.height as i32 {
             for x in 0..g.width as i32 {
@@ -790,6 +866,7 @@ pub fn search_brute_force<const N: usize>(
         nodes_per_level: [nodes, 0, 0, 0, 0, 0, 0, 0, 0],
         total_weight: sel.total,
         min_score,
+        passes: 1,
         complete: true,
     })
 }
@@ -867,13 +944,14 @@ mod tests {
     /// Score of `pose` recomputed the brute-force way (its heading and cell).
     fn rescore(
         view: &GridView<'_>,
+        layers: &MaxPoolLayers<'_>,
         points: &[ScanPoint],
         c: &GlobalSearchConfig,
         h: &Hypothesis,
     ) -> u32 {
-        let sel = select(points, c);
+        let (sel, _, _) = prepare(view, layers, points, c).unwrap();
         let mut cells = [(0, 0, 0); MAX_SEARCH_BEAMS];
-        end_cells(view, &sel, h.pose.theta, &mut cells);
+        end_cells(&sel, h.pose.theta, &mut cells);
         let (x, y) = view.geometry().world_to_cell(h.pose.x, h.pose.y).unwrap();
         leaf_score(view, &cells[..sel.len], x as i32, y as i32)
     }
@@ -921,7 +999,7 @@ mod tests {
             );
             for hyp in fast.as_slice() {
                 assert_eq!(
-                    rescore(&view, pts.as_slice(), &c, hyp),
+                    rescore(&view, &layers, pts.as_slice(), &c, hyp),
                     hyp.score,
                     "trial {trial}"
                 );

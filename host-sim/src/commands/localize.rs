@@ -2,7 +2,7 @@
 //! CARMEN log, scored with the relation metric when a relations file is found.
 
 use super::replay::{metrics_json, options_from, report, scan_progress_bar};
-use crate::domain::grid::GridOptions;
+use crate::domain::grid::{GlobalOptions, GridOptions};
 use crate::drivers::grid::{carmen_inputs, run_localizer};
 use crate::inputs::readers::DatasetSpec;
 use crate::inputs::readers::carmen::{front_scans, read_log, resolve_log};
@@ -27,10 +27,23 @@ pub struct LocalizeOptions {
     pub grid: GridOptions,
     /// Output folder.
     pub out: PathBuf,
+    /// Global localization trials instead of one tracked run (when enabled).
+    pub global: GlobalOptions,
 }
 
 /// `host-sim localize --map map.yaml --dataset carmen:<file>`.
 pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
+    if args.global.enabled {
+        return super::global::localize_cli(
+            &args.map,
+            &args.dataset,
+            args.config.as_deref(),
+            &args.grid,
+            &args.global,
+            &args.out,
+            quiet,
+        );
+    }
     let start = Instant::now();
     let DatasetSpec::Carmen(file) = &args.dataset else {
         bail!("localize needs a lidar dataset (carmen:<file>)");

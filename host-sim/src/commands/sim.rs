@@ -7,6 +7,7 @@ use super::replay::run_and_report;
 use crate::domain::AssociationMode;
 use crate::domain::Precision;
 use crate::domain::config::Settings;
+use crate::domain::grid::GlobalOptions;
 use crate::drivers::grid::{GridRunOptions, f32_pose, run_localizer, run_slam, sim_inputs};
 use crate::inputs::sim::lidar_world::{LidarRecording, SIM_GRID_CELLS, true_map};
 use crate::inputs::sim::simulate;
@@ -36,6 +37,8 @@ pub struct SimOptions {
     /// Particles of the grid filters in the lidar world (one of [`SIM_PARTICLES`]; 0
     /// skips the grid scenario).
     pub grid_particles: usize,
+    /// Global localization trials on the grid SLAM map (when enabled).
+    pub global: GlobalOptions,
 }
 
 impl Default for SimOptions {
@@ -48,6 +51,7 @@ impl Default for SimOptions {
             precision: Precision::F64,
             no_plots: false,
             grid_particles: 200,
+            global: GlobalOptions::default(),
         }
     }
 }
@@ -84,6 +88,9 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
     };
     let out = args.out.join("grid");
     let (slam, loc) = run_and_write(&rec, config, args.grid_particles, &out)?;
+    if args.global.enabled {
+        super::global::sim_cli(&rec, config, args.grid_particles, &args.global, &out, quiet)?;
+    }
     if !quiet {
         println!(
             "{}: {} scans, {} particles, dead reckoning ATE {:.3} m",

@@ -118,3 +118,45 @@ pub struct GridOptions {
     /// Benchmark relations file (default: a `*.relations` file next to the log).
     pub relations: Option<std::path::PathBuf>,
 }
+
+/// Options of global localization trials (`localize --global`, `sim --global`).
+#[derive(Clone, Debug)]
+pub struct GlobalOptions {
+    /// Run the trials.
+    pub enabled: bool,
+    /// Number of trials.
+    pub trials: usize,
+    /// Seed of the random start scans.
+    pub trial_seed: u64,
+    /// Scans a trial may take to converge.
+    pub max_scans: usize,
+    /// Levels of the max-pooled map layers.
+    pub levels: u8,
+    /// Node budget of the search (`None`: the core's).
+    pub node_budget: Option<u32>,
+    /// Smallest hypothesis score, a fraction of the beams' total weight.
+    pub min_score: Option<f32>,
+    /// Beams farther than this are left out of the search, metres.
+    pub search_range: Option<f32>,
+    /// Beams the search uses at most.
+    pub search_beams: Option<u16>,
+    /// Particles spread over this many hypotheses.
+    pub hypotheses: Option<u8>,
+}
+
+impl Default for GlobalOptions {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            trials: 20,
+            trial_seed: 1,
+            max_scans: 10,
+            levels: 6,
+            node_budget: None,
+            min_score: None,
+            search_range: None,
+            search_beams: None,
+            hypotheses: None,
+        }
+    }
+}

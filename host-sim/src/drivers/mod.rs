@@ -11,6 +11,7 @@
 
 pub mod detections;
 pub mod ekf;
+pub mod global;
 pub mod grid;
 pub mod hil;
 pub mod hil_localizer;

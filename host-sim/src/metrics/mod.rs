@@ -20,6 +20,7 @@
 
 mod alignment;
 mod assignment;
+pub mod global;
 pub mod grid;
 pub mod relations;
 
