@@ -24,6 +24,8 @@ PROFILE=firmware
 # Cargo's target directory: $CARGO_TARGET_DIR when set.
 TARGET_DIR="${CARGO_TARGET_DIR:-target}"
 OUT="$TARGET_DIR/firmware-elf"
+mkdir -p "$OUT"
+OUT="$(cd "$OUT" && pwd)" # absolute: the tests run from other folders
 BUDGET=firmware-example/budget.txt
 TOLERANCE_PERCENT=2
 mkdir -p "$OUT"
@@ -47,21 +49,38 @@ cargo clippy -p microslam --locked --target "$TARGET" --features wire,defmt -- -
 
 step "build: stm32f411"
 cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --no-default-features --features stm32f411
-cp "target/$TARGET/$PROFILE/firmware-example" "$OUT/stm32f411.elf"
+cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/stm32f411.elf"
 
 step "build: qemu (firmware and cost binaries)"
 cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --bins
-cp "target/$TARGET/$PROFILE/firmware-example" "$OUT/qemu.elf"
-cp "target/$TARGET/$PROFILE/cost" "$OUT/cost.elf"
-cp "target/$TARGET/$PROFILE/cost_grid" "$OUT/cost_grid.elf"
+cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/qemu.elf"
+cp "$TARGET_DIR/$TARGET/$PROFILE/cost" "$OUT/cost.elf"
+cp "$TARGET_DIR/$TARGET/$PROFILE/cost_grid" "$OUT/cost_grid.elf"
+cp "$TARGET_DIR/$TARGET/$PROFILE/cost_relocalize" "$OUT/cost_relocalize.elf"
+
+# ---- Localizer firmware (map in flash) ----
+# The map of a host grid-SLAM run on the Intel log (made here, never committed) is
+# embedded with MICROSLAM_MAP: the firmware then carries the localizer instead of the
+# grid SLAM. Built after the plain ELFs above were copied (the variable changes the build).
+step "build: localizer firmware with the Intel map in flash (qemu, stm32f411)"
+MAP_DIR="$OUT/intel-map"
+cargo build --release -p host-sim --locked
+"$TARGET_DIR/release/host-sim" -q replay --filter grid-slam --dataset carmen:intel/intel-raw-part.clf --out "$MAP_DIR"
+MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo clippy -p firmware-example --locked --target "$TARGET" --bins -- -D warnings
+MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --no-default-features --features stm32f411
+cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/localizer-stm32f411.elf"
+MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --bin firmware-example
+cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/localizer.elf"
+export LOCALIZER_ELF="$OUT/localizer.elf" LOCALIZER_MAP="$MAP_DIR/map.yaml"
+# ---- end localizer firmware ----
 
 measured="$OUT/measured.txt"
 : >"$measured"
 record() { printf '%-40s %s\n' "$1" "$2" >>"$measured"; }
-for board in qemu stm32f411; do
+for board in qemu stm32f411 localizer localizer-stm32f411; do
     read -r text data bss _ < <(arm-none-eabi-size "$OUT/$board.elf" | tail -1)
-    record "${board}_flash_bytes" "$((text + data))"
-    record "${board}_static_ram_bytes" "$((data + bss))"
+    record "${board//-/_}_flash_bytes" "$((text + data))"
+    record "${board//-/_}_static_ram_bytes" "$((data + bss))"
 done
 
 step "QEMU: firmware equals the host bit for bit (EKF and grid drives, MRCLAM 6)"
@@ -74,16 +93,21 @@ FIRMWARE_ELF="$(cd "$OUT" && pwd)/qemu.elf" run_tests "$qemu_tests" cargo test -
 stack=$(sed -n 's/^firmware stack peak\( with grid\)\{0,1\}: \([0-9]*\) bytes$/\2/p' "$log" | sort -n | tail -1)
 [[ -n "$stack" ]] || fail "no stack figure in the HIL output"
 record "qemu_stack_peak_bytes" "$stack"
+# The localizer firmware's high-water mark (its own QEMU run in the same test binary).
+lstack=$(sed -n 's/^firmware stack peak with localizer: \([0-9]*\) bytes$/\1/p' "$log" | sort -n | tail -1)
+[[ -n "$lstack" ]] || { echo "no localizer stack figure in the HIL output" >&2; exit 1; }
+record "localizer_stack_peak_bytes" "$lstack"
 # What the RAM bar is about: static RAM plus the stack (the QEMU runs' peak for both).
-for board in qemu stm32f411; do
+for board in qemu stm32f411 localizer localizer_stm32f411; do
     static=$(awk -v n="${board}_static_ram_bytes" '$1 == n { print $2 }' "$measured")
-    record "${board}_ram_with_stack_bytes" "$((static + stack))"
+    peak=$stack; [[ $board == localizer* ]] && peak=$lstack
+    record "${board}_ram_with_stack_bytes" "$((static + peak))"
 done
 
 step "QEMU: instructions per call (-icount shift=6)"
 cost_log="$OUT/cost.log"
 : >"$cost_log"
-for elf in cost cost_grid; do
+for elf in cost cost_grid cost_relocalize; do
     timeout 600 qemu-system-arm -machine mps2-an386 -cpu cortex-m4 -display none -monitor none \
         -serial stdio -icount shift=6 -semihosting-config enable=on,target=native \
         -kernel "$OUT/$elf.elf" </dev/null | tee "$OUT/$elf.run.log"
@@ -100,6 +124,13 @@ awk '/^ekf /{
     /^grid /{
         split($2, p, "="); split($3, b, "="); split($4, w, "=");
         printf "%-40s %s\n", "grid_p" p[2] "_b" b[2] "_w9_step_instructions", w[2];
+    /^localizer /{
+        split($2, p, "="); split($4, w, "=");
+        printf "%-40s %s\n", "localizer_p" p[2] "_b90_w9_step_instructions", w[2];
+    }
+    /^relocalize /{
+        split($2, c, "="); split($6, n, "=");
+        printf "%-40s %s\n", "relocalize_" c[2] "x" c[2] "_instructions", n[2];
     }' "$cost_log" >>"$measured"
 
 step "report"
@@ -125,6 +156,27 @@ awk '
             printf "EKF update %-9s at 64 landmarks: %d instructions = %.2f per (3+2n)^2 entry; fitted exponent n^%.2f\n",
                 form, c[form, 64], c[form, 64] / (3 + 2 * 64) ^ 2, e
         }
+    }' "$measured"
+
+# Localizer bars: flash with the map ≤ 512 KB, static RAM + stack ≤ 128 KB (both boards'
+# flash, QEMU's RAM with its measured stack); every localizer figure present. The
+# instruction bar (step ≤ 0.8 M at P = 64) is reported; the budget below enforces the
+# recorded figures (the instruction bars are printed as met / NOT MET).
+awk '
+    { v[$1] = $2 }
+    END {
+        split("localizer_flash_bytes localizer_static_ram_bytes localizer_stm32f411_flash_bytes localizer_stack_peak_bytes localizer_p32_b90_w9_step_instructions localizer_p64_b90_w9_step_instructions localizer_p128_b90_w9_step_instructions relocalize_256x256_instructions", need, " ");
+        for (i in need) if (!(need[i] in v)) { printf "FAIL: localizer figure %s missing\n", need[i]; bad = 1 }
+        ram = v["localizer_static_ram_bytes"] + v["localizer_stack_peak_bytes"];
+        printf "localizer firmware: flash %d bytes with the map (bar <= 524288), static RAM + stack %d bytes (bar <= 131072)\n", v["localizer_flash_bytes"], ram;
+        if (v["localizer_flash_bytes"] > 524288 || v["localizer_stm32f411_flash_bytes"] > 524288 || ram > 131072) {
+            print "FAIL: the localizer firmware is over the STM32F411 memory bar"; bad = 1
+        }
+        s = v["localizer_p64_b90_w9_step_instructions"];
+        printf "localizer step P=64, 90 beams, 9x9: %d instructions (bar <= 800000: %s)\n", s, (s <= 800000) ? "met" : "NOT MET";
+        r = v["relocalize_256x256_instructions"];
+        printf "relocalization on 256x256: %d instructions (bar <= 50000000: %s)\n", r, (r <= 50000000) ? "met" : "NOT MET";
+        if (bad) exit 1
     }' "$measured"
 
 if [[ "${1:-}" == "--record" ]]; then

@@ -1,5 +1,21 @@
-//! Picks the memory layout of the board and passes the linker scripts.
+//! Picks the memory layout of the board, passes the linker scripts, and embeds the map.
+//!
+//! `MICROSLAM_MAP=<map.yaml>` (a ROS map_server map, e.g. from `host-sim replay --filter
+//! grid-slam`) converts the map into a map image (`microslam::grid::map_image`, the
+//! same code as `host-sim export-map`) at `$OUT_DIR/map.bin`, which the firmware embeds
+//! with `include_bytes!`, and sets `cfg(microslam_map)`: the firmware then carries the
+//! localizer instead of the grid SLAM. Without the variable `map.bin` is empty and the
+//! firmware refuses localizer requests (`Refusal::NoMap`). The image carries the map's
+//! max-pooled layers for the global search: `MICROSLAM_MAP_LEVELS` levels (default 5,
+//! 0 for none).
+use microslam::grid::map_image::{DEFAULT_LAYER_LEVELS, encode_map_image_with_layers};
+use microslam::grid::ros_map::RosMap;
+use microslam::pf::GridPfConfig;
 use std::{env, fs, path::PathBuf};
+
+/// The localizer's settings (`firmware_example::config::LOCALIZER_CONFIG` is the same
+/// constant): the map's cells are read with its log-odds unit and thresholds.
+const MAP_CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
 
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("OUT_DIR is set by cargo"));
@@ -17,4 +33,54 @@ fn main() {
         println!("cargo:rustc-link-arg-bins=-Tlink.x");
         println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
     }
+    embed_map(&out);
+}
+
+fn embed_map(out: &std::path::Path) {
+    println!("cargo:rerun-if-env-changed=MICROSLAM_MAP");
+    println!("cargo:rustc-check-cfg=cfg(microslam_map)");
+    let image = match env::var_os("MICROSLAM_MAP").filter(|v| !v.is_empty()) {
+        None => Vec::new(),
+        Some(yaml) => {
+            let yaml = PathBuf::from(yaml);
+            println!("cargo:rerun-if-changed={}", yaml.display());
+            let map = RosMap::read(&yaml, &MAP_CONFIG.log_odds)
+                .unwrap_or_else(|e| panic!("MICROSLAM_MAP: {e}"));
+            if (map.geometry.resolution - MAP_CONFIG.resolution).abs() > 1e-6 {
+                panic!(
+                    "MICROSLAM_MAP: {}: resolution {} m, the localizer runs at {} m",
+                    yaml.display(),
+                    map.geometry.resolution,
+                    MAP_CONFIG.resolution
+                );
+            }
+            // Levels of the global search's layers: MICROSLAM_MAP_LEVELS, default 5 (0: no
+            // layers, no global search; the map alone).
+            println!("cargo:rerun-if-env-changed=MICROSLAM_MAP_LEVELS");
+            let levels = env::var("MICROSLAM_MAP_LEVELS").map_or(DEFAULT_LAYER_LEVELS, |v| {
+                v.parse()
+                    .unwrap_or_else(|_| panic!("MICROSLAM_MAP_LEVELS={v}: not a number 0..=8"))
+            });
+            let log_odds = MAP_CONFIG.log_odds;
+            let image = encode_map_image_with_layers(
+                &map.cells,
+                &map.geometry,
+                log_odds.occupied_above,
+                log_odds.free_below,
+                levels,
+            )
+            .unwrap_or_else(|e| panic!("MICROSLAM_MAP: {}: {e}", yaml.display()));
+            println!("cargo:rustc-cfg=microslam_map");
+            println!(
+                "cargo:warning=map {} embedded: {} x {} cells, {} layer levels, {} bytes",
+                yaml.display(),
+                map.geometry.width,
+                map.geometry.height,
+                levels,
+                image.len()
+            );
+            image
+        }
+    };
+    fs::write(out.join("map.bin"), image).expect("write map.bin");
 }

@@ -5,7 +5,7 @@ use microslam::gate::ChiSquareGate;
 use microslam::geometry::Pose2;
 use microslam::grid::{OccupancyGrid, occupancy_bytes};
 use microslam::motion::{IncrementNoise, VelocityNoise};
-use microslam::pf::{GridPfConfig, GridSlam};
+use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam, RelocalizationConfig};
 use microslam::sensors::range_bearing::RangeBearingSensor;
 use microslam::wire::GridSetup;
 
@@ -69,3 +69,25 @@ pub const GRID_CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
 
 /// Lidar and wheels as the session hands them to the grid estimator.
 pub const GRID_SETUP: GridSetup = GridSetup::EXAMPLE;
+
+// ---- Localizer on the map in flash (built with MICROSLAM_MAP=<map.yaml>) ----
+
+/// Particles of the localizer. Without the 64 KB grid in RAM far more would fit (28 bytes
+/// each); the instruction budget per scan is what limits them.
+pub const LOCALIZER_PARTICLES: usize = 64;
+
+/// Settings of the localizer: the grid estimator's (the map image is made with its
+/// log-odds thresholds by `build.rs`).
+pub const LOCALIZER_CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
+
+/// Lost detection and global relocalization of the localizer (used when the map image
+/// carries max-pooled layers).
+pub const RELOCALIZATION: RelocalizationConfig = RelocalizationConfig::DEFAULT;
+
+/// The localizer on the `&'static` map image in flash.
+pub type Localizer = GridLocalizer<'static, LOCALIZER_PARTICLES, GRID_BEAMS>;
+
+/// The map image embedded by `build.rs` (`MICROSLAM_MAP`), in `.rodata`: empty when the
+/// firmware was built without a map. Checked at boot with
+/// [`microslam::grid::MapImage::parse`].
+pub static MAP_IMAGE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/map.bin"));

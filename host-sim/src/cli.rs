@@ -49,6 +49,9 @@ pub enum Command {
     /// Localize on a saved grid map (`map.yaml` from `replay --filter grid-slam`) with the
     /// grid particle filter.
     Localize(LocalizeArgs),
+    /// Convert a ROS map (`map.yaml` + PGM) into the firmware's map image (what
+    /// `MICROSLAM_MAP=<map.yaml>` embeds in the firmware).
+    ExportMap(ExportMapArgs),
     /// Coloured floor map from simulated RGB-D frames (`--dataset sim`), scored against the
     /// simulator's true floor texture.
     Texture(TextureArgs),
@@ -288,9 +291,17 @@ pub struct HilArgs {
     /// Baud rate of the serial port.
     #[arg(long, default_value_t = 115_200)]
     pub baud: u32,
-    /// Dataset: `mrclam:<dir>`, as for `replay`.
+    /// Dataset: `mrclam:<dir>` (EKF), as for `replay`, or `carmen:<log>` (the localizer
+    /// on the map in the firmware's flash; needs `--map`).
     #[arg(long, short)]
     pub dataset: DatasetSpec,
+    /// With `carmen:`: the map the firmware was built with (`MICROSLAM_MAP`), for the
+    /// host reference.
+    #[arg(long)]
+    pub map: Option<PathBuf>,
+    /// With `carmen:`: stream only the first N scans.
+    #[arg(long)]
+    pub scans: Option<usize>,
     /// Robot whose log is streamed.
     #[arg(long, default_value_t = 1)]
     pub robot: u8,
@@ -315,6 +326,20 @@ pub struct HilArgs {
     /// EKF settings (TOML) laid over the dataset's defaults, with `--dataset-settings`.
     #[arg(long)]
     pub config: Option<PathBuf>,
+}
+
+/// Options of `host-sim export-map`.
+#[derive(Debug, Clone, Args)]
+pub struct ExportMapArgs {
+    /// The map: `map.yaml` (ROS map_server) next to its PGM.
+    #[arg(long)]
+    pub map: PathBuf,
+    /// The map image to write.
+    #[arg(long, short, default_value = "out/map.bin")]
+    pub out: PathBuf,
+    /// Levels of the global search's max-pooled layers in the image (0: none).
+    #[arg(long, default_value_t = microslam::grid::map_image::DEFAULT_LAYER_LEVELS)]
+    pub levels: u8,
 }
 
 /// Options of `host-sim detections`.
@@ -436,6 +461,8 @@ impl From<&HilArgs> for HilOptions {
             corrupt_seed: a.corrupt_seed,
             dataset_settings: a.dataset_settings,
             config: a.config.clone(),
+            map: a.map.clone(),
+            scans: a.scans,
         }
     }
 }
@@ -471,6 +498,9 @@ pub fn run(cli: &Cli) -> Result<()> {
         Some(Command::Sim(args)) => sim::run_cli(&args.into(), cli.quiet),
         Some(Command::Hil(args)) => hil::run_cli(&args.into(), cli.quiet),
         Some(Command::Localize(args)) => localize::localize_cli(&args.into(), cli.quiet),
+        Some(Command::ExportMap(args)) => {
+            crate::commands::hil_localizer::export_cli(&args.map, &args.out, args.levels, cli.quiet)
+        }
         Some(Command::Texture(args)) => texture::texture_cli(&args.into(), cli.quiet),
         Some(Command::Detections(args)) => detections::detections_cli(&args.into(), cli.quiet),
         None => sim::run_cli(&SimOptions::default(), cli.quiet),

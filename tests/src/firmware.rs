@@ -353,3 +353,32 @@ pub fn lidar_world_messages(laps: u32, seed: u64) -> (Vec<ToDevice>, Vec<[f64; 3
     });
     (out, truth)
 }
+
+/// The localizer firmware ELF (built with `MICROSLAM_MAP`): `$LOCALIZER_ELF`, else
+/// `target/firmware-elf/localizer.elf` (where `.ci/firmware.sh` puts it).
+pub fn localizer_elf() -> PathBuf {
+    std::env::var_os("LOCALIZER_ELF").map_or_else(
+        || workspace_root().join("target/firmware-elf/localizer.elf"),
+        PathBuf::from,
+    )
+}
+
+/// The map the localizer firmware was built with: `$LOCALIZER_MAP`, else
+/// `target/firmware-elf/intel-map/map.yaml` (the map of the host grid-SLAM run on the
+/// Intel log that `.ci/firmware.sh` makes).
+pub fn localizer_map() -> PathBuf {
+    std::env::var_os("LOCALIZER_MAP").map_or_else(
+        || workspace_root().join("target/firmware-elf/intel-map/map.yaml"),
+        PathBuf::from,
+    )
+}
+
+/// A copy of `elf` at `out` with one byte of the embedded map image `image` flipped
+/// (after the header: the CRC-32 no longer matches). `None` when the image is not found
+/// in the ELF verbatim.
+pub fn elf_with_corrupt_map(elf: &Path, image: &[u8], out: &Path) -> Option<()> {
+    let mut bytes = std::fs::read(elf).ok()?;
+    let at = bytes.windows(image.len()).position(|w| w == image)?;
+    bytes[at + image.len() / 2] ^= 0x5a;
+    std::fs::write(out, bytes).ok()
+}

@@ -340,3 +340,140 @@ fn dataset_ekf_settings_travel_over_the_wire() {
     assert!(tuned_ate < 0.19, "{tuned_ate}");
     assert!(tuned_ate < own_ate, "{tuned_ate} {own_ate}");
 }
+
+/// The localizer firmware (built with `MICROSLAM_MAP` = the map of a host grid-SLAM run
+/// on the Intel log, see `.ci/firmware.sh`) in localizer mode on the first 400 scans of
+/// the Intel raw log, started at the first pose: every reply equals the host's — the
+/// firmware's session with its localizer on the same map image — bit for bit, and every
+/// completed scan is applied.
+#[test]
+#[ignore = "needs qemu-system-arm, the localizer ELF, its map and the datasets: run by .ci/firmware.sh"]
+fn localizer_firmware_in_qemu_equals_host_bit_for_bit_on_intel() {
+    use host_sim::drivers::hil_localizer::{
+        host_localizer_replies, localizer_messages, map_image_of,
+    };
+    use microslam_replay_tests::firmware::{localizer_elf, localizer_map};
+    let elf = localizer_elf();
+    let map = localizer_map();
+    assert!(
+        elf.exists(),
+        "{} missing: run .ci/firmware.sh",
+        elf.display()
+    );
+    assert!(
+        map.exists(),
+        "{} missing: run .ci/firmware.sh",
+        map.display()
+    );
+    let log_path = host_sim::inputs::readers::carmen::resolve_log("intel/intel-raw-part.clf")
+        .expect("Intel log");
+    let log = host_sim::inputs::readers::carmen::read_log(&log_path).expect("Intel log reads");
+    let mut scans = host_sim::inputs::readers::carmen::front_scans(&log);
+    scans.truncate(400);
+    let image = map_image_of(&map).expect("the map converts");
+    let (messages, last_chunks) = localizer_messages(&scans, microslam::geometry::Pose2::IDENTITY);
+    let bytes = encode_all(&messages);
+    let expected = host_localizer_replies(&bytes, &image).expect("host reference");
+    assert_eq!(expected.len(), messages.len(), "one reply per message");
+    let applied = last_chunks
+        .iter()
+        .filter(|&&i| {
+            matches!(expected.get(i), Some(ToHost::Localization { estimate, .. })
+                if estimate.result == StepResult::Applied
+                    && estimate.estimator == EstimatorKind::Localizer)
+        })
+        .count();
+    assert_eq!(applied, scans.len(), "every scan reaches the localizer");
+
+    let run = run_in_qemu(&elf, bytes, expected.len(), Duration::from_secs(600));
+    println!(
+        "localizer: {} scans, {} frames → {} replies in {:.2} s",
+        scans.len(),
+        messages.len(),
+        run.replies.len(),
+        run.elapsed.as_secs_f64()
+    );
+    assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
+    assert_eq!(run.replies.len(), expected.len(), "every message answered");
+    for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
+        assert_eq!(
+            bits(got),
+            bits(want),
+            "reply {i} differs:\n{got:?}\n{want:?}"
+        );
+    }
+    let Some(ToHost::Status {
+        stack_peak_bytes, ..
+    }) = run.replies.last()
+    else {
+        panic!("last reply is not a status");
+    };
+    println!("firmware stack peak with localizer: {stack_peak_bytes} bytes");
+}
+
+/// A localizer request is refused with a status the host can read, never a fault: by
+/// the firmware built without a map (`NoMap`), and by the localizer firmware whose map
+/// image was corrupted in the ELF (`BadMap`, checksum mismatch) — which still serves the
+/// EKF.
+#[test]
+#[ignore = "needs qemu-system-arm and both firmware ELFs: run by .ci/firmware.sh"]
+fn localizer_requests_are_refused_without_a_valid_map() {
+    use microslam::grid::MapImageError;
+    use microslam::wire::{Command as WireCommand, Refusal};
+    use microslam_replay_tests::firmware::{elf_with_corrupt_map, localizer_elf, localizer_map};
+    let ask = vec![
+        ToDevice::Command {
+            seq: 1,
+            command: WireCommand::SelectEstimator(EstimatorKind::Localizer),
+        },
+        ToDevice::Command {
+            seq: 2,
+            command: WireCommand::Relocalize,
+        },
+        ToDevice::Command {
+            seq: 3,
+            command: WireCommand::ReportStatus,
+        },
+    ];
+    let refused = |reason| ToHost::Refused {
+        seq: 1,
+        reason,
+        estimator: EstimatorKind::Ekf,
+    };
+    let not_localizing = ToHost::Refused {
+        seq: 2,
+        reason: Refusal::NotLocalizing,
+        estimator: EstimatorKind::Ekf,
+    };
+
+    let plain = firmware_elf();
+    assert!(
+        plain.exists(),
+        "{} missing: run .ci/firmware.sh",
+        plain.display()
+    );
+    let run = run_in_qemu(&plain, encode_all(&ask), 3, Duration::from_secs(60));
+    assert_eq!(run.replies.len(), 3, "{:?}", run.replies);
+    assert_eq!(bits(&run.replies[0]), bits(&refused(Refusal::NoMap)));
+    assert_eq!(bits(&run.replies[1]), bits(&not_localizing));
+
+    let image =
+        host_sim::drivers::hil_localizer::map_image_of(&localizer_map()).expect("the map converts");
+    let dir = tempfile::tempdir().expect("temporary folder");
+    let bad = dir.path().join("corrupt-map.elf");
+    elf_with_corrupt_map(&localizer_elf(), &image, &bad).expect("the map image is in the ELF");
+    let run = run_in_qemu(&bad, encode_all(&ask), 3, Duration::from_secs(60));
+    assert_eq!(run.replies.len(), 3, "{:?}", run.replies);
+    let code = MapImageError::ChecksumMismatch as u8;
+    assert_eq!(
+        bits(&run.replies[0]),
+        bits(&refused(Refusal::BadMap { code }))
+    );
+    assert!(matches!(
+        run.replies[2],
+        ToHost::Status {
+            estimator: EstimatorKind::Ekf,
+            ..
+        }
+    ));
+}

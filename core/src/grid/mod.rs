@@ -16,14 +16,23 @@
 //! - [`MaxPoolLayers`]: max-pooled copies of a map (any occupied cell in each `2^k × 2^k`
 //!   window) and its free blocks, in one byte image for flash or RAM: the bounds of the
 //!   global search ([`crate::pf::global`]).
+//! - [`map_image`] (feature `map-image`): a map as one versioned, checksummed binary image
+//!   for flash, read in place.
+//! - [`ros_map`] (feature `std`): reading a ROS `map_server` map (`map.yaml` + PGM).
 
 mod bresenham;
 pub mod layers;
+#[cfg(feature = "map-image")]
+pub mod map_image;
 mod occupancy;
+#[cfg(feature = "std")]
+pub mod ros_map;
 mod view;
 
 pub use bresenham::Bresenham;
 pub use layers::{LayersError, MaxPoolLayers};
+#[cfg(feature = "map-image")]
+pub use map_image::{MapImage, MapImageError};
 pub use occupancy::{OccupancyGrid, ScanIntegration};
 pub use view::{GridView, fill_occupancy_bits};
 

@@ -58,6 +58,35 @@ impl<'a> GridView<'a> {
         })
     }
 
+    /// A view made of the occupied-cell bitmap alone (no log-odds cells): what a map in
+    /// flash carries ([`super::MapImage`]), an eighth of the bytes of the cells. Cell
+    /// `(x, y)` is occupied when bit `x % 8` of byte `y · ⌈width/8⌉ + x / 8` is set;
+    /// [`GridView::log_odds`] answers `None` and [`GridView::cells`] is empty. Scores
+    /// against it equal the scores against the cells the bitmap was computed from. A
+    /// bitmap of another length is refused with [`GridError::SizeMismatch`].
+    /// `occupied_above` is the threshold the bitmap was made with (kept for
+    /// [`GridView::occupied_above`], not applied).
+    pub fn from_occupancy_bits(
+        bits: &'a [u8],
+        geometry: GridGeometry,
+        occupied_above: i8,
+    ) -> Result<Self, GridError> {
+        if !geometry.is_valid() {
+            return Err(GridError::InvalidGeometry);
+        }
+        if geometry.width.checked_mul(geometry.height).is_none()
+            || bits.len() != super::occupancy_bytes(geometry.width, geometry.height)
+        {
+            return Err(GridError::SizeMismatch);
+        }
+        Ok(Self {
+            cells: &[],
+            geometry,
+            occupied_above,
+            bits: Some(bits),
+        })
+    }
+
     /// [`GridView::with_occupancy_bits`] for a bitmap kept by the grid itself.
     pub(crate) fn with_trusted_bits(self, bits: &'a [u8]) -> Self {
         Self {
@@ -99,13 +128,15 @@ impl<'a> GridView<'a> {
         self.occupied_above
     }
 
-    /// All cells, row-major.
+    /// All cells, row-major (empty on a view made with
+    /// [`GridView::from_occupancy_bits`]).
     #[inline]
     pub fn cells(&self) -> &'a [i8] {
         self.cells
     }
 
-    /// Log-odds of cell `(ix, iy)`, `None` off the grid.
+    /// Log-odds of cell `(ix, iy)`, `None` off the grid (and everywhere on a view made
+    /// with [`GridView::from_occupancy_bits`]).
     #[inline]
     pub fn log_odds(&self, ix: i32, iy: i32) -> Option<i8> {
         if !self.geometry.contains(ix, iy) {
@@ -119,8 +150,24 @@ impl<'a> GridView<'a> {
     /// `true` when `(ix, iy)` is on the grid and occupied.
     #[inline]
     pub fn is_occupied(&self, ix: i32, iy: i32) -> bool {
+        if self.cells.is_empty() {
+            return self.occupancy_bit(ix, iy);
+        }
         self.log_odds(ix, iy)
             .is_some_and(|v| v > self.occupied_above)
+    }
+
+    /// The bitmap's bit of cell `(ix, iy)`; `false` off the grid or without a bitmap.
+    #[inline]
+    fn occupancy_bit(&self, ix: i32, iy: i32) -> bool {
+        if !self.geometry.contains(ix, iy) {
+            return false;
+        }
+        let (x, y) = (ix as usize, iy as usize);
+        let byte = y * self.geometry.width.div_ceil(8) + x / 8;
+        self.bits
+            .and_then(|b| b.get(byte))
+            .is_some_and(|b| b & (1 << (x % 8)) != 0)
     }
 
     /// Occupancy of the `n ≤ 16` cells `(x0 + k, y)`, `k < n`, as bits (bit `k` set when
@@ -227,6 +274,32 @@ mod tests {
             }
         }
         assert!(!view.is_occupied(-1, 0) && view.log_odds(23, 0).is_none());
+    }
+
+    #[test]
+    fn a_bitmap_alone_answers_like_the_cells() {
+        let g = GridGeometry::centred(21, 6, 0.1);
+        let cells: Vec<i8> = (0..21 * 6)
+            .map(|i| ((i * 29 + 3) % 53) as i8 - 26)
+            .collect();
+        let mut bits = vec![0u8; super::super::occupancy_bytes(21, 6)];
+        fill_occupancy_bits(&cells, 21, 6, 4, &mut bits).unwrap();
+        let full = GridView::new(&cells, g, 4).unwrap();
+        let only = GridView::from_occupancy_bits(&bits, g, 4).unwrap();
+        assert!(only.cells().is_empty() && only.log_odds(0, 0).is_none());
+        for y in -2..8 {
+            for x in -3..24 {
+                assert_eq!(only.is_occupied(x, y), full.is_occupied(x, y), "{x} {y}");
+                assert_eq!(
+                    only.occupied_row_mask(x, y, 9),
+                    full.occupied_row_mask(x, y, 9)
+                );
+            }
+        }
+        assert_eq!(
+            GridView::from_occupancy_bits(&bits[1..], g, 4).err(),
+            Some(GridError::SizeMismatch)
+        );
     }
 
     #[test]

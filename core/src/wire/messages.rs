@@ -63,6 +63,10 @@ pub enum EstimatorKind {
     Ekf,
     /// Grid particle filter (odometry + yaw rate + lidar).
     Grid,
+    /// Grid localizer on the map in the device's flash (odometry + lidar): estimates come
+    /// as [`ToHost::Localization`]. Refused with [`ToHost::Refused`] when the device
+    /// has no valid map.
+    Localizer,
 }
 
 /// Commands from the host.
@@ -87,6 +91,10 @@ pub enum Command {
     /// valid ([`EkfConfig::is_valid`]) are refused: counted in [`Status::rejected`], the
     /// settings unchanged.
     ConfigureEkf(EkfSettings),
+    /// Forget the localizer's pose: it is lost, and its next scan runs the global search
+    /// over the whole map (refused with [`ToHost::Refused`] unless the localizer is
+    /// active).
+    Relocalize,
 }
 
 /// The EKF's settings on the wire: [`EkfConfig<f32>`] field by field (see its fields for
@@ -308,6 +316,53 @@ pub struct Estimate {
     pub status: Status,
 }
 
+/// Where the localizer stands (see [`crate::pf::GridLocalizer`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TrackingState {
+    /// The scans fit the map at the estimate.
+    #[default]
+    Tracking,
+    /// The scans stopped fitting, or a relocalization was asked for: the pose is not to be
+    /// trusted; the global search runs on a coming scan.
+    Lost,
+    /// The particles were seeded by a global search and are not yet confirmed.
+    Relocalized,
+}
+
+/// The localizer's side of an estimate in localizer mode.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LocalizerReport {
+    /// Tracking, lost or relocalized.
+    pub state: TrackingState,
+    /// Share of the last scan's beam weight that ended in occupied cells at the estimate
+    /// (0..1).
+    pub hit_fraction: f32,
+    /// Times the localizer declared itself lost.
+    pub lost_events: u32,
+    /// Global searches that seeded the particles.
+    pub relocalizations: u32,
+}
+
+/// Why a command was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Refusal {
+    /// The firmware carries no map (built without one): no localizer.
+    NoMap,
+    /// The map in flash failed its check at boot: `code` is the position of the variant in
+    /// [`crate::grid::MapImageError`].
+    BadMap {
+        /// Error code.
+        code: u8,
+    },
+    /// The command needs the localizer to be the active estimator.
+    NotLocalizing,
+    /// The map carries no max-pooled layers: the localizer cannot search globally.
+    NoGlobalSearch,
+}
+
 /// Messages from the device to the host.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -325,5 +380,21 @@ pub enum ToHost {
         /// Deepest use of the stack so far, bytes, where the device can measure it
         /// (a firmware that paints its stack at reset); 0 where it cannot.
         stack_peak_bytes: u32,
+    },
+    /// An estimate after an event in localizer mode, with the localizer's state.
+    Localization {
+        /// The estimate (pose, covariance of the particle cloud, counters).
+        estimate: Estimate,
+        /// Tracking, lost or relocalized.
+        localizer: LocalizerReport,
+    },
+    /// The answer to a command the device cannot carry out; nothing changed.
+    Refused {
+        /// Sequence number of the command.
+        seq: u32,
+        /// Why.
+        reason: Refusal,
+        /// The estimator still active.
+        estimator: EstimatorKind,
     },
 }

@@ -49,11 +49,11 @@ pub use frame::{
     encode_frame,
 };
 pub use messages::{
-    Command, EkfSettings, Estimate, EstimatorKind, Odometry, SCAN_CHUNK_BEAMS, ScanChunk, Status,
-    StepResult, ToDevice, ToHost,
+    Command, EkfSettings, Estimate, EstimatorKind, LocalizerReport, Odometry, Refusal,
+    SCAN_CHUNK_BEAMS, ScanChunk, Status, StepResult, ToDevice, ToHost, TrackingState,
 };
 pub use scan::{Scan, ScanAssembler, ScanError};
-pub use session::{GridEstimator, GridSetup, MAX_SCAN_BEAMS, Session};
+pub use session::{GridEstimator, GridSetup, LocalizerEstimator, MAX_SCAN_BEAMS, Session};
 
 #[cfg(test)]
 mod tests;

@@ -12,14 +12,15 @@ use crate::association::KnownIds;
 use crate::association::{Observed, observe_known};
 use crate::ekf::{EkfConfig, EkfSlam, UpdateOutcome};
 use crate::geometry::Pose2;
-use crate::pf::{GridSlam, PfError, StepReport};
+use crate::pf::{GridLocalizer, GridSlam, LocalizerState, PfError, StepReport};
 use crate::sensors::lidar::{LidarGeometry, LidarScan};
 use crate::sensors::range_bearing::RangeBearing;
 use crate::sensors::wheel_odometry::{DiffDriveGeometry, WheelTicks};
 
 use super::frame::{FrameDecoder, FrameError, MAX_FRAME_LEN};
 use super::messages::{
-    Command, Estimate, EstimatorKind, Odometry, ScanChunk, Status, StepResult, ToDevice, ToHost,
+    Command, Estimate, EstimatorKind, LocalizerReport, Odometry, Refusal, ScanChunk, Status,
+    StepResult, ToDevice, ToHost, TrackingState,
 };
 use super::scan::ScanAssembler;
 
@@ -75,6 +76,63 @@ impl<const W: usize, const H: usize, const P: usize, const B: usize, const BITMA
     }
     fn pose_covariance(&self) -> [f32; 6] {
         self.filter().pose_covariance()
+    }
+}
+
+/// A localizer on a fixed map as a [`Session`] drives it: a [`GridEstimator`] (reset puts
+/// every particle at the pose and the state to tracking) that can also be sent looking
+/// for itself and reports where it stands. Implemented by [`GridLocalizer`].
+pub trait LocalizerEstimator: GridEstimator {
+    /// Forget the pose: lost, the global search runs on the next scan. Refused with
+    /// [`Refusal::NoGlobalSearch`] when the map has no layers for it.
+    fn relocalize(&mut self) -> Result<(), Refusal>;
+    /// Tracking, lost or relocalized, with its counters.
+    fn report(&self) -> LocalizerReport;
+}
+
+impl<const P: usize, const B: usize> GridEstimator for GridLocalizer<'_, P, B> {
+    fn reset(&mut self, start: Pose2<f32>) -> Result<(), PfError> {
+        self.reset_around(start, 0.0, 0.0)
+    }
+    fn predict_increment(&mut self, increment: &Pose2<f32>) -> Result<(), PfError> {
+        self.predict_odometry(&Pose2::new(0.0, 0.0, 0.0), increment)
+    }
+    fn predict_arc(&mut self, distance: f32, heading_change: f32) -> Result<(), PfError> {
+        self.predict(distance, heading_change)
+    }
+    fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError> {
+        GridLocalizer::predict_velocity(self, v, omega, dt)
+    }
+    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
+        GridLocalizer::observe(self, scan)
+    }
+    fn pose(&self) -> Pose2<f32> {
+        GridLocalizer::pose(self)
+    }
+    fn resamples(&self) -> u32 {
+        self.filter().resample_count()
+    }
+    fn pose_covariance(&self) -> [f32; 6] {
+        self.filter().pose_covariance()
+    }
+}
+
+impl<const P: usize, const B: usize> LocalizerEstimator for GridLocalizer<'_, P, B> {
+    fn relocalize(&mut self) -> Result<(), Refusal> {
+        GridLocalizer::relocalize(self).map_err(|_| Refusal::NoGlobalSearch)
+    }
+    fn report(&self) -> LocalizerReport {
+        let s = self.status();
+        LocalizerReport {
+            state: match s.state {
+                LocalizerState::Tracking => TrackingState::Tracking,
+                LocalizerState::Lost => TrackingState::Lost,
+                LocalizerState::Relocalized => TrackingState::Relocalized,
+            },
+            hit_fraction: s.hit_fraction,
+            lost_events: s.lost_events,
+            relocalizations: s.relocalizations,
+        }
     }
 }
 
@@ -148,6 +206,7 @@ pub struct Session<'a, const N: usize, const P: usize, const L: usize> {
     ids: KnownIds<L>,
     grid: Option<&'a mut dyn GridEstimator>,
     grid_setup: Option<GridSetup>,
+    localizer: Result<&'a mut dyn LocalizerEstimator, Refusal>,
     assembler: ScanAssembler<MAX_SCAN_BEAMS>,
     ranges: [f32; MAX_SCAN_BEAMS],
     active: EstimatorKind,
@@ -165,6 +224,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             ids: KnownIds::new(),
             grid: None,
             grid_setup: None,
+            localizer: Err(Refusal::NoMap),
             assembler: ScanAssembler::new(),
             ranges: [0.0; MAX_SCAN_BEAMS],
             active: EstimatorKind::Ekf,
@@ -186,6 +246,36 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
         session.grid = Some(grid);
         session.grid_setup = Some(setup);
         session
+    }
+
+    /// The same session with a localizer on a map in flash — or, when the map was
+    /// refused at boot, the reason, which [`Command::SelectEstimator`]`(Localizer)` then
+    /// answers with [`ToHost::Refused`]. Scans and odometry reach the localizer as they
+    /// reach the grid estimator (`setup` replaces the grid's when both are given: one
+    /// robot, one lidar).
+    pub fn with_localizer(
+        mut self,
+        localizer: Result<&'a mut dyn LocalizerEstimator, Refusal>,
+        setup: GridSetup,
+    ) -> Self {
+        self.localizer = localizer;
+        self.grid_setup = Some(setup);
+        self.reset(Pose2::new(0.0, 0.0, 0.0));
+        self
+    }
+
+    /// The grid estimator or localizer the active mode feeds, with the setup.
+    fn active_grid(&mut self) -> Option<(&mut dyn GridEstimator, GridSetup)> {
+        let setup = self.grid_setup?;
+        let grid: &mut dyn GridEstimator = match self.active {
+            EstimatorKind::Grid => self.grid.as_deref_mut()?,
+            EstimatorKind::Localizer => match &mut self.localizer {
+                Ok(l) => &mut **l,
+                Err(_) => return None,
+            },
+            EstimatorKind::Ekf => return None,
+        };
+        Some((grid, setup))
     }
 
     /// The counters.
@@ -239,11 +329,18 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
         if let StepResult::Rejected { .. } = result {
             self.status.rejected = self.status.rejected.saturating_add(1);
         }
-        ToHost::Estimate(self.estimate(seq, stamp_us, result))
+        let estimate = self.estimate(seq, stamp_us, result);
+        match (&self.localizer, self.active) {
+            (Ok(l), EstimatorKind::Localizer) => ToHost::Localization {
+                estimate,
+                localizer: l.report(),
+            },
+            _ => ToHost::Estimate(estimate),
+        }
     }
 
     fn grid_odometry(&mut self, odometry: &Odometry) -> StepResult {
-        let (Some(grid), Some(setup)) = (self.grid.as_deref_mut(), self.grid_setup) else {
+        let Some((grid, setup)) = self.active_grid() else {
             return StepResult::Ignored;
         };
         let r = match *odometry {
@@ -281,10 +378,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
     }
 
     fn scan(&mut self, chunk: &ScanChunk) -> StepResult {
-        if self.active != EstimatorKind::Grid {
-            return StepResult::Ignored;
-        }
-        let (Some(grid), Some(setup)) = (self.grid.as_deref_mut(), self.grid_setup) else {
+        let Some((_, setup)) = self.active_grid() else {
             return StepResult::Ignored;
         };
         let scan = match self.assembler.push(chunk) {
@@ -312,6 +406,12 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             ..setup.lidar
         };
         let ranges = self.ranges.get(..n).unwrap_or(&[]);
+        let grid: &mut dyn GridEstimator = match (self.active, &mut self.grid, &mut self.localizer)
+        {
+            (EstimatorKind::Grid, Some(g), _) => &mut **g,
+            (EstimatorKind::Localizer, _, Ok(l)) => &mut **l,
+            _ => return StepResult::Ignored,
+        };
         match grid.observe(&LidarScan::new(ranges, geometry)) {
             Ok(_) => StepResult::Applied,
             Err(e) => StepResult::Rejected { reason: e as u8 },
@@ -319,7 +419,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
     }
 
     fn odometry(&mut self, odometry: &Odometry) -> StepResult {
-        if self.active == EstimatorKind::Grid {
+        if self.active != EstimatorKind::Ekf {
             return self.grid_odometry(odometry);
         }
         let r = match *odometry {
@@ -358,6 +458,17 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
     fn command(&mut self, seq: u32, command: &Command) -> ToHost {
         match *command {
             Command::Reset { x, y, theta } => self.reset(Pose2::new(x, y, theta)),
+            Command::SelectEstimator(EstimatorKind::Localizer) => {
+                if let Err(reason) = &self.localizer {
+                    return ToHost::Refused {
+                        seq,
+                        reason: *reason,
+                        estimator: self.active,
+                    };
+                }
+                self.active = EstimatorKind::Localizer;
+                self.reset(Pose2::new(0.0, 0.0, 0.0));
+            }
             Command::SelectEstimator(kind) => {
                 // Without a grid estimator the session stays on the EKF.
                 self.active = if self.grid.is_some() {
@@ -366,6 +477,19 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
                     EstimatorKind::Ekf
                 };
                 self.reset(Pose2::new(0.0, 0.0, 0.0));
+            }
+            Command::Relocalize => {
+                let relocalized = match (&mut self.localizer, self.active) {
+                    (Ok(l), EstimatorKind::Localizer) => l.relocalize(),
+                    _ => Err(Refusal::NotLocalizing),
+                };
+                if let Err(reason) = relocalized {
+                    return ToHost::Refused {
+                        seq,
+                        reason,
+                        estimator: self.active,
+                    };
+                }
             }
             Command::ReportStatus => {}
             Command::ConfigureEkf(settings) => {
@@ -403,6 +527,11 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
         {
             let _ = grid.reset(Pose2::new(0.0, 0.0, 0.0));
         }
+        if let Ok(localizer) = &mut self.localizer
+            && localizer.reset(pose).is_err()
+        {
+            let _ = localizer.reset(Pose2::new(0.0, 0.0, 0.0));
+        }
         let (ok, bad) = (self.status.frames_ok, self.status.frames_bad);
         self.status = Status {
             frames_ok: ok,
@@ -412,9 +541,12 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
     }
 
     fn estimate(&mut self, seq: u32, stamp_us: u64, result: StepResult) -> Estimate {
-        if self.active == EstimatorKind::Grid
-            && let Some(grid) = self.grid.as_deref()
-        {
+        let grid: Option<&dyn GridEstimator> = match (self.active, &self.grid, &self.localizer) {
+            (EstimatorKind::Grid, Some(g), _) => Some(&**g),
+            (EstimatorKind::Localizer, _, Ok(l)) => Some(&**l),
+            _ => None,
+        };
+        if let Some(grid) = grid {
             let pose = grid.pose();
             self.status.resamples = grid.resamples();
             return Estimate {
@@ -774,6 +906,7 @@ mod tests {
             .map(|r| match r {
                 ToHost::Estimate(e) => (e.seq, e.estimator, e.result),
                 ToHost::Status { seq, estimator, .. } => (*seq, *estimator, StepResult::Ignored),
+                other => panic!("{other:?}"),
             })
             .collect();
         use EstimatorKind::{Ekf, Grid};
@@ -808,5 +941,147 @@ mod tests {
         assert_eq!(last.status.resamples, direct.filter().resample_count());
         assert_eq!(last.covariance, direct.filter().pose_covariance());
         assert!(last.covariance[0] > 0.0 && last.covariance[3] > 0.0 && last.covariance[5] > 0.0);
+    }
+
+    #[test]
+    fn localizer_mode_matches_direct_calls_and_refusals_are_explicit() {
+        use crate::grid::{GridGeometry, GridView, MaxPoolLayers};
+        use crate::pf::{GridPfConfig, RelocalizationConfig};
+        use crate::wire::{LocalizerReport, Refusal, ScanChunk, TrackingState};
+        let config = GridPfConfig::MICROCONTROLLER;
+        // A square room, walls at ±1.2 m, on a 64 × 64 map of 5 cm cells.
+        let g = GridGeometry::centred(64, 64, 0.05);
+        let cells: std::vec::Vec<i8> = (0..64 * 64)
+            .map(|i| {
+                let (x, y) = g.cell_centre(i % 64, i / 64);
+                let d = x.abs().max(y.abs());
+                if (1.175..1.25).contains(&d) {
+                    100
+                } else if d < 1.175 {
+                    -100
+                } else {
+                    0
+                }
+            })
+            .collect();
+        let view = GridView::new(&cells, g, config.log_odds.occupied_above).unwrap();
+        let mut layers = vec![0u8; MaxPoolLayers::bytes_for(64, 64, 3).unwrap()];
+        let layers =
+            MaxPoolLayers::build(&view, config.log_odds.free_below, 3, &mut layers).unwrap();
+        let inc = core::f32::consts::TAU / 40.0;
+        let ranges_mm: std::vec::Vec<u16> = (0..40)
+            .map(|i| {
+                let a = -core::f32::consts::PI + inc * i as f32;
+                let r = 1.2 / libm::fabsf(libm::cosf(a)).max(libm::fabsf(libm::sinf(a)));
+                (r * 1000.0) as u16
+            })
+            .collect();
+        let chunk = |seq: u32, offset: usize| {
+            ToDevice::Scan(ScanChunk {
+                seq,
+                stamp_us: 0,
+                scan_id: seq as u16,
+                beam_offset: offset as u16,
+                beam_total: 40,
+                angle_min: -core::f32::consts::PI,
+                angle_increment: inc,
+                ranges_mm: heapless::Vec::from_slice(&ranges_mm[offset..(offset + 32).min(40)])
+                    .unwrap(),
+            })
+        };
+        let command = |seq, command| ToDevice::Command { seq, command };
+        let msgs = [
+            command(1, Command::Relocalize),
+            command(2, Command::SelectEstimator(EstimatorKind::Localizer)),
+            command(
+                3,
+                Command::Reset {
+                    x: 0.05,
+                    y: 0.0,
+                    theta: 0.0,
+                },
+            ),
+            chunk(4, 0),
+            chunk(4, 32),
+            velocity(5, 0.0, 0.0),
+            command(6, Command::Relocalize),
+            chunk(7, 0),
+            chunk(7, 32),
+        ];
+        let bytes = frames(&msgs);
+        let setup = GridSetup::EXAMPLE;
+
+        // Without a map: both commands refused, the EKF stays.
+        let mut ekf = EkfSlam::<f32, { state_dim(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut plain = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+        let replies: std::vec::Vec<_> = bytes.iter().filter_map(|&b| plain.receive(b)).collect();
+        let refused = |seq, reason| ToHost::Refused {
+            seq,
+            reason,
+            estimator: EstimatorKind::Ekf,
+        };
+        assert_eq!(replies[0], refused(1, Refusal::NotLocalizing));
+        assert_eq!(replies[1], refused(2, Refusal::NoMap));
+        drop(plain);
+        let mut bad = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32)
+            .with_localizer(Err(Refusal::BadMap { code: 6 }), setup);
+        let replies: std::vec::Vec<_> = bytes.iter().filter_map(|&b| bad.receive(b)).collect();
+        assert_eq!(replies[1], refused(2, Refusal::BadMap { code: 6 }));
+        drop(bad);
+
+        // With the map and its layers.
+        let start = Pose2::new(0.0, 0.0, 0.0);
+        let mut loc = GridLocalizer::<16, 40>::new(view, config, start)
+            .unwrap()
+            .with_layers(layers, RelocalizationConfig::DEFAULT)
+            .unwrap();
+        let mut session = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32)
+            .with_localizer(Ok(&mut loc), setup);
+        let replies: std::vec::Vec<_> = bytes.iter().filter_map(|&b| session.receive(b)).collect();
+        drop(session);
+        assert_eq!(replies.len(), msgs.len());
+        assert_eq!(replies[0], refused(1, Refusal::NotLocalizing));
+        assert!(matches!(
+            replies[1],
+            ToHost::Status {
+                seq: 2,
+                estimator: EstimatorKind::Localizer,
+                ..
+            }
+        ));
+        let localization = |r: &ToHost| match r {
+            ToHost::Localization {
+                estimate,
+                localizer,
+            } => (*estimate, *localizer),
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(localization(&replies[3]).0.result, StepResult::Ignored);
+        let (after_scan, report) = localization(&replies[4]);
+        assert_eq!(after_scan.result, StepResult::Applied);
+        assert_eq!(report.state, TrackingState::Tracking);
+        assert!(report.hit_fraction > 0.5, "{report:?}");
+
+        // The same steps on a twin, called directly.
+        let mut twin = GridLocalizer::<16, 40>::new(view, config, start).unwrap();
+        twin.reset_around(Pose2::new(0.05, 0.0, 0.0), 0.0, 0.0)
+            .unwrap();
+        let ranges: std::vec::Vec<f32> =
+            ranges_mm.iter().map(|&mm| f32::from(mm) * 0.001).collect();
+        let lidar = LidarGeometry {
+            first_angle: -core::f32::consts::PI,
+            angle_increment: inc,
+            ..setup.lidar
+        };
+        twin.observe(&LidarScan::new(&ranges, lidar)).unwrap();
+        let pose = twin.pose();
+        assert_eq!(after_scan.pose, [pose.x, pose.y, pose.theta]);
+        assert_eq!(after_scan.covariance, twin.filter().pose_covariance());
+
+        // Relocalize: answered with a status; the next scan runs the global search.
+        assert!(matches!(replies[6], ToHost::Status { seq: 6, .. }));
+        let (_, report) = localization(&replies[8]);
+        assert_eq!(report.relocalizations, 1, "{report:?}");
+        assert_ne!(report, LocalizerReport::default());
     }
 }

@@ -1,6 +1,8 @@
 //! Instructions per grid particle-filter step under QEMU `-icount shift=6` (see
 //! `firmware_example::cost`): P = 16, 32, 64 particles, 90 beams, 9 × 9 shift window, a
-//! 256 × 256 grid of 5 cm cells, in a synthetic 6 m × 6 m room with a pillar.
+//! 256 × 256 grid of 5 cm cells, in a synthetic 6 m × 6 m room with a pillar; then the
+//! localizer (no map writes) at P = 32, 64, 128 on the map the SLAM runs built, read
+//! through its occupied-cell bitmap alone (as a map image in flash is).
 //!
 //! Prints one line per P on UART0 and exits through semihosting.
 #![no_std]
@@ -12,8 +14,9 @@ use cortex_m_rt::{ExceptionFrame, entry, exception};
 use firmware_example::board::{self, Serial};
 use firmware_example::cost::{Ticks, thousand_nops};
 use microslam::geometry::Pose2;
+use microslam::grid::GridView;
 use microslam::grid::{OccupancyGrid, occupancy_bytes};
-use microslam::pf::{GridPfConfig, GridSlam};
+use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam};
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
 use panic_probe as _;
 use static_cell::ConstStaticCell;
@@ -121,6 +124,51 @@ fn measure<const P: usize>(
     )
 }
 
+/// The localizer's step (prediction + scan) on `map`, started at the true pose, along the
+/// same drive as [`measure`].
+fn measure_localizer<const P: usize>(
+    out: &mut Serial,
+    ticks: &mut Ticks,
+    map: GridView<'_>,
+) -> core::fmt::Result {
+    let mut truth = Pose2::new(-1.0, -1.0, 0.3);
+    let Ok(mut loc) = GridLocalizer::<P, BEAMS>::new(map, CONFIG, truth) else {
+        return writeln!(out, "error localizer p={P} new");
+    };
+    let mut ranges = [0.0f32; BEAMS];
+    let (v, omega, dt) = (0.4f32, 0.3f32, 0.1f32);
+    let (mut predict, mut observe, mut resamples) = (0u32, 0u32, 0u32);
+    for _ in 0..STEPS {
+        truth = Pose2::new(
+            truth.x + v * dt * libm::cosf(truth.theta),
+            truth.y + v * dt * libm::sinf(truth.theta),
+            truth.theta + omega * dt,
+        );
+        let mut r = Ok(());
+        predict += ticks.instructions(|| r = loc.predict_velocity(v, omega, dt));
+        scan_at(&truth, &mut ranges);
+        let scan = LidarScan::new(&ranges, LIDAR);
+        let mut report = None;
+        observe += ticks.instructions(|| report = Some(loc.observe(&scan)));
+        match (r, report) {
+            (Ok(()), Some(Ok(rep))) => resamples += u32::from(rep.resampled),
+            _ => return writeln!(out, "error localizer p={P} step"),
+        }
+    }
+    let est = loc.pose();
+    writeln!(
+        out,
+        "localizer p={} beams={} step={} predict={} observe={} resamples={} error_mm={}",
+        P,
+        BEAMS,
+        (predict + observe) / STEPS,
+        predict / STEPS,
+        observe / STEPS,
+        resamples,
+        (libm::hypotf(est.x - truth.x, est.y - truth.y) * 1000.0) as u32
+    )
+}
+
 fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
     writeln!(
         out,
@@ -137,6 +185,18 @@ fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
     measure::<16>(out, ticks, grid)?;
     measure::<32>(out, ticks, grid)?;
     measure::<64>(out, ticks, grid)?;
+    // The map the last SLAM run built, as the bitmap alone (a map image's view).
+    let view = grid.view();
+    let Some(bits) = view.occupancy_bits() else {
+        return writeln!(out, "error grid has no bitmap");
+    };
+    let Ok(map) = GridView::from_occupancy_bits(bits, *view.geometry(), view.occupied_above())
+    else {
+        return writeln!(out, "error localizer map");
+    };
+    measure_localizer::<32>(out, ticks, map)?;
+    measure_localizer::<64>(out, ticks, map)?;
+    measure_localizer::<128>(out, ticks, map)?;
     writeln!(
         out,
         "stack_peak_bytes={}",

@@ -58,7 +58,7 @@ pub struct HilOptions {
     pub serial: Option<String>,
     /// Baud rate of the serial port.
     pub baud: u32,
-    /// Dataset: `mrclam:<dir>`.
+    /// Dataset: `mrclam:<dir>` (EKF) or `carmen:<log>` (the localizer; needs `map`).
     pub dataset: DatasetSpec,
     /// Robot whose log is streamed.
     pub robot: u8,
@@ -74,12 +74,28 @@ pub struct HilOptions {
     pub dataset_settings: bool,
     /// EKF settings (TOML) laid over the dataset's defaults, with `dataset_settings`.
     pub config: Option<PathBuf>,
+    /// With a `carmen:` dataset: the map the localizer firmware was built with.
+    pub map: Option<PathBuf>,
+    /// With a `carmen:` dataset: stream only the first N scans.
+    pub scans: Option<usize>,
 }
 
 /// `host-sim hil`.
 pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
     if let Some(elf) = &args.qemu {
         check_firmware_elf(elf)?;
+    }
+    if let DatasetSpec::Carmen(log) = &args.dataset {
+        use crate::commands::hil_localizer::{LocalizerHilOptions, run_cli};
+        let options = LocalizerHilOptions {
+            qemu: args.qemu.as_deref(),
+            map: args.map.as_deref(),
+            log,
+            scans: args.scans,
+            out: &args.out,
+            timeout_s: args.timeout_s,
+        };
+        return run_cli(&options, quiet);
     }
     let recording = crate::inputs::readers::read(&args.dataset, args.robot)?;
     let settings = if args.dataset_settings {

@@ -5,6 +5,7 @@
 pub mod detections;
 pub mod global;
 pub mod hil;
+pub mod hil_localizer;
 pub mod localize;
 pub mod replay;
 pub mod sim;

@@ -14,4 +14,5 @@ pub mod ekf;
 pub mod global;
 pub mod grid;
 pub mod hil;
+pub mod hil_localizer;
 pub mod texture;

@@ -1,0 +1,204 @@
+//! `host-sim hil --dataset carmen:<log> --map <map.yaml>`: the firmware's localizer mode
+//! in the loop (through [`crate::drivers::hil_localizer`]). The device (a firmware built
+//! with `MICROSLAM_MAP=<map.yaml>`) is put in localizer mode at the log's first pose (the
+//! map's frame: a grid-SLAM map of the same log starts at its first scan), then every
+//! front scan is streamed; every reply is compared bit for bit with the host running the
+//! firmware's session on the same map image, and the device's trajectory is scored with
+//! the relation error when a relations file is found. Writes `hil.json` and
+//! `firmware.tum`.
+//!
+//! `host-sim export-map --map <map.yaml> --out <map.bin>` writes the map image the
+//! firmware's build script embeds.
+
+use std::path::Path;
+use std::time::Duration;
+
+use anyhow::{Context, Result, bail};
+use microslam::geometry::Pose2;
+use microslam::grid::MapImage;
+use microslam::wire::ToHost;
+use serde::Serialize;
+
+use crate::drivers::hil::{compare, encode_all, run_qemu};
+use crate::drivers::hil_localizer::{
+    FIRMWARE_LOCALIZER_PARTICLES, host_localizer_replies, localizer_messages, map_image_of,
+    map_image_with_levels,
+};
+use crate::inputs::readers::carmen::{LaserMessage, front_scans, read_log, resolve_log};
+
+/// `host-sim export-map`.
+pub fn export_cli(map: &Path, out: &Path, levels: u8, quiet: bool) -> Result<()> {
+    let image = map_image_with_levels(map, levels)?;
+    let parsed = MapImage::parse(&image)?;
+    std::fs::write(out, &image).with_context(|| format!("writing {}", out.display()))?;
+    if !quiet {
+        let g = parsed.geometry();
+        println!(
+            "{}: {} x {} cells of {} m, {} bytes, CRC-32 {:#010x}",
+            out.display(),
+            g.width,
+            g.height,
+            g.resolution,
+            image.len(),
+            parsed.checksum()
+        );
+    }
+    Ok(())
+}
+
+/// What `hil.json` holds for a localizer run.
+#[derive(Debug, Serialize)]
+pub struct LocalizerHil {
+    /// Replies equal to the host's bit for bit (the stack figure aside).
+    pub replies_identical: usize,
+    /// Replies expected (one per message).
+    pub replies_expected: usize,
+    /// Replies received.
+    pub replies_received: usize,
+    /// Scans streamed.
+    pub scans: usize,
+    /// Particles of the firmware's localizer.
+    pub particles: usize,
+    /// The device's stack high-water mark from its final status, bytes.
+    pub stack_peak_bytes: Option<u32>,
+    /// Wall time, s.
+    pub seconds: f64,
+    /// Relation error of the device's trajectory (when a relations file was found).
+    pub relation_error: Option<crate::metrics::relations::RelationError>,
+    /// The localizer's state after the last scan (lost events, relocalizations).
+    pub final_localizer: Option<microslam::wire::LocalizerReport>,
+    /// The full comparison (pose and covariance differences).
+    pub comparison: crate::drivers::hil::Comparison,
+}
+
+/// The device's trajectory: the estimate after each scan's last chunk, at the scan's
+/// stamp.
+fn trajectory(
+    replies: &[ToHost],
+    scans: &[&LaserMessage],
+    last_chunks: &[usize],
+) -> Vec<(f64, [f64; 3])> {
+    scans
+        .iter()
+        .zip(last_chunks)
+        .filter_map(|(laser, &i)| match replies.get(i) {
+            Some(ToHost::Localization { estimate, .. }) => {
+                Some((laser.stamp, estimate.pose.map(f64::from)))
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+/// Options of the localizer HIL (from `host-sim hil` with a `carmen:` dataset).
+#[derive(Debug, Clone)]
+pub struct LocalizerHilOptions<'a> {
+    /// The localizer firmware ELF, run under QEMU.
+    pub qemu: Option<&'a Path>,
+    /// The map it was built with (`MICROSLAM_MAP`).
+    pub map: Option<&'a Path>,
+    /// The CARMEN log (`carmen:<file>`).
+    pub log: &'a str,
+    /// Stream only the first N scans.
+    pub scans: Option<usize>,
+    /// Output folder.
+    pub out: &'a Path,
+    /// Give up waiting for replies after this many seconds.
+    pub timeout_s: u64,
+}
+
+/// `host-sim hil --dataset carmen:<log> --map <map.yaml>`.
+pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
+    let Some(map_yaml) = args.map else {
+        bail!("a lidar dataset runs the device's localizer: give --map <map.yaml>");
+    };
+    let Some(elf) = args.qemu else {
+        bail!("the localizer HIL runs under QEMU: give --qemu <elf>");
+    };
+    let file = args.log;
+    let path = resolve_log(file)?;
+    let log = read_log(&path)?;
+    let mut scans = front_scans(&log);
+    if let Some(n) = args.scans {
+        scans.truncate(n);
+    }
+    let image = map_image_of(map_yaml)?;
+    let (messages, last_chunks) = localizer_messages(&scans, Pose2::IDENTITY);
+    let bytes = encode_all(&messages);
+    let host = host_localizer_replies(&bytes, &image)?;
+    if !quiet {
+        println!(
+            "{}: {} scans → {} frames ({} bytes), map image {} bytes",
+            path.display(),
+            scans.len(),
+            messages.len(),
+            bytes.len(),
+            image.len()
+        );
+    }
+    let run = run_qemu(elf, bytes, host.len(), Duration::from_secs(args.timeout_s))?;
+    let comparison = compare(messages.len(), &run, &host);
+    let relation_error = crate::metrics::relations::find_relations(&path, None)
+        .map(|r| -> Result<_> {
+            let rels = crate::metrics::relations::read(&r)?;
+            Ok(crate::metrics::relations::evaluate(
+                &trajectory(&run.replies, &scans, &last_chunks),
+                &rels,
+                1e-3,
+            ))
+        })
+        .transpose()?
+        .filter(|e| e.used > 0);
+    let report = LocalizerHil {
+        replies_identical: comparison.identical,
+        replies_expected: comparison.expected,
+        replies_received: comparison.received,
+        scans: scans.len(),
+        particles: FIRMWARE_LOCALIZER_PARTICLES,
+        stack_peak_bytes: comparison.stack_peak_bytes,
+        seconds: comparison.seconds,
+        relation_error,
+        final_localizer: run.replies.iter().rev().find_map(|r| match r {
+            ToHost::Localization { localizer, .. } => Some(*localizer),
+            _ => None,
+        }),
+        comparison,
+    };
+    std::fs::create_dir_all(args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let json = args.out.join("hil.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&report)?)?;
+    let mut tum = String::new();
+    for (t, [x, y, th]) in trajectory(&run.replies, &scans, &last_chunks) {
+        let (s, c) = (th / 2.0).sin_cos();
+        tum.push_str(&format!("{t:.6} {x} {y} 0 0 0 {s} {c}\n"));
+    }
+    std::fs::write(args.out.join("firmware.tum"), tum)?;
+    if !quiet {
+        println!(
+            "{} of {} replies identical to the host bit for bit; relation error {}; {:.1} s; report in {}",
+            report.replies_identical,
+            report.replies_expected,
+            report.relation_error.as_ref().map_or_else(
+                || "–".to_string(),
+                |r| format!(
+                    "{:.4} ± {:.4} m over {}",
+                    r.trans_mean_m, r.trans_std_m, r.used
+                )
+            ),
+            report.seconds,
+            json.display()
+        );
+    }
+    if report.replies_received != report.replies_expected
+        || report.replies_identical != report.replies_expected
+    {
+        bail!(
+            "the device's replies differ from the host's ({} of {} identical, {} received)",
+            report.replies_identical,
+            report.replies_expected,
+            report.replies_received
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,172 @@
+//! The firmware's localizer mode in the loop: the map image a firmware built with
+//! `MICROSLAM_MAP=<map.yaml>` embeds ([`map_image_of`], the build script's code), the wire
+//! messages of a lidar log in localizer mode ([`localizer_messages`]: select the localizer,
+//! reset at a pose, then per front scan its odometry increment and its scan chunks), and
+//! the host reference the device must equal bit for bit ([`host_localizer_replies`]: the
+//! firmware's [`Session`] with its localizer on the same map image).
+
+use std::path::Path;
+
+use anyhow::{Result, bail};
+use microslam::ekf::{EkfConfig, EkfSlam, state_dim};
+use microslam::geometry::Pose2;
+use microslam::grid::MapImage;
+use microslam::grid::map_image::{DEFAULT_LAYER_LEVELS, encode_map_image_with_layers};
+use microslam::grid::ros_map::RosMap;
+use microslam::pf::{GridLocalizer, GridPfConfig, RelocalizationConfig};
+use microslam::wire::{
+    Command as WireCommand, EstimatorKind, LocalizerEstimator, Odometry, SCAN_CHUNK_BEAMS,
+    ScanChunk, Session, ToDevice, ToHost,
+};
+
+use crate::drivers::hil::{FIRMWARE_GRID_SETUP, FIRMWARE_LANDMARKS};
+use crate::inputs::readers::carmen::LaserMessage;
+
+/// Particles of the firmware's localizer (`firmware_example::config::LOCALIZER_PARTICLES`).
+pub const FIRMWARE_LOCALIZER_PARTICLES: usize = 64;
+/// Beams of the firmware's localizer (`firmware_example::config::GRID_BEAMS`).
+pub const FIRMWARE_LOCALIZER_BEAMS: usize = 90;
+/// Settings of the firmware's localizer (`firmware_example::config::LOCALIZER_CONFIG`).
+pub const FIRMWARE_LOCALIZER_CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
+
+/// The firmware's localizer type.
+pub type FirmwareLocalizer<'m> =
+    GridLocalizer<'m, FIRMWARE_LOCALIZER_PARTICLES, FIRMWARE_LOCALIZER_BEAMS>;
+
+/// The map image of `yaml` as the firmware's build script makes it (with
+/// [`DEFAULT_LAYER_LEVELS`] levels of layers).
+pub fn map_image_of(yaml: &Path) -> Result<Vec<u8>> {
+    map_image_with_levels(yaml, DEFAULT_LAYER_LEVELS)
+}
+
+/// The map image of `yaml` with `levels` levels of max-pooled layers (0: none).
+pub fn map_image_with_levels(yaml: &Path, levels: u8) -> Result<Vec<u8>> {
+    let config = FIRMWARE_LOCALIZER_CONFIG;
+    let map = RosMap::read(yaml, &config.log_odds)?;
+    if (map.geometry.resolution - config.resolution).abs() > 1e-6 {
+        bail!(
+            "{}: resolution {} m, the localizer runs at {} m",
+            yaml.display(),
+            map.geometry.resolution,
+            config.resolution
+        );
+    }
+    Ok(encode_map_image_with_layers(
+        &map.cells,
+        &map.geometry,
+        config.log_odds.occupied_above,
+        config.log_odds.free_below,
+        levels,
+    )?)
+}
+
+/// Wire range of one beam: millimetres, 0 for no return (not finite, or beyond what a
+/// `u16` holds).
+fn range_mm(r: f32) -> u16 {
+    if r.is_finite() && r > 0.0 && r * 1000.0 < f32::from(u16::MAX) {
+        (r * 1000.0).round() as u16
+    } else {
+        0
+    }
+}
+
+/// The messages for localizer mode over `scans`: select the localizer, reset at
+/// `start`, then per scan its odometry increment (from the previous finite odometry
+/// pose) and its chunks, then a status request. Also the index of each scan's last
+/// chunk in the messages.
+pub fn localizer_messages(
+    scans: &[&LaserMessage],
+    start: Pose2<f32>,
+) -> (Vec<ToDevice>, Vec<usize>) {
+    let mut out = vec![
+        ToDevice::Command {
+            seq: 0,
+            command: WireCommand::SelectEstimator(EstimatorKind::Localizer),
+        },
+        ToDevice::Command {
+            seq: 1,
+            command: WireCommand::Reset {
+                x: start.x,
+                y: start.y,
+                theta: start.theta,
+            },
+        },
+    ];
+    let mut seq = 2u32;
+    let mut last_chunks = Vec::with_capacity(scans.len());
+    let mut previous: Option<Pose2<f32>> = None;
+    for (i, laser) in scans.iter().enumerate() {
+        let stamp_us = (laser.stamp * 1e6).max(0.0) as u64;
+        let odom = Pose2::new(
+            laser.odom[0] as f32,
+            laser.odom[1] as f32,
+            laser.odom[2] as f32,
+        );
+        // A pose that is not finite is skipped: the next good one predicts the whole motion.
+        if odom.is_finite()
+            && let Some(from) = previous.replace(odom)
+        {
+            let d = from.between(&odom);
+            out.push(ToDevice::Odometry {
+                seq,
+                stamp_us,
+                odometry: Odometry::Increment {
+                    dx: d.x,
+                    dy: d.y,
+                    dtheta: d.theta,
+                },
+            });
+            seq = seq.wrapping_add(1);
+        }
+        let n = laser.ranges.len();
+        let increment = core::f32::consts::PI / n.max(1) as f32;
+        for offset in (0..n).step_by(SCAN_CHUNK_BEAMS) {
+            let end = (offset + SCAN_CHUNK_BEAMS).min(n);
+            let ranges_mm = laser.ranges[offset..end]
+                .iter()
+                .map(|&r| range_mm(r))
+                .collect();
+            out.push(ToDevice::Scan(ScanChunk {
+                seq,
+                stamp_us,
+                scan_id: i as u16,
+                beam_offset: offset as u16,
+                beam_total: n as u16,
+                angle_min: -core::f32::consts::FRAC_PI_2,
+                angle_increment: increment,
+                ranges_mm,
+            }));
+            seq = seq.wrapping_add(1);
+        }
+        last_chunks.push(out.len() - 1);
+    }
+    out.push(ToDevice::Command {
+        seq,
+        command: WireCommand::ReportStatus,
+    });
+    (out, last_chunks)
+}
+
+/// The replies of the host reference: the firmware's [`Session`] with its EKF and its
+/// localizer on `image`, fed the same bytes.
+pub fn host_localizer_replies(bytes: &[u8], image: &[u8]) -> Result<Vec<ToHost>> {
+    let map = MapImage::parse(image)?;
+    let mut ekf = Box::new(EkfSlam::<f32, { state_dim(FIRMWARE_LANDMARKS) }>::new(
+        EkfConfig::MICROCONTROLLER,
+    ));
+    let mut localizer =
+        FirmwareLocalizer::new(map.view(), FIRMWARE_LOCALIZER_CONFIG, Pose2::IDENTITY)
+            .map_err(|e| anyhow::anyhow!("localizer: {e}"))?;
+    if let Some(layers) = map.layers() {
+        localizer = localizer
+            .with_layers(layers?, RelocalizationConfig::DEFAULT)
+            .map_err(|e| anyhow::anyhow!("localizer layers: {e}"))?;
+    }
+    let mut localizer = Box::new(localizer);
+    let mut session = Session::<_, FIRMWARE_LANDMARKS>::new(&mut ekf, EkfConfig::MICROCONTROLLER)
+        .with_localizer(
+            Ok(&mut *localizer as &mut dyn LocalizerEstimator),
+            FIRMWARE_GRID_SETUP,
+        );
+    Ok(bytes.iter().filter_map(|&b| session.receive(b)).collect())
+}
