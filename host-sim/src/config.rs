@@ -5,6 +5,7 @@
 use crate::cli::AssociationMode;
 use anyhow::{Context, Result, bail};
 use microslam::association::AssociationConfig;
+use microslam::ekf::health::HealthConfig;
 use microslam::ekf::{CovarianceUpdate, EkfConfig};
 use microslam::gate::{ChiSquareGate, chi_square_quantile};
 use microslam::geometry::Pose2;
@@ -32,6 +33,9 @@ pub struct Settings {
     pub association: AssociationSettings,
     /// Filter options.
     pub filter: FilterSettings,
+    /// Robust weighting and recovery of the EKF's updates (`[recovery]`; off when absent).
+    #[serde(default)]
+    pub recovery: RecoverySettings,
     /// Simulator scenario (only in `sim.toml`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scenario: Option<crate::sim::Scenario>,
@@ -93,6 +97,32 @@ pub struct AssociationSettings {
 #[allow(missing_docs)]
 pub struct FilterSettings {
     pub covariance_update: CovarianceUpdateSetting,
+}
+
+/// `[recovery]`: the fields of [`microslam::ekf::health::HealthConfig`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecoverySettings {
+    /// Innovations beyond this many standard deviations are down-weighted (Huber); 0: off.
+    pub huber_sigma: f64,
+    /// Gate refusals in a row that declare the filter lost; 0: no recovery.
+    pub lost_after: u16,
+    /// Standard deviation added to x and y at a recovery, m.
+    pub position_std: f64,
+    /// Standard deviation added to the heading at a recovery, rad.
+    pub heading_std: f64,
+}
+
+impl Default for RecoverySettings {
+    /// Off: no weighting, no recovery.
+    fn default() -> Self {
+        Self {
+            huber_sigma: 0.0,
+            lost_after: 0,
+            position_std: 0.0,
+            heading_std: 0.0,
+        }
+    }
 }
 
 /// The covariance update form, as written in the file.
@@ -205,6 +235,15 @@ impl Settings {
         if a.new_landmark_probability < a.individual_probability {
             bail!("new_landmark_probability must not be below individual_probability");
         }
+        let r = &self.recovery;
+        if [r.huber_sigma, r.position_std, r.heading_std]
+            .iter()
+            .any(|v| !(v.is_finite() && *v >= 0.0))
+        {
+            bail!(
+                "[recovery] huber_sigma, position_std and heading_std must be finite and non-negative"
+            );
+        }
         if s.mount.iter().any(|v| !v.is_finite()) {
             bail!("sensor mount must be finite");
         }
@@ -247,6 +286,17 @@ impl Settings {
                 CovarianceUpdateSetting::Joseph => CovarianceUpdate::Joseph,
                 CovarianceUpdateSetting::Symmetric => CovarianceUpdate::Symmetric,
             },
+        }
+    }
+
+    /// The supervision settings of the EKF's updates (`[recovery]`).
+    pub fn health_config<T: Real>(&self) -> HealthConfig<T> {
+        let r = &self.recovery;
+        HealthConfig {
+            huber_sigma: T::lit(r.huber_sigma),
+            lost_after: r.lost_after,
+            recovery_position_std: T::lit(r.position_std),
+            recovery_heading_std: T::lit(r.heading_std),
         }
     }
 

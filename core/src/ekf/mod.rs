@@ -76,6 +76,7 @@ use crate::sensors::range_bearing::{RangeBearing, RangeBearingSensor};
 use nalgebra::{ArrayStorage, Matrix2, Matrix2x3, Matrix3, SMatrix, SVector, Vector2};
 
 pub mod covariance;
+pub mod health;
 
 pub use covariance::CovarianceView;
 use covariance::{
@@ -457,6 +458,44 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
     /// Covariance of the robot pose, `P_RR`.
     pub fn pose_covariance(&self) -> Matrix3<T> {
         block(&self.covariance, 0, 0)
+    }
+
+    /// Adds `added`, a symmetric positive semi-definite 3 × 3 matrix, to the robot's pose
+    /// covariance `P_RR` (a congruence-free PSD addition: `P` stays positive
+    /// semi-definite). Used to re-open a filter that has become overconfident.
+    ///
+    /// Refused, state unchanged: non-finite entries ([`EkfError::NonFiniteInput`]), a
+    /// matrix that is not symmetric or has a negative principal minor
+    /// ([`EkfError::InvalidNoise`]), a result beyond [`MAX_POSITION_VARIANCE`] or
+    /// [`MAX_HEADING_VARIANCE`] ([`EkfError::NumericalFailure`]).
+    pub fn inflate_pose_covariance(&mut self, added: &Matrix3<T>) -> Result<(), EkfError> {
+        if added.iter().any(|v| !v.finite()) {
+            return Err(EkfError::NonFiniteInput);
+        }
+        let a = |r: usize, c: usize| added[(r, c)];
+        let symmetric = a(0, 1) == a(1, 0) && a(0, 2) == a(2, 0) && a(1, 2) == a(2, 1);
+        let minors = [
+            a(0, 0),
+            a(1, 1),
+            a(2, 2),
+            a(0, 0) * a(1, 1) - a(0, 1) * a(0, 1),
+            a(0, 0) * a(2, 2) - a(0, 2) * a(0, 2),
+            a(1, 1) * a(2, 2) - a(1, 2) * a(1, 2),
+            added.determinant(),
+        ];
+        if !symmetric || minors.iter().any(|&m| m < T::ZERO) {
+            return Err(EkfError::InvalidNoise);
+        }
+        let sum = self.pose_covariance() + added;
+        let position_cap = T::lit(MAX_POSITION_VARIANCE);
+        let heading_cap = T::lit(MAX_HEADING_VARIANCE);
+        if !(sum[(0, 0)] <= position_cap && sum[(1, 1)] <= position_cap)
+            || !(sum[(2, 2)] <= heading_cap)
+        {
+            return Err(EkfError::NumericalFailure);
+        }
+        set_diagonal_block(&mut self.covariance, 0, &sum);
+        Ok(())
     }
 
     /// Position of landmark `index`, or `None` when there is no such landmark.
