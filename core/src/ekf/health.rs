@@ -51,13 +51,13 @@ impl HealthConfig<f32> {
         recovery_heading_std: 0.0,
     };
     /// The defaults chosen on UTIAS MRCLAM dataset 6 (robots 1–3 tuned, 4–5 checked; see
-    /// `host-sim/configs/mrclam.toml`): Huber beyond 3 σ, recovery after 8 refusals in a
-    /// row with 0.3 m and 0.3 rad added.
+    /// `host-sim/configs/mrclam.toml`, whose `[recovery]` holds the same figures): Huber
+    /// beyond 2 σ, recovery after 10 refusals in a row with 0.3 m and 0.2 rad added.
     pub const DEFAULT_F32: Self = Self {
-        huber_sigma: 3.0,
-        lost_after: 8,
+        huber_sigma: 2.0,
+        lost_after: 10,
         recovery_position_std: 0.3,
-        recovery_heading_std: 0.3,
+        recovery_heading_std: 0.2,
     };
 }
 
@@ -288,7 +288,7 @@ mod tests {
     #[test]
     fn large_innovation_is_downweighted_not_refused() {
         // 4 σ off: the bare filter (gate 13.8 = 3.7 σ) refuses it, the supervisor
-        // accepts it with weight 3/4 (its gate sees 3 · 4 = 12).
+        // accepts it with weight 2/4 (its gate sees 2 · 4 = 8).
         let mut bare = confident();
         let mut robust = confident();
         let s = bare.innovation(0, &RangeBearing::new(2.0, 0.0)).unwrap().s;

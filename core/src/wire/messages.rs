@@ -6,6 +6,7 @@
 //! each estimate names the `seq` of the event it answers, so the host can stream without
 //! waiting for replies.
 
+use crate::ekf::health::HealthStatus;
 use crate::ekf::{CovarianceUpdate, EkfConfig};
 use crate::gate::ChiSquareGate;
 use crate::geometry::Pose2;
@@ -314,6 +315,9 @@ pub struct Estimate {
     pub covariance: [f32; 6],
     /// The device's counters after the event.
     pub status: Status,
+    /// The EKF supervision's fault flags and counters after the event
+    /// ([`crate::ekf::health`]; all zero on the grid estimator).
+    pub health: HealthStatus,
 }
 
 /// Messages from the device to the host.

@@ -9,7 +9,8 @@
 //! [`ToHost::Status`].
 
 use crate::association::KnownIds;
-use crate::association::{Observed, observe_known};
+use crate::association::{Observed, observe_known_supervised};
+use crate::ekf::health::{HealthConfig, HealthStatus, Supervisor};
 use crate::ekf::{EkfConfig, EkfSlam, UpdateOutcome};
 use crate::geometry::Pose2;
 use crate::pf::{GridSlam, PfError, StepReport};
@@ -146,6 +147,7 @@ pub struct Session<'a, const N: usize, const L: usize> {
     ekf: &'a mut EkfSlam<f32, N>,
     ekf_config: EkfConfig<f32>,
     ids: KnownIds<L>,
+    supervisor: Supervisor<f32>,
     grid: Option<&'a mut dyn GridEstimator>,
     grid_setup: Option<GridSetup>,
     assembler: ScanAssembler<MAX_SCAN_BEAMS>,
@@ -163,6 +165,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
             ekf,
             ekf_config,
             ids: KnownIds::new(),
+            supervisor: Supervisor::new(HealthConfig::DEFAULT_F32),
             grid: None,
             grid_setup: None,
             assembler: ScanAssembler::new(),
@@ -196,6 +199,12 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
     /// The estimator in use.
     pub fn active(&self) -> EstimatorKind {
         self.active
+    }
+
+    /// The supervision of the EKF's updates (its settings are
+    /// [`HealthConfig::DEFAULT_F32`]).
+    pub fn supervisor(&self) -> &Supervisor<f32> {
+        &self.supervisor
     }
 
     /// The EKF.
@@ -341,7 +350,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
             return StepResult::Ignored;
         }
         let z = RangeBearing::new(range, bearing);
-        match observe_known(self.ekf, &mut self.ids, id, &z) {
+        match observe_known_supervised(self.ekf, &mut self.ids, id, &z, &mut self.supervisor) {
             Ok(Observed::Added { .. }) => StepResult::Added,
             Ok(Observed::Updated {
                 outcome: UpdateOutcome::Accepted { .. },
@@ -397,6 +406,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
             let _ = self.ekf.init(config, Pose2::new(0.0, 0.0, 0.0));
         }
         self.ids.clear();
+        self.supervisor.reset();
         self.assembler.clear();
         if let Some(grid) = self.grid.as_deref_mut()
             && grid.reset(pose).is_err()
@@ -425,6 +435,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
                 pose: [pose.x, pose.y, pose.theta],
                 covariance: grid.pose_covariance(),
                 status: self.status,
+                health: HealthStatus::default(),
             };
         }
         let pose = self.ekf.pose();
@@ -445,6 +456,7 @@ impl<'a, const N: usize, const L: usize> Session<'a, N, L> {
                 p[(2, 2)],
             ],
             status: self.status,
+            health: self.supervisor.status(),
         }
     }
 }
