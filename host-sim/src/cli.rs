@@ -34,6 +34,11 @@ pub enum Command {
     /// Stream a dataset to the firmware (under QEMU or on a board) and compare its
     /// estimates with the host's, bit for bit.
     Hil(HilArgs),
+    /// Replay a grid of settings (a settings file whose keys may hold lists) on a list of
+    /// recordings in parallel, e.g. `sweep -g grid.toml -r mrclam:dataset6/robot1-5`;
+    /// writes sweep.csv and sweep.json (one row per settings × recording, mean and worst
+    /// per settings).
+    Sweep(crate::sweep::SweepArgs),
     /// Localize on a saved grid map (`map.yaml` from `replay --filter grid-slam`) with the
     /// grid particle filter.
     Localize(LocalizeArgs),
@@ -118,10 +123,10 @@ pub enum Precision {
 #[derive(Debug, Clone, Args)]
 pub struct ReplayArgs {
     /// Dataset: `mrclam:<dir>` (a folder, or a name under `$SLAM_DATASETS/mrclam`, e.g.
-    /// `mrclam:dataset6`).
+    /// `mrclam:dataset6`); `mrclam:dataset6/robot3` picks the robot (overrides `--robot`).
     #[arg(long, short)]
     pub dataset: DatasetSpec,
-    /// Robot whose log is replayed.
+    /// Robot whose log is replayed (1–5 in MRCLAM).
     #[arg(long, default_value_t = 1)]
     pub robot: u8,
     /// Data association (default: from the config file, `known` if none).
@@ -216,10 +221,10 @@ pub struct HilArgs {
     /// Baud rate of the serial port.
     #[arg(long, default_value_t = 115_200)]
     pub baud: u32,
-    /// Dataset: `mrclam:<dir>`, as for `replay`.
+    /// Dataset: `mrclam:<dir>` or `mrclam:<dir>/robot<k>`, as for `replay`.
     #[arg(long, short)]
     pub dataset: DatasetSpec,
-    /// Robot whose log is streamed.
+    /// Robot whose log is streamed (1–5 in MRCLAM).
     #[arg(long, default_value_t = 1)]
     pub robot: u8,
     /// Output folder: hil.json (the comparison) and firmware.tum (the device's trajectory).
@@ -251,6 +256,7 @@ pub fn run(cli: &Cli) -> Result<()> {
         Some(Command::Replay(args)) => crate::replay::run_cli(args, cli.quiet),
         Some(Command::Sim(args)) => crate::sim::run_cli(args, cli.quiet),
         Some(Command::Hil(args)) => crate::hil::run_cli(args, cli.quiet),
+        Some(Command::Sweep(args)) => crate::sweep::run_cli(args, cli.quiet),
         Some(Command::Localize(args)) => crate::grid_replay::localize_cli(args, cli.quiet),
         Some(Command::Texture(args)) => crate::camera::texture_cli(args, cli.quiet),
         Some(Command::Detections(args)) => crate::camera::detections_cli(args, cli.quiet),

@@ -153,14 +153,31 @@ impl Settings {
         path: Option<&Path>,
         mode: Option<AssociationMode>,
     ) -> Result<Self> {
+        let over = match path {
+            Some(path) => {
+                let text = std::fs::read_to_string(path)
+                    .with_context(|| format!("cannot read config {}", path.display()))?;
+                toml::from_str(&text).with_context(|| format!("config {}", path.display()))?
+            }
+            None => toml::Table::new(),
+        };
+        let origin = match path {
+            Some(p) => format!("config {}", p.display()),
+            None => format!("built-in config {family}.toml"),
+        };
+        Self::load_over(family, over, mode, &origin)
+    }
+
+    /// Like [`Settings::load_for`] with the overrides already parsed (`over`, laid over
+    /// the built-in defaults); `origin` names them in errors.
+    pub fn load_over(
+        family: &str,
+        over: toml::Table,
+        mode: Option<AssociationMode>,
+        origin: &str,
+    ) -> Result<Self> {
         let mut base: toml::Table = toml::from_str(builtin_text(family)?)?;
-        if let Some(path) = path {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("cannot read config {}", path.display()))?;
-            let over: toml::Table =
-                toml::from_str(&text).with_context(|| format!("config {}", path.display()))?;
-            merge(&mut base, over);
-        }
+        merge(&mut base, over);
         let unknown = base.remove("unknown_ids");
         if let Some(mode) = mode {
             let mut table = toml::Table::new();
@@ -183,10 +200,7 @@ impl Settings {
         }
         let settings: Self = toml::Value::Table(base)
             .try_into()
-            .with_context(|| match path {
-                Some(p) => format!("config {}", p.display()),
-                None => format!("built-in config {family}.toml"),
-            })?;
+            .with_context(|| origin.to_owned())?;
         settings.validate()?;
         Ok(settings)
     }
@@ -316,7 +330,8 @@ impl Settings {
     }
 }
 
-fn builtin_text(family: &str) -> Result<&'static str> {
+/// The built-in settings file of a dataset family, as TOML text.
+pub fn builtin_text(family: &str) -> Result<&'static str> {
     BUILTIN
         .iter()
         .find(|(f, _)| *f == family)

@@ -16,6 +16,7 @@
 //!   corrupted readings, clock jumps).
 //! - [`camera`]: camera front ends on the simulator: rendered RGB-D frames, the floor
 //!   texture map, sign detections through the EKF-SLAM.
+//! - [`sweep`]: a grid of settings × recordings replayed in parallel, one table.
 //! - [`grid_replay`]: the grid particle filter (SLAM, localization) on CARMEN lidar logs.
 #![deny(missing_docs)]
 
@@ -31,3 +32,4 @@ pub mod output;
 pub mod readers;
 pub mod replay;
 pub mod sim;
+pub mod sweep;
