@@ -131,3 +131,30 @@ fn recovery_alone_reacquires_robot3() {
     assert_eq!(m.counts.recoveries, 1, "{:?}", m.counts);
     assert!(se2(&m.ate_rmse_m) < bound(0.2045), "{m:?}");
 }
+
+/// Measured with hidden ids (JCBB), f64: (robot, ATE(se2) m, landmarks(se2) m, purity,
+/// landmarks created).
+const JCBB: [(u8, f64, f64, f64, usize); 5] = [
+    (1, 0.1862, 0.1761, 0.597, 9),
+    (2, 0.3090, 1.0661, 0.758, 16),
+    (3, 0.3144, 0.7444, 0.713, 14),
+    (4, 0.9132, 1.0890, 0.644, 11),
+    (5, 0.3668, 1.6789, 0.722, 15),
+];
+
+#[test]
+fn jcbb_hidden_ids_every_robot() {
+    for &(robot, ate, landmarks, purity, created) in &JCBB {
+        let m = run(robot, AssociationMode::Jcbb, Precision::F64);
+        assert!(se2(&m.ate_rmse_m) < bound(ate), "robot {robot}: {m:?}");
+        assert!(se2(&m.landmark_rmse_m) < bound(landmarks), "robot {robot}: {m:?}");
+        let p = m.association_purity.unwrap();
+        assert!(p > purity / 1.05, "robot {robot}: purity {p}");
+        assert_eq!(m.landmarks_created, created, "robot {robot}");
+        let m32 = run(robot, AssociationMode::Jcbb, Precision::F32);
+        assert!(
+            (se2(&m32.ate_rmse_m) - se2(&m.ate_rmse_m)).abs() < 0.001,
+            "robot {robot} f32: {m32:?}"
+        );
+    }
+}
