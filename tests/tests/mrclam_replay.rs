@@ -13,8 +13,7 @@ use std::sync::OnceLock;
 fn recording(robot: u8) -> &'static Recording {
     static RECS: [OnceLock<Recording>; 5] = [const { OnceLock::new() }; 5];
     RECS[usize::from(robot - 1)].get_or_init(|| {
-        readers::read(&DatasetSpec::Mrclam("dataset6".into()), robot)
-            .expect("MRCLAM dataset 6")
+        readers::read(&DatasetSpec::Mrclam("dataset6".into()), robot).expect("MRCLAM dataset 6")
     })
 }
 
@@ -147,7 +146,10 @@ fn jcbb_hidden_ids_every_robot() {
     for &(robot, ate, landmarks, purity, created) in &JCBB {
         let m = run(robot, AssociationMode::Jcbb, Precision::F64);
         assert!(se2(&m.ate_rmse_m) < bound(ate), "robot {robot}: {m:?}");
-        assert!(se2(&m.landmark_rmse_m) < bound(landmarks), "robot {robot}: {m:?}");
+        assert!(
+            se2(&m.landmark_rmse_m) < bound(landmarks),
+            "robot {robot}: {m:?}"
+        );
         let p = m.association_purity.unwrap();
         assert!(p > purity / 1.05, "robot {robot}: purity {p}");
         assert_eq!(m.landmarks_created, created, "robot {robot}");
