@@ -489,9 +489,8 @@ impl<T: Real, const N: usize> EkfSlam<T, N> {
         let sum = self.pose_covariance() + added;
         let position_cap = T::lit(MAX_POSITION_VARIANCE);
         let heading_cap = T::lit(MAX_HEADING_VARIANCE);
-        if !(sum[(0, 0)] <= position_cap && sum[(1, 1)] <= position_cap)
-            || !(sum[(2, 2)] <= heading_cap)
-        {
+        // Finite: both terms are.
+        if sum[(0, 0)] > position_cap || sum[(1, 1)] > position_cap || sum[(2, 2)] > heading_cap {
             return Err(EkfError::NumericalFailure);
         }
         set_diagonal_block(&mut self.covariance, 0, &sum);
