@@ -1,9 +1,21 @@
-//! The command line: `host-sim [replay|sim] …`. Each subcommand's work lives in its own
-//! module; this file only parses and dispatches.
+//! Layer 6, the top: the command line (`host-sim [replay|localize|sim|hil|sweep|texture|detections]
+//! …`), clap only. Each subcommand's arguments are converted into the options struct of
+//! its module in [`crate::commands`]; nothing below this file imports it.
 
-use crate::readers::DatasetSpec;
+use crate::commands::detections::DetectionsOptions;
+use crate::commands::hil::HilOptions;
+use crate::commands::localize::LocalizeOptions;
+use crate::commands::replay::ReplayOptions;
+use crate::commands::sim::SimOptions;
+use crate::commands::sweep::SweepOptions;
+use crate::commands::texture::TextureOptions;
+use crate::commands::{detections, hil, localize, replay, sim, sweep, texture};
+use crate::domain::grid::GridOptions;
+use crate::domain::{AssociationMode, FilterKind, Precision};
+use crate::inputs::faults::FaultRates;
+use crate::inputs::readers::DatasetSpec;
 use anyhow::Result;
-use clap::{Args, Parser, Subcommand, ValueEnum};
+use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
 
 /// Replay recorded datasets and simulations through the microslam estimators.
@@ -38,26 +50,16 @@ pub enum Command {
     /// recordings in parallel, e.g. `sweep -g grid.toml -r mrclam:dataset6/robot1-5`;
     /// writes sweep.csv and sweep.json (one row per settings × recording, mean and worst
     /// per settings).
-    Sweep(crate::sweep::SweepArgs),
+    Sweep(SweepArgs),
     /// Localize on a saved grid map (`map.yaml` from `replay --filter grid-slam`) with the
     /// grid particle filter.
     Localize(LocalizeArgs),
     /// Coloured floor map from simulated RGB-D frames (`--dataset sim`), scored against the
     /// simulator's true floor texture.
-    Texture(crate::camera::TextureArgs),
+    Texture(TextureArgs),
     /// Sign detections (box centre + depth, wrong class ids) → range/bearing → EKF-SLAM on
     /// the simulator; ATE and the share of wrong class ids the association corrected.
-    Detections(crate::camera::DetectionsArgs),
-}
-
-/// Which estimator a replay drives.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Default)]
-pub enum FilterKind {
-    /// Landmark EKF-SLAM (landmark datasets).
-    #[default]
-    EkfSlam,
-    /// Grid particle-filter SLAM (lidar datasets).
-    GridSlam,
+    Detections(DetectionsArgs),
 }
 
 /// Options of the grid particle filter shared by `replay` and `localize`.
@@ -95,28 +97,6 @@ pub struct LocalizeArgs {
     /// Output folder.
     #[arg(long, short, default_value = "out/localize")]
     pub out: PathBuf,
-}
-
-/// How sightings are associated with landmarks.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum AssociationMode {
-    /// The sighting's id (barcode) names the landmark.
-    Known,
-    /// Ids hidden; individual compatibility nearest neighbour (seed 1, Fig. 11).
-    Icnn,
-    /// Ids hidden; joint compatibility branch and bound over each batch of sightings.
-    Jcbb,
-}
-
-/// Scalar the filter runs on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Default)]
-pub enum Precision {
-    /// Single precision, as on the microcontroller.
-    F32,
-    /// Double precision.
-    #[default]
-    F64,
 }
 
 /// Options of `host-sim replay`.
@@ -161,10 +141,44 @@ pub struct ReplayArgs {
     /// (`carmen:` logs; `stuck` repeats the previous scan, for lidar logs only); what was
     /// injected is reported in `metrics.json`.
     #[arg(long)]
-    pub faults: Option<crate::faults::FaultRates>,
+    pub faults: Option<FaultRates>,
     /// Seed of the fault generator.
     #[arg(long, default_value_t = 1)]
     pub fault_seed: u64,
+}
+
+/// Options of `host-sim sweep`.
+#[derive(Debug, Clone, Args)]
+pub struct SweepArgs {
+    /// The grid: a settings file whose keys may hold lists of values (their Cartesian
+    /// product is replayed). Without it, the built-in settings alone.
+    #[arg(long, short)]
+    pub grid: Option<PathBuf>,
+    /// Recordings, comma-separated: `mrclam:dataset6/robot1,mrclam:dataset6/robot2`;
+    /// `mrclam:dataset6/robot1-5` names a range of robots.
+    #[arg(long, short, value_delimiter = ',', required = true)]
+    pub runs: Vec<String>,
+    /// Data association (default: from the settings, `known` if none).
+    #[arg(long, short)]
+    pub association: Option<AssociationMode>,
+    /// Scalar the filter runs on.
+    #[arg(long, value_enum, default_value_t = Precision::F64)]
+    pub precision: Precision,
+    /// Output folder: sweep.csv, sweep.json.
+    #[arg(long, short, default_value = "out/sweep")]
+    pub out: PathBuf,
+}
+
+impl From<&SweepArgs> for SweepOptions {
+    fn from(a: &SweepArgs) -> Self {
+        Self {
+            grid: a.grid.clone(),
+            runs: a.runs.clone(),
+            association: a.association,
+            precision: a.precision,
+            out: a.out.clone(),
+        }
+    }
 }
 
 /// Options of `host-sim sim`.
@@ -192,20 +206,6 @@ pub struct SimArgs {
     /// grid scenario).
     #[arg(long, default_value_t = 200)]
     pub grid_particles: usize,
-}
-
-impl Default for SimArgs {
-    fn default() -> Self {
-        Self {
-            seed: 1,
-            out: PathBuf::from("out/sim"),
-            association: AssociationMode::Known,
-            config: None,
-            precision: Precision::F64,
-            no_plots: false,
-            grid_particles: 200,
-        }
-    }
 }
 
 /// Options of `host-sim hil`.
@@ -250,16 +250,156 @@ pub struct HilArgs {
     pub config: Option<PathBuf>,
 }
 
+/// Options of `host-sim detections`.
+#[derive(Debug, Clone, Args)]
+pub struct DetectionsArgs {
+    /// Seed of the simulation (trajectory, odometry noise, sign heights, detector noise).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Share of detections with a wrong class id.
+    #[arg(long, default_value_t = 0.15)]
+    pub wrong_class_share: f64,
+    /// Number of signs (default: the `sim.toml` scenario's 24 landmarks).
+    #[arg(long)]
+    pub signs: Option<u32>,
+    /// Smallest distance between two signs, metres (default: the scenario's 0.8 m).
+    #[arg(long)]
+    pub min_spacing: Option<f64>,
+    /// Output folder: metrics.json, map.png (geometry with class hints).
+    #[arg(long, short, default_value = "out/detections")]
+    pub out: PathBuf,
+}
+
+/// Options of `host-sim texture`.
+#[derive(Debug, Clone, Args)]
+pub struct TextureArgs {
+    /// Dataset: only `sim` (the built-in simulator) is supported.
+    #[arg(long, short, default_value = "sim")]
+    pub dataset: String,
+    /// Seed of the simulation.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Floor height band, metres: points with a world height in [LOW, HIGH] are floor
+    /// (the seed used −0.5 0.25).
+    #[arg(long, num_args = 2, value_names = ["LOW", "HIGH"], allow_negative_numbers = true,
+          default_values_t = [-0.1, 0.1])]
+    pub band: Vec<f64>,
+    /// Frames per second of the trajectory.
+    #[arg(long, default_value_t = 2.0)]
+    pub frame_rate: f64,
+    /// Output folder: texture.png, texture_truth.png, texture_ekf.png, texture.json.
+    #[arg(long, short, default_value = "out/texture")]
+    pub out: PathBuf,
+}
+
+impl From<&GridArgs> for GridOptions {
+    fn from(a: &GridArgs) -> Self {
+        Self {
+            particles: a.particles,
+            window: a.window,
+            beams: a.beams,
+            relations: a.relations.clone(),
+        }
+    }
+}
+
+impl From<&ReplayArgs> for ReplayOptions {
+    fn from(a: &ReplayArgs) -> Self {
+        Self {
+            dataset: a.dataset.clone(),
+            robot: a.robot,
+            association: a.association,
+            config: a.config.clone(),
+            out: a.out.clone(),
+            precision: a.precision,
+            no_plots: a.no_plots,
+            filter: a.filter,
+            grid: (&a.grid).into(),
+            run: a.run,
+            faults: a.faults,
+            fault_seed: a.fault_seed,
+        }
+    }
+}
+
+impl From<&LocalizeArgs> for LocalizeOptions {
+    fn from(a: &LocalizeArgs) -> Self {
+        Self {
+            map: a.map.clone(),
+            dataset: a.dataset.clone(),
+            config: a.config.clone(),
+            grid: (&a.grid).into(),
+            out: a.out.clone(),
+        }
+    }
+}
+
+impl From<&SimArgs> for SimOptions {
+    fn from(a: &SimArgs) -> Self {
+        Self {
+            seed: a.seed,
+            out: a.out.clone(),
+            association: a.association,
+            config: a.config.clone(),
+            precision: a.precision,
+            no_plots: a.no_plots,
+            grid_particles: a.grid_particles,
+        }
+    }
+}
+
+impl From<&HilArgs> for HilOptions {
+    fn from(a: &HilArgs) -> Self {
+        Self {
+            qemu: a.qemu.clone(),
+            serial: a.serial.clone(),
+            baud: a.baud,
+            dataset: a.dataset.clone(),
+            robot: a.robot,
+            out: a.out.clone(),
+            timeout_s: a.timeout_s,
+            corrupt_frames: a.corrupt_frames,
+            corrupt_seed: a.corrupt_seed,
+            dataset_settings: a.dataset_settings,
+            config: a.config.clone(),
+        }
+    }
+}
+
+impl From<&TextureArgs> for TextureOptions {
+    fn from(a: &TextureArgs) -> Self {
+        Self {
+            dataset: a.dataset.clone(),
+            seed: a.seed,
+            band: a.band.clone(),
+            frame_rate: a.frame_rate,
+            out: a.out.clone(),
+        }
+    }
+}
+
+impl From<&DetectionsArgs> for DetectionsOptions {
+    fn from(a: &DetectionsArgs) -> Self {
+        Self {
+            seed: a.seed,
+            wrong_class_share: a.wrong_class_share,
+            signs: a.signs,
+            min_spacing: a.min_spacing,
+            out: a.out.clone(),
+        }
+    }
+}
+
 /// Runs what the command line asks for.
 pub fn run(cli: &Cli) -> Result<()> {
     match &cli.command {
-        Some(Command::Replay(args)) => crate::replay::run_cli(args, cli.quiet),
-        Some(Command::Sim(args)) => crate::sim::run_cli(args, cli.quiet),
-        Some(Command::Hil(args)) => crate::hil::run_cli(args, cli.quiet),
-        Some(Command::Sweep(args)) => crate::sweep::run_cli(args, cli.quiet),
-        Some(Command::Localize(args)) => crate::grid_replay::localize_cli(args, cli.quiet),
-        Some(Command::Texture(args)) => crate::camera::texture_cli(args, cli.quiet),
-        Some(Command::Detections(args)) => crate::camera::detections_cli(args, cli.quiet),
-        None => crate::sim::run_cli(&SimArgs::default(), cli.quiet),
+        Some(Command::Replay(args)) => replay::run_cli(&args.into(), cli.quiet),
+        Some(Command::Sim(args)) => sim::run_cli(&args.into(), cli.quiet),
+        Some(Command::Hil(args)) => hil::run_cli(&args.into(), cli.quiet),
+        Some(Command::Sweep(args)) => sweep::run_cli(&args.into(), cli.quiet),
+        Some(Command::Localize(args)) => localize::localize_cli(&args.into(), cli.quiet),
+        Some(Command::Texture(args)) => texture::texture_cli(&args.into(), cli.quiet),
+        Some(Command::Detections(args)) => detections::detections_cli(&args.into(), cli.quiet),
+        None => sim::run_cli(&SimOptions::default(), cli.quiet),
     }
 }

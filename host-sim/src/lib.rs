@@ -1,35 +1,27 @@
 //! # host-sim
 //!
 //! The host side of microslam: dataset readers that turn recorded logs into
-//! [`microslam::event::Event`] streams, a deterministic simulator, the replay loop that
-//! feeds the estimators, metrics against ground truth, and pictures.
+//! [`microslam::event::Event`] streams, a deterministic simulator, the run drivers that
+//! feed the estimators, metrics against ground truth, and pictures.
 //!
-//! - [`cli`]: the command line (`replay`, `sim`).
-//! - [`datasets`]: the one place that finds the shared datasets folder.
-//! - [`readers`]: dataset files → time-ordered events + ground truth.
-//! - [`replay`]: events → estimator → estimates; never parses anything.
-//! - [`sim`]: the built-in simulator.
-//! - [`metrics`]: ATE, landmark error, NEES/NIS, association purity → `metrics.json`.
-//! - [`output`]: TUM trajectories and PNG pictures.
-//! - [`config`]: estimator settings from TOML files.
-//! - [`faults`]: fault injection into event streams (drops, duplicates, reordering,
-//!   corrupted readings, clock jumps).
-//! - [`camera`]: camera front ends on the simulator: rendered RGB-D frames, the floor
-//!   texture map, sign detections through the EKF-SLAM.
-//! - [`sweep`]: a grid of settings × recordings replayed in parallel, one table.
-//! - [`grid_replay`]: the grid particle filter (SLAM, localization) on CARMEN lidar logs.
+//! The modules are layers; each imports only the layers below it (checked by
+//! `tests/layers.rs`), and the folder a file is in names its layer:
+//!
+//! | layer | folder | what |
+//! | --- | --- | --- |
+//! | 6 | [`cli`] | the command line (clap only): arguments → the commands' options |
+//! | 5 | [`commands`] | one module per subcommand: wiring, progress bars, printing |
+//! | 4 | [`output`] | TUM trajectories, `metrics.json`, ROS maps, PNG pictures |
+//! | 3 | [`metrics`] | ATE, landmark error, NEES/NIS, association purity, relation error |
+//! | 2 | [`drivers`] | the EKF run driver, the grid run driver, the camera chains |
+//! | 1 | [`inputs`] | dataset readers, the simulator's worlds, fault injection, the camera world |
+//! | 0 | [`domain`] | settings and plain domain types (association mode, precision, true poses) |
 #![deny(missing_docs)]
 
-pub mod camera;
 pub mod cli;
-pub mod config;
-pub mod datasets;
-pub mod faults;
-pub mod grid_replay;
-pub mod hil;
+pub mod commands;
+pub mod domain;
+pub mod drivers;
+pub mod inputs;
 pub mod metrics;
 pub mod output;
-pub mod readers;
-pub mod replay;
-pub mod sim;
-pub mod sweep;

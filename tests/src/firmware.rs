@@ -1,4 +1,4 @@
-//! Hardware-in-the-loop under QEMU, through `host_sim::hil`: the firmware ELF on
+//! Hardware-in-the-loop under QEMU, through `host_sim::drivers::hil`: the firmware ELF on
 //! `mps2-an386`, its UART0 on the child's stdin/stdout, semihosting (defmt) on a file so
 //! it never mixes with the frames; plus the synthetic drive of the equality test.
 
@@ -26,12 +26,12 @@ pub fn firmware_elf() -> PathBuf {
     )
 }
 
-pub use host_sim::hil::{LinkRun as QemuRun, encode_all, host_replies};
+pub use host_sim::drivers::hil::{LinkRun as QemuRun, encode_all, host_replies};
 
 /// Runs `elf` under QEMU, writes `bytes` to its UART without waiting, and reads replies
 /// until `expected` have arrived (or `timeout` passes: then fewer are returned).
 pub fn run_in_qemu(elf: &Path, bytes: Vec<u8>, expected: usize, timeout: Duration) -> QemuRun {
-    host_sim::hil::run_qemu(elf, bytes, expected, timeout).expect("qemu-system-arm runs")
+    host_sim::drivers::hil::run_qemu(elf, bytes, expected, timeout).expect("qemu-system-arm runs")
 }
 
 /// A deterministic drive: a robot circling twice through a ring of 12 landmarks, velocity
@@ -250,14 +250,14 @@ pub fn synthetic_lidar_drive(steps: usize) -> (Vec<ToDevice>, usize) {
     (out, scans)
 }
 
-/// The simulator's lidar world (`host_sim::sim::lidar_world`, seed `seed`) as wire frames
+/// The simulator's lidar world (`host_sim::inputs::sim::lidar_world`, seed `seed`) as wire frames
 /// for the grid estimator: select the grid, reset to the start pose, then for every sweep
 /// the odometry increment since the previous sweep (in the previous odometry frame) and the
 /// sweep in chunks (readings at or beyond the maximum range as 0 mm: no return); a status
 /// request at the end. The lidar is moved to the robot's centre (the wire carries no mount
 /// pose) and `laps` set. Returns the messages and the sweeps' true poses.
 pub fn lidar_world_messages(laps: u32, seed: u64) -> (Vec<ToDevice>, Vec<[f64; 3]>) {
-    use host_sim::sim::lidar_world::{LidarWorld, simulate};
+    use host_sim::inputs::sim::lidar_world::{LidarWorld, simulate};
     let mut world = LidarWorld::office();
     world.lidar.mount = [0.0; 3];
     world.laps = laps;

@@ -326,7 +326,7 @@ pub fn grid_steps(data: &[u8]) {
 
 /// Fuzzes the CARMEN log parser with arbitrary text: no panic; an error names its line.
 pub fn carmen_reader(data: &[u8]) {
-    match host_sim::readers::carmen::parse(std::io::BufReader::new(data)) {
+    match host_sim::inputs::readers::carmen::parse(std::io::BufReader::new(data)) {
         Ok(log) => {
             for laser in log.lasers() {
                 let _ = laser.ranges.len();
@@ -366,7 +366,7 @@ pub fn mrclam_reader(data: &[u8]) {
         let part = parts.next().unwrap_or(&[]);
         std::fs::write(dir.path().join(name), part).expect("write fuzz file");
     }
-    if let Err(e) = host_sim::readers::mrclam::read(dir.path(), 1) {
+    if let Err(e) = host_sim::inputs::readers::mrclam::read(dir.path(), 1) {
         let text = format!("{e:#}");
         assert!(text.contains(".dat"), "error without a file name: {text}");
     }
@@ -384,7 +384,7 @@ pub fn npz_reader(data: &[u8]) {
     std::fs::write(dir.path().join("Encoders20.npz"), enc).expect("write fuzz file");
     std::fs::write(dir.path().join("Imu20.npz"), imu.get(2..).unwrap_or(&[]))
         .expect("write fuzz file");
-    let _ = host_sim::readers::thor::dead_reckoning(dir.path(), 20);
+    let _ = host_sim::inputs::readers::thor::dead_reckoning(dir.path(), 20);
 }
 
 /// A fuzz target's check: panics when an invariant breaks.

@@ -6,9 +6,9 @@
 //! from the conversion under test. Accuracy bounds are measured figures plus a small
 //! margin (see each test).
 
-use host_sim::camera::detections::{ClassUse, DetectorSettings};
-use host_sim::camera::texture::TextureSettings;
-use host_sim::camera::world::{Room, Sign, SimCamera, Surface, floor_colour, render};
+use host_sim::drivers::detections::{ClassUse, DetectorSettings};
+use host_sim::drivers::texture::TextureSettings;
+use host_sim::inputs::camera::world::{Room, Sign, SimCamera, Surface, floor_colour, render};
 use microslam::geometry::{Pose2, wrap_angle};
 use microslam::sensors::camera::{DetectionNoise, kinect_v1};
 
@@ -128,7 +128,7 @@ fn every_rendered_pixel_back_projects_onto_its_surface() {
 }
 
 /// Bounding box centre and the depth at its pixel, as a detector would report them.
-fn detect(frame: &host_sim::camera::world::RgbdFrame, id: u32) -> Option<(f64, f64, f64)> {
+fn detect(frame: &host_sim::inputs::camera::world::RgbdFrame, id: u32) -> Option<(f64, f64, f64)> {
     let (mut c0, mut c1, mut r0, mut r1) = (u32::MAX, 0, u32::MAX, 0);
     for row in 0..frame.height {
         for col in 0..frame.width {
@@ -222,7 +222,8 @@ fn test_texture_settings() -> TextureSettings {
 
 #[test]
 fn texture_map_matches_the_true_floor() {
-    let (report, map, _) = host_sim::camera::run_texture(1, &test_texture_settings()).unwrap();
+    let (report, map, _) =
+        host_sim::commands::texture::run_texture(1, &test_texture_settings()).unwrap();
     eprintln!("{report:#?}");
     let t = report.true_poses;
     let e = report.ekf_poses;
@@ -234,7 +235,7 @@ fn texture_map_matches_the_true_floor() {
     assert!(e.mean_abs_rgb_error > t.mean_abs_rgb_error);
     assert!(report.ekf_ate_rmse_m.unwrap() < 0.05);
     // The metric can fail: a map shifted by 0.1 m is far worse.
-    let mut shifted = host_sim::camera::texture::TextureMap::new(7.0, map.resolution_m);
+    let mut shifted = host_sim::drivers::texture::TextureMap::new(7.0, map.resolution_m);
     for i in 0..map.size * map.size {
         if let Some(c) = map.colour(i) {
             let (x, y) = map.centre(i);
@@ -252,8 +253,8 @@ fn seed_height_band_paints_walls_into_the_floor_map() {
         band: (-0.5, 0.25),
         ..narrow
     };
-    let (a, _, _) = host_sim::camera::run_texture(1, &narrow).unwrap();
-    let (b, _, _) = host_sim::camera::run_texture(1, &seed_band).unwrap();
+    let (a, _, _) = host_sim::commands::texture::run_texture(1, &narrow).unwrap();
+    let (b, _, _) = host_sim::commands::texture::run_texture(1, &seed_band).unwrap();
     eprintln!("{:?}\n{:?}", a.true_poses, b.true_poses);
     assert!(b.true_pose_points.in_band > a.true_pose_points.in_band);
     assert!(b.true_poses.mean_abs_rgb_error > a.true_poses.mean_abs_rgb_error);
@@ -261,10 +262,10 @@ fn seed_height_band_paints_walls_into_the_floor_map() {
 
 #[test]
 fn association_corrects_wrong_class_ids() {
-    let (report, _, _) = host_sim::camera::run_detections(
+    let (report, _, _) = host_sim::commands::detections::run_detections(
         1,
         &DetectorSettings::default(),
-        host_sim::camera::SignField::default(),
+        host_sim::commands::detections::SignField::default(),
     )
     .unwrap();
     let mode = |m| report.modes.iter().find(|r| r.class_use == m).unwrap();

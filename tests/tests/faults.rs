@@ -3,13 +3,14 @@
 //! corrupted reading, and the accuracy degrades gracefully. Bounds are the measured
 //! figures (README, "Reliability") plus a small margin.
 
-use host_sim::cli::{AssociationMode, Precision};
-use host_sim::config::Settings;
-use host_sim::faults::{FaultRates, inject};
+use host_sim::domain::config::Settings;
+use host_sim::domain::recording::Recording;
+use host_sim::domain::{AssociationMode, Precision};
+use host_sim::inputs::faults::{FaultRates, inject};
+use host_sim::inputs::readers::{self, DatasetSpec};
 use host_sim::metrics::{Metrics, evaluate};
-use host_sim::readers::{self, DatasetSpec, Recording};
 
-fn run_with(rates: &str) -> (Metrics, host_sim::faults::FaultCounts) {
+fn run_with(rates: &str) -> (Metrics, host_sim::inputs::faults::FaultCounts) {
     let mut rec: Recording =
         readers::read(&DatasetSpec::Mrclam("dataset6".into()), 1).expect("MRCLAM dataset 6");
     let rates: FaultRates = rates.parse().expect("fault spec");
@@ -17,7 +18,7 @@ fn run_with(rates: &str) -> (Metrics, host_sim::faults::FaultCounts) {
     rec.events = events;
     let settings =
         Settings::load_for("mrclam", None, Some(AssociationMode::Known)).expect("settings");
-    let run = host_sim::replay::replay(
+    let run = host_sim::drivers::ekf::replay(
         &rec,
         &settings,
         AssociationMode::Known,

@@ -94,10 +94,10 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_a_synthetic_drive() {
 #[test]
 #[ignore = "needs qemu-system-arm, the firmware ELF and the datasets: run by .ci/firmware.sh"]
 fn firmware_in_qemu_equals_host_bit_for_bit_on_mrclam_dataset6() {
-    let dir = host_sim::datasets::resolve("mrclam", "dataset6").expect("MRCLAM dataset 6");
-    let recording = host_sim::readers::mrclam::read(&dir, 1).expect("robot 1 reads");
-    let messages = host_sim::hil::messages_for(&recording, None);
-    let (bytes, corrupted) = host_sim::hil::encode_all_corrupted(&messages, 0.01, 1);
+    let dir = host_sim::domain::datasets::resolve("mrclam", "dataset6").expect("MRCLAM dataset 6");
+    let recording = host_sim::inputs::readers::mrclam::read(&dir, 1).expect("robot 1 reads");
+    let messages = host_sim::drivers::hil::messages_for(&recording, None);
+    let (bytes, corrupted) = host_sim::drivers::hil::encode_all_corrupted(&messages, 0.01, 1);
     assert!(corrupted > 500, "{corrupted} frames corrupted");
     let expected = host_replies(&bytes);
     assert_eq!(
@@ -128,7 +128,7 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_mrclam_dataset6() {
     );
     assert_eq!(run.bad_frames, 0);
     assert_eq!(run.replies.len(), expected.len(), "every message answered");
-    let comparison = host_sim::hil::compare(messages.len(), &run, &expected);
+    let comparison = host_sim::drivers::hil::compare(messages.len(), &run, &expected);
     assert_eq!(
         comparison.identical,
         expected.len(),
@@ -136,7 +136,7 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_mrclam_dataset6() {
     );
     assert_eq!(comparison.max_pose_difference, [0.0; 3]);
     let out = elf.with_extension("mrclam6.tum");
-    std::fs::write(&out, host_sim::hil::tum(&run.replies)).expect("trajectory written");
+    std::fs::write(&out, host_sim::commands::hil::tum(&run.replies)).expect("trajectory written");
     let Some(ToHost::Status {
         status,
         stack_peak_bytes,
@@ -302,17 +302,17 @@ fn firmware_in_qemu_equals_host_bit_for_bit_in_the_lidar_world() {
 /// checked identical to the host's too: `host-sim hil --qemu … --dataset-settings`.)
 #[test]
 fn dataset_ekf_settings_travel_over_the_wire() {
-    use host_sim::config::Settings;
+    use host_sim::domain::config::Settings;
     use microslam::wire::EkfSettings;
-    let dir = host_sim::datasets::resolve("mrclam", "dataset6").expect("MRCLAM dataset 6");
-    let recording = host_sim::readers::mrclam::read(&dir, 1).expect("robot 1 reads");
+    let dir = host_sim::domain::datasets::resolve("mrclam", "dataset6").expect("MRCLAM dataset 6");
+    let recording = host_sim::inputs::readers::mrclam::read(&dir, 1).expect("robot 1 reads");
     let tuned = Settings::load_for("mrclam", None, None).expect("mrclam settings");
     let settings = EkfSettings::from_config(&tuned.ekf_config::<f32>());
-    let with = host_sim::hil::messages_for(&recording, Some(settings));
-    let without = host_sim::hil::messages_for(&recording, None);
+    let with = host_sim::drivers::hil::messages_for(&recording, Some(settings));
+    let without = host_sim::drivers::hil::messages_for(&recording, None);
     assert_eq!(with.len(), without.len() + 1);
-    let a = host_replies(&host_sim::hil::encode_all(&with));
-    let b = host_replies(&host_sim::hil::encode_all(&without));
+    let a = host_replies(&host_sim::drivers::hil::encode_all(&with));
+    let b = host_replies(&host_sim::drivers::hil::encode_all(&without));
     assert_eq!(a.len(), with.len());
     match &a[0] {
         ToHost::Status { seq: 0, status, .. } => assert_eq!(status.rejected, 0),
@@ -333,8 +333,8 @@ fn dataset_ekf_settings_travel_over_the_wire() {
     // as `host-sim replay` (0.276 m); measured 0.2754 m over 52 303 estimates, against
     // 0.2902 m with the firmware's own settings (both with the session's supervision,
     // `HealthConfig::DEFAULT_F32`).
-    let (tuned_ate, poses) = host_sim::hil::device_ate(&a, &recording.ground_truth);
-    let (own_ate, _) = host_sim::hil::device_ate(&b, &recording.ground_truth);
+    let (tuned_ate, poses) = host_sim::commands::hil::device_ate(&a, &recording.ground_truth);
+    let (own_ate, _) = host_sim::commands::hil::device_ate(&b, &recording.ground_truth);
     let (tuned_ate, own_ate) = (tuned_ate.expect("ATE"), own_ate.expect("ATE"));
     println!("device ATE(se2): tuned {tuned_ate:.4} m over {poses} estimates, own {own_ate:.4} m");
     assert!(poses > 50_000, "{poses}");

@@ -2,20 +2,23 @@
 //! the benchmark relations, the localizer on the map SLAM built, and THOR's Hokuyo scan
 //! geometry. Bounds are what was measured, plus a small margin.
 
-use host_sim::datasets::dataset_path;
-use host_sim::grid_replay::{self, GridRunOptions};
-use host_sim::metrics::relations;
+use host_sim::domain::datasets::dataset_path;
+use host_sim::domain::grid::GRID_CELLS;
+use host_sim::domain::grid::carmen_lidar;
+use host_sim::drivers::grid::{GridRunOptions, carmen_inputs, run_localizer, run_slam};
+use host_sim::inputs::readers::carmen::{front_scans, read_log};
+use host_sim::metrics::relations::{self, relation_error};
 use microslam::geometry::Pose2;
 use microslam::grid::GridView;
 use microslam::pf::GridPfConfig;
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
 
 fn intel() -> (
-    host_sim::readers::carmen::CarmenLog,
+    host_sim::inputs::readers::carmen::CarmenLog,
     Vec<relations::Relation>,
 ) {
-    let log = grid_replay::read_log(&dataset_path("intel/intel-raw-part.clf").expect("Intel log"))
-        .expect("read");
+    let log =
+        read_log(&dataset_path("intel/intel-raw-part.clf").expect("Intel log")).expect("read");
     let rels =
         relations::read(&dataset_path("intel/intel.relations").expect("relations")).expect("read");
     (log, rels)
@@ -39,10 +42,16 @@ fn intel_grid_slam_relation_error() {
     let options = GridRunOptions {
         particles: 200,
         config: GridPfConfig::DEFAULT,
-        lidar: grid_replay::carmen_lidar(180),
+        lidar: carmen_lidar(180),
     };
-    let run = grid_replay::run_slam(&log, &options, &|_| {}).expect("run");
-    let e = grid_replay::relation_error(&run, &rels);
+    let run = run_slam::<GRID_CELLS>(
+        &carmen_inputs(&front_scans(&log)),
+        Pose2::IDENTITY,
+        &options,
+        &|_| {},
+    )
+    .expect("run");
+    let e = relation_error(&run, &rels);
     println!("P=200, 180 beams: {e:?}");
     assert_eq!(e.used, 1030);
     // Measured: 0.0243 ± 0.0280 m, 0.290 ± 0.272° (seeds 1–3: 0.0265–0.0282 m).
@@ -56,9 +65,15 @@ fn intel_grid_slam_relation_error() {
         options.config.log_odds.occupied_above,
     )
     .expect("map");
-    let loc = grid_replay::run_localizer(&log, &view, Pose2::IDENTITY, &options, &|_| {})
-        .expect("localize");
-    let el = grid_replay::relation_error(&loc, &rels);
+    let loc = run_localizer(
+        &carmen_inputs(&front_scans(&log)),
+        &view,
+        Pose2::IDENTITY,
+        &options,
+        &|_| {},
+    )
+    .expect("localize");
+    let el = relation_error(&loc, &rels);
     println!("localizer on that map: {el:?}");
     // Measured: 0.0326 ± 0.0455 m, 0.310 ± 0.324°.
     assert!(el.trans_mean_m < 0.04, "{el:?}");
@@ -73,10 +88,16 @@ fn intel_grid_slam_microcontroller_settings() {
     let options = GridRunOptions {
         particles: 32,
         config,
-        lidar: grid_replay::carmen_lidar(180),
+        lidar: carmen_lidar(180),
     };
-    let run = grid_replay::run_slam(&log, &options, &|_| {}).expect("run");
-    let e = grid_replay::relation_error(&run, &rels);
+    let run = run_slam::<GRID_CELLS>(
+        &carmen_inputs(&front_scans(&log)),
+        Pose2::IDENTITY,
+        &options,
+        &|_| {},
+    )
+    .expect("run");
+    let e = relation_error(&run, &rels);
     println!("P=32, 90 beams: {e:?}");
     assert!(e.trans_mean_m < 0.06, "{e:?}"); // measured 0.0495 (seeds 1–3: 0.036–0.046 m)
 }
@@ -89,20 +110,21 @@ fn intel_grid_slam_with_faults_refuses_exactly_what_was_injected() {
     let options = GridRunOptions {
         particles: 200,
         config: GridPfConfig::DEFAULT,
-        lidar: grid_replay::carmen_lidar(180),
+        lidar: carmen_lidar(180),
     };
-    let clean = grid_replay::front_scans(&log);
-    let rates: host_sim::faults::FaultRates = "all=0.01".parse().expect("rates");
-    let (faulty, injected) = host_sim::faults::inject_scans(&clean, &rates, 1);
+    let clean = front_scans(&log);
+    let rates: host_sim::inputs::faults::FaultRates = "all=0.01".parse().expect("rates");
+    let (faulty, injected) = host_sim::inputs::faults::inject_scans(&clean, &rates, 1);
     assert!(injected.total() > 300 && injected.stuck > 0, "{injected:?}");
     let scans: Vec<_> = faulty.iter().collect();
-    let run = grid_replay::run_slam_scans(&scans, &options, &|_| {}).expect("the run completes");
+    let run = run_slam::<GRID_CELLS>(&carmen_inputs(&scans), Pose2::IDENTITY, &options, &|_| {})
+        .expect("the run completes");
     // The log itself has no NaN: every refusal is an injected fault, and every injected
     // NaN (with the copies made by duplication and the stuck lidar) is refused.
     assert_eq!(run.refused_odometry, injected.nan_odometry, "{injected:?}");
     assert_eq!(run.non_finite_beams, injected.nan_ranges, "{injected:?}");
     assert_eq!(run.trajectory.len(), scans.len());
-    let e = grid_replay::relation_error(&run, &rels);
+    let e = relation_error(&run, &rels);
     println!("all=0.01: {injected:?} {e:?}");
     // Measured: 0.0270 ± 0.0348 m over 989 relations (0.0243 m without faults).
     assert!(e.trans_mean_m < 0.03, "{e:?}");

@@ -5,9 +5,12 @@
 //!
 //! Bounds are the ATEs measured on these seeds (noted next to each) plus a small margin.
 
-use host_sim::grid_replay::GridRun;
-use host_sim::sim::grid::{ate_m, odometry_ate_m, run_localizer, run_slam, true_map};
-use host_sim::sim::lidar_world::{LidarRecording, LidarWorld, simulate};
+use host_sim::drivers::grid::{self, GridRun, GridRunOptions, f32_pose, sim_inputs};
+use host_sim::inputs::sim::lidar_world::{
+    LidarRecording, LidarWorld, SIM_GRID_CELLS, simulate, true_map,
+};
+use host_sim::metrics::grid::{ate_m, odometry_ate_m};
+use microslam::grid::GridView;
 use microslam::pf::GridPfConfig;
 
 fn recording(seed: u64) -> LidarRecording {
@@ -20,6 +23,33 @@ fn mcu() -> GridPfConfig {
         beam_decimation: 2,
         ..GridPfConfig::MICROCONTROLLER
     }
+}
+
+fn options(rec: &LidarRecording, particles: usize, config: GridPfConfig) -> GridRunOptions {
+    GridRunOptions {
+        particles,
+        config,
+        lidar: rec.lidar,
+    }
+}
+
+/// Grid SLAM on the firmware's 256 × 256 grid from the true start pose.
+fn run_slam(rec: &LidarRecording, particles: usize, config: GridPfConfig) -> GridRun {
+    let start = f32_pose(&rec.scans[0].truth);
+    let opts = options(rec, particles, config);
+    grid::run_slam::<SIM_GRID_CELLS>(&sim_inputs(rec), start, &opts, &|_| {}).unwrap()
+}
+
+/// The localizer on `map` from the true start pose.
+fn run_localizer(
+    rec: &LidarRecording,
+    map: &GridView<'_>,
+    particles: usize,
+    config: GridPfConfig,
+) -> GridRun {
+    let start = f32_pose(&rec.scans[0].truth);
+    let opts = options(rec, particles, config);
+    grid::run_localizer(&sim_inputs(rec), map, start, &opts, &|_| {}).unwrap()
 }
 
 fn check(rec: &LidarRecording, run: &GridRun, what: &str, bound: f64) -> f64 {
@@ -36,14 +66,14 @@ fn check(rec: &LidarRecording, run: &GridRun, what: &str, bound: f64) -> f64 {
 #[test]
 fn slam_host_settings_p200() {
     let rec = recording(3);
-    let run = run_slam::<200, 180>(&rec, GridPfConfig::DEFAULT).unwrap();
+    let run = run_slam(&rec, 200, GridPfConfig::DEFAULT);
     check(&rec, &run, "SLAM DEFAULT P=200", 0.16); // measured 0.146 m
 }
 
 #[test]
 fn slam_microcontroller_settings_p32() {
     let rec = recording(3);
-    let run = run_slam::<32, 90>(&rec, mcu()).unwrap();
+    let run = run_slam(&rec, 32, mcu());
     check(&rec, &run, "SLAM MICROCONTROLLER P=32", 0.12); // measured 0.108 m
 }
 
@@ -52,18 +82,18 @@ fn localizer_on_the_true_map() {
     let rec = recording(2);
     let host = GridPfConfig::DEFAULT;
     let map = true_map(&rec.world.walls, &host);
-    let run = run_localizer::<200, 180>(&rec, &map.view(), host).unwrap();
+    let run = run_localizer(&rec, &map.view(), 200, host);
     check(&rec, &run, "localizer DEFAULT P=200", 0.036); // measured 0.0328 m
     let map = true_map(&rec.world.walls, &mcu());
-    let run = run_localizer::<32, 90>(&rec, &map.view(), mcu()).unwrap();
+    let run = run_localizer(&rec, &map.view(), 32, mcu());
     check(&rec, &run, "localizer MICROCONTROLLER P=32", 0.038); // measured 0.034 m
 }
 
 #[test]
 fn same_seed_same_estimate() {
     let rec = recording(4);
-    let a = run_slam::<32, 90>(&rec, mcu()).unwrap();
-    let b = run_slam::<32, 90>(&rec, mcu()).unwrap();
+    let a = run_slam(&rec, 32, mcu());
+    let b = run_slam(&rec, 32, mcu());
     assert_eq!(a.trajectory, b.trajectory);
     assert_eq!(a.cells, b.cells);
 }

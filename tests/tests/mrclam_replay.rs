@@ -4,10 +4,11 @@
 //! `docs/results-ekf.md`; re-measure with
 //! `host-sim replay -d mrclam:dataset6/robot<k> [-a jcbb] [--precision f32]`).
 
-use host_sim::cli::{AssociationMode, Precision};
-use host_sim::config::Settings;
+use host_sim::domain::config::Settings;
+use host_sim::domain::recording::Recording;
+use host_sim::domain::{AssociationMode, Precision};
+use host_sim::inputs::readers::{self, DatasetSpec};
 use host_sim::metrics::{Metrics, evaluate};
-use host_sim::readers::{self, DatasetSpec, Recording};
 use std::sync::OnceLock;
 
 fn recording(robot: u8) -> &'static Recording {
@@ -20,7 +21,7 @@ fn recording(robot: u8) -> &'static Recording {
 fn run(robot: u8, mode: AssociationMode, precision: Precision) -> Metrics {
     let settings = Settings::load_for("mrclam", None, Some(mode)).unwrap();
     let rec = recording(robot);
-    let run = host_sim::replay::replay(rec, &settings, mode, precision, None).unwrap();
+    let run = host_sim::drivers::ekf::replay(rec, &settings, mode, precision, None).unwrap();
     evaluate(rec, &run)
 }
 
@@ -106,11 +107,16 @@ fn without_supervision_robot3_locks_out() {
     // an overconfident filter and it never comes back (measured 2.49 m ATE, 3106 sightings
     // refused).
     let mut settings = Settings::load_for("mrclam", None, Some(AssociationMode::Known)).unwrap();
-    settings.recovery = host_sim::config::RecoverySettings::default();
+    settings.recovery = host_sim::domain::config::RecoverySettings::default();
     let rec = recording(3);
-    let run =
-        host_sim::replay::replay(rec, &settings, AssociationMode::Known, Precision::F64, None)
-            .unwrap();
+    let run = host_sim::drivers::ekf::replay(
+        rec,
+        &settings,
+        AssociationMode::Known,
+        Precision::F64,
+        None,
+    )
+    .unwrap();
     let m = evaluate(rec, &run);
     assert!(se2(&m.ate_rmse_m) > 2.0, "{m:?}");
     assert!(m.counts.gated > 1000, "{:?}", m.counts);
@@ -123,9 +129,14 @@ fn recovery_alone_reacquires_robot3() {
     let mut settings = Settings::load_for("mrclam", None, Some(AssociationMode::Known)).unwrap();
     settings.recovery.huber_sigma = 0.0;
     let rec = recording(3);
-    let run =
-        host_sim::replay::replay(rec, &settings, AssociationMode::Known, Precision::F64, None)
-            .unwrap();
+    let run = host_sim::drivers::ekf::replay(
+        rec,
+        &settings,
+        AssociationMode::Known,
+        Precision::F64,
+        None,
+    )
+    .unwrap();
     let m = evaluate(rec, &run);
     assert_eq!(m.counts.recoveries, 1, "{:?}", m.counts);
     assert!(se2(&m.ate_rmse_m) < bound(0.2045), "{m:?}");

@@ -1,12 +1,12 @@
 //! Readers on the real MRCLAM files and on damaged copies: a bad line is an error that
 //! names the file and the line number.
 
-use host_sim::readers::{self, DatasetSpec, mrclam};
+use host_sim::inputs::readers::{self, DatasetSpec, mrclam};
 use microslam::event::{EventKind, Identity};
 use std::path::Path;
 
 fn dataset6() -> std::path::PathBuf {
-    host_sim::datasets::resolve("mrclam", "dataset6").expect("MRCLAM dataset 6")
+    host_sim::domain::datasets::resolve("mrclam", "dataset6").expect("MRCLAM dataset 6")
 }
 
 #[test]

@@ -1,8 +1,8 @@
 //! The simulator draws its noise from the filter's own noise model, so the filter must be
 //! consistent: the pose NEES averaged over runs must sit inside the 95 % χ² band.
 
-use host_sim::cli::{AssociationMode, Precision};
-use host_sim::config::Settings;
+use host_sim::domain::config::Settings;
+use host_sim::domain::{AssociationMode, Precision};
 use host_sim::metrics::evaluate;
 use microslam::gate::chi_square_quantile;
 
@@ -16,8 +16,8 @@ fn pose_nees_inside_the_chi_square_band() {
     }
     let mut sum = 0.0;
     for seed in 1..=RUNS {
-        let rec = host_sim::sim::simulate(&settings, seed).unwrap();
-        let run = host_sim::replay::replay(
+        let rec = host_sim::inputs::sim::simulate(&settings, seed).unwrap();
+        let run = host_sim::drivers::ekf::replay(
             &rec,
             &settings,
             AssociationMode::Known,
@@ -47,10 +47,15 @@ fn jcbb_on_the_simulator_finds_every_landmark() {
     if let Some(s) = settings.scenario.as_mut() {
         s.duration_s = 120.0;
     }
-    let rec = host_sim::sim::simulate(&settings, 1).unwrap();
-    let run =
-        host_sim::replay::replay(&rec, &settings, AssociationMode::Jcbb, Precision::F32, None)
-            .unwrap();
+    let rec = host_sim::inputs::sim::simulate(&settings, 1).unwrap();
+    let run = host_sim::drivers::ekf::replay(
+        &rec,
+        &settings,
+        AssociationMode::Jcbb,
+        Precision::F32,
+        None,
+    )
+    .unwrap();
     let m = evaluate(&rec, &run);
     assert!(m.association_purity.unwrap() > 0.99, "{m:?}");
     assert!(m.ate_rmse_m.se2.unwrap() < 0.1, "{m:?}");

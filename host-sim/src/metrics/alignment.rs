@@ -1,6 +1,6 @@
 //! Rigid 2-D alignments of an estimated trajectory onto ground truth.
 
-use microslam::geometry::Pose2;
+use microslam::geometry::{Pose2, wrap_near};
 
 /// Least-squares rotation + translation (no scale) taking `estimated` points onto
 /// `truth` points (Umeyama / Kabsch in 2-D), as the pose of the estimate's frame in the
@@ -72,7 +72,7 @@ impl Rigid {
     /// `T · pose`, heading wrapped to (−π, π].
     pub fn apply(&self, p: &Pose2<f64>) -> Pose2<f64> {
         let [x, y] = self.point(p.x, p.y);
-        Pose2::new(x, y, wrap(self.theta + p.theta))
+        Pose2::new(x, y, wrap_near(self.theta + p.theta))
     }
 
     /// `T · (x, y)`.
@@ -82,17 +82,6 @@ impl Rigid {
             self.y + self.sin * x + self.cos * y,
         ]
     }
-}
-
-/// Wraps an angle to (−π, π] without trigonometry (same result as the core's
-/// `wrap_angle` up to rounding).
-pub fn wrap(a: f64) -> f64 {
-    use std::f64::consts::{PI, TAU};
-    if a > -PI && a <= PI {
-        return a;
-    }
-    let w = a - TAU * ((a + PI) / TAU).floor();
-    if w <= -PI { w + TAU } else { w }
 }
 
 #[cfg(test)]
@@ -119,26 +108,5 @@ mod tests {
         let f = first_pose(&Pose2::new(1.0, 0.0, 0.0), &Pose2::new(0.0, 1.0, 1.0));
         let p = apply(&f, &Pose2::new(1.0, 0.0, 0.0));
         assert!(p.x.abs() < 1e-12 && (p.y - 1.0).abs() < 1e-12 && (p.theta - 1.0).abs() < 1e-12);
-        for a in [
-            -10.0,
-            -3.2,
-            -std::f64::consts::PI,
-            0.0,
-            3.0,
-            3.2,
-            7.0,
-            100.0,
-        ] {
-            let w = wrap(a);
-            let reference = microslam::geometry::wrap_angle(a);
-            assert!(
-                w > -std::f64::consts::PI && w <= std::f64::consts::PI,
-                "{a} -> {w}"
-            );
-            assert!(
-                (w - reference).abs() < 1e-12 || (w - reference).abs() > 6.0,
-                "{a}: {w} vs {reference}"
-            );
-        }
     }
 }

@@ -20,95 +20,21 @@
 
 mod alignment;
 mod assignment;
+pub mod grid;
 pub mod relations;
 
-pub use alignment::{Rigid, apply, first_pose, se2_least_squares, wrap};
+pub use alignment::{Rigid, apply, first_pose, se2_least_squares};
 pub use assignment::{max_gain, min_cost};
 
-use crate::readers::{Recording, TruePose};
-use crate::replay::ReplayRun;
-use microslam::geometry::Pose2;
+use crate::domain::recording::{Recording, TruthCursor};
+use crate::drivers::ekf::ReplayRun;
+use microslam::geometry::{Pose2, wrap_near};
 use nalgebra::{Matrix3, Vector2, Vector3};
 use serde::Serialize;
 
 /// Estimates whose position standard deviation `√(σx² + σy²)` is below this (m) are left
 /// out of the NEES: ground-truth noise (millimetres for Vicon) would dominate it.
 pub const NEES_MIN_POSITION_STD: f64 = 0.01;
-
-/// Ground truth linearly interpolated at `stamp` (heading along the shorter arc), or
-/// `None` outside its time span.
-pub fn interpolate_pose(truth: &[TruePose], stamp: f64) -> Option<Pose2<f64>> {
-    let first = truth.first()?;
-    let last = truth.last()?;
-    if !(stamp >= first.stamp && stamp <= last.stamp) {
-        return None;
-    }
-    let i = truth.partition_point(|p| p.stamp <= stamp);
-    if i == 0 {
-        return Some(first.pose);
-    }
-    let a = truth.get(i - 1)?;
-    let Some(b) = truth.get(i) else {
-        return Some(a.pose);
-    };
-    let span = b.stamp - a.stamp;
-    let s = if span > 0.0 {
-        (stamp - a.stamp) / span
-    } else {
-        0.0
-    };
-    Some(Pose2::new(
-        a.pose.x + s * (b.pose.x - a.pose.x),
-        a.pose.y + s * (b.pose.y - a.pose.y),
-        wrap(a.pose.theta + s * wrap(b.pose.theta - a.pose.theta)),
-    ))
-}
-
-/// Interpolates ground truth at non-decreasing stamps by walking forward (no search):
-/// the same results as [`interpolate_pose`].
-pub struct TruthCursor<'a> {
-    truth: &'a [TruePose],
-    next: usize,
-}
-
-impl<'a> TruthCursor<'a> {
-    /// A cursor at the start of `truth`.
-    pub fn new(truth: &'a [TruePose]) -> Self {
-        Self { truth, next: 0 }
-    }
-
-    /// Ground truth at `stamp`; stamps must not decrease between calls (a smaller one
-    /// falls back to a search).
-    pub fn at(&mut self, stamp: f64) -> Option<Pose2<f64>> {
-        let t = self.truth;
-        if self.next > 0 && t.get(self.next - 1).is_some_and(|p| p.stamp > stamp) {
-            return interpolate_pose(t, stamp);
-        }
-        while t.get(self.next).is_some_and(|p| p.stamp <= stamp) {
-            self.next += 1;
-        }
-        let first = t.first()?;
-        let last = t.last()?;
-        if !(stamp >= first.stamp && stamp <= last.stamp) {
-            return None;
-        }
-        let a = t.get(self.next.checked_sub(1)?)?;
-        let Some(b) = t.get(self.next) else {
-            return Some(a.pose);
-        };
-        let span = b.stamp - a.stamp;
-        let s = if span > 0.0 {
-            (stamp - a.stamp) / span
-        } else {
-            0.0
-        };
-        Some(Pose2::new(
-            a.pose.x + s * (b.pose.x - a.pose.x),
-            a.pose.y + s * (b.pose.y - a.pose.y),
-            wrap(a.pose.theta + s * wrap(b.pose.theta - a.pose.theta)),
-        ))
-    }
-}
 
 /// A figure under both alignments (`null` in JSON when it cannot be computed).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
@@ -162,12 +88,12 @@ pub struct Metrics {
     /// Fraction of evaluated estimates whose NEES is below the 95 % χ²(3) quantile.
     pub nees_pose_within_95: Option<f64>,
     /// What the association did.
-    pub counts: crate::replay::AssociationCounts,
+    pub counts: crate::drivers::ekf::AssociationCounts,
     /// Sightings dropped by the reader (other robots, unknown barcodes).
     pub reader_dropped_sightings: usize,
     /// Faults injected into the event stream (`replay --faults`), if any.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub faults: Option<crate::faults::FaultReport>,
+    pub faults: Option<crate::inputs::faults::FaultReport>,
     /// The SE(2) alignment of the estimate onto ground truth: x, y (m), θ (rad).
     pub se2_alignment: Option<[f64; 3]>,
     /// What the `se2` landmark error was aligned on: `trajectory` (the robot's ground
@@ -290,7 +216,7 @@ fn yaw_rmse_deg(t: &Pose2<f64>, est: &[Pose2<f64>], gt: &[Pose2<f64>]) -> Option
     let sq: Vec<f64> = est
         .iter()
         .zip(gt)
-        .map(|(e, g)| wrap(r.apply(e).theta - g.theta).powi(2))
+        .map(|(e, g)| wrap_near(r.apply(e).theta - g.theta).powi(2))
         .collect();
     mean(&sq).map(|v| v.sqrt().to_degrees())
 }
@@ -303,7 +229,7 @@ pub fn pose_nees(est: &Pose2<f64>, truth: &Pose2<f64>, p: &[[f64; 3]; 3]) -> Opt
     let e = Vector3::new(
         truth.x - est.x,
         truth.y - est.y,
-        wrap(truth.theta - est.theta),
+        wrap_near(truth.theta - est.theta),
     );
     let v = (e.transpose() * inv * e)[(0, 0)];
     v.is_finite().then_some(v)
@@ -402,30 +328,4 @@ fn purity(recording: &Recording, run: &ReplayRun) -> (Option<f64>, Option<f64>) 
         Some(matched / total as f64),
         Some(cluster as f64 / total as f64),
     )
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn cursor_matches_search_and_stays_inside_the_span() {
-        let truth: Vec<TruePose> = (0..50)
-            .map(|i| TruePose {
-                stamp: f64::from(i) * 0.1,
-                pose: Pose2::new(f64::from(i), -f64::from(i), wrap(f64::from(i) * 0.4)),
-            })
-            .collect();
-        let mut c = TruthCursor::new(&truth);
-        for k in -5..560 {
-            let t = f64::from(k) * 0.00913;
-            assert_eq!(c.at(t), interpolate_pose(&truth, t), "t = {t}");
-        }
-        assert_eq!(c.at(0.05), interpolate_pose(&truth, 0.05), "backwards");
-        // Half-way between samples 3 and 4, heading across the ±π cut handled.
-        let p = interpolate_pose(&truth, 0.35).unwrap();
-        assert!((p.x - 3.5).abs() < 1e-12 && (p.y + 3.5).abs() < 1e-12);
-        assert_eq!(interpolate_pose(&truth, 4.95), None);
-        assert_eq!(interpolate_pose(&truth, -0.01), None);
-    }
 }

@@ -8,7 +8,10 @@
 //! translational `|Δxy|` (m) and absolute rotational `|wrap(Δθ)|` (degrees). Reported as
 //! mean and (population) standard deviation over the used relations.
 
+use crate::drivers::grid::GridRun;
+use microslam::geometry::{Pose2, wrap_angle};
 use std::io::BufRead;
+use std::path::{Path, PathBuf};
 
 /// One relation: the pose of the scan at `t2` seen from the scan at `t1`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -76,16 +79,6 @@ pub struct RelationError {
     pub rot_std_deg: f64,
 }
 
-fn wrap(a: f64) -> f64 {
-    a.sin().atan2(a.cos())
-}
-
-fn between(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    let (s, c) = a[2].sin_cos();
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    [c * dx + s * dy, -s * dx + c * dy, wrap(b[2] - a[2])]
-}
-
 fn mean_std(v: &[f64]) -> (f64, f64) {
     if v.is_empty() {
         return (f64::NAN, f64::NAN);
@@ -124,9 +117,11 @@ pub fn evaluate(trajectory: &[(f64, [f64; 3])], relations: &[Relation], tol: f64
         let (Some(i), Some(j)) = (nearest(&sorted, r.t1, tol), nearest(&sorted, r.t2, tol)) else {
             continue;
         };
-        let est = between(trajectory[i].1, trajectory[j].1);
-        et.push((est[0] - r.pose[0]).hypot(est[1] - r.pose[1]));
-        er.push(wrap(est[2] - r.pose[2]).abs().to_degrees());
+        let [a, b] =
+            [trajectory[i].1, trajectory[j].1].map(|[x, y, theta]| Pose2::new(x, y, theta));
+        let est = a.between(&b);
+        et.push((est.x - r.pose[0]).hypot(est.y - r.pose[1]));
+        er.push(wrap_angle(est.theta - r.pose[2]).abs().to_degrees());
     }
     let (tm, ts) = mean_std(&et);
     let (rm, rs) = mean_std(&er);
@@ -137,6 +132,31 @@ pub fn evaluate(trajectory: &[(f64, [f64; 3])], relations: &[Relation], tol: f64
         rot_mean_deg: rm,
         rot_std_deg: rs,
     }
+}
+
+/// The relation error of a run's trajectory (stamps matched within 1 ms).
+pub fn relation_error(run: &GridRun, rels: &[Relation]) -> RelationError {
+    let traj: Vec<(f64, [f64; 3])> = run
+        .trajectory
+        .iter()
+        .map(|(t, p)| (*t, [f64::from(p.x), f64::from(p.y), f64::from(p.theta)]))
+        .collect();
+    evaluate(&traj, rels, 1e-3)
+}
+
+/// The relations file to use: the one given, else a single `*.relations` file next to
+/// the log, else none.
+pub fn find_relations(log_path: &Path, given: Option<&Path>) -> Option<PathBuf> {
+    if let Some(g) = given {
+        return Some(g.to_path_buf());
+    }
+    let dir = log_path.parent()?;
+    let mut found = std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "relations"));
+    let first = found.next()?;
+    found.next().is_none().then_some(first)
 }
 
 #[cfg(test)]

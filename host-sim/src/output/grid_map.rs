@@ -1,9 +1,11 @@
 //! Occupancy maps as files: PGM + YAML in the ROS `map_server` convention, a PNG with the
 //! trajectory, TUM trajectories — and reading a saved map back for localization.
 
+use crate::drivers::grid::GridRun;
 use anyhow::{Context, Result, bail};
 use microslam::geometry::Pose2;
 use microslam::grid::{GridGeometry, LogOdds};
+use microslam::pf::GridPfConfig;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -183,4 +185,26 @@ pub fn read_map(yaml_path: &Path, log_odds: &LogOdds) -> Result<(Vec<i8>, GridGe
             origin_y: oy,
         },
     ))
+}
+/// Writes the outputs of a run into `out`.
+pub fn write_outputs(
+    out: &Path,
+    run: &GridRun,
+    config: &GridPfConfig,
+    metrics: &serde_json::Value,
+) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    write_map(
+        out,
+        &run.cells,
+        &run.geometry,
+        &config.log_odds,
+        &run.trajectory,
+    )?;
+    write_tum(&out.join("trajectory.tum"), &run.trajectory)?;
+    std::fs::write(
+        out.join("metrics.json"),
+        serde_json::to_string_pretty(metrics)? + "\n",
+    )?;
+    Ok(())
 }

@@ -1,32 +1,21 @@
-//! Files written after a run: TUM trajectories, `metrics.json`, PNG pictures; the
-//! progress bar and the one-line summary.
+//! Layer 4: files written after a run: TUM trajectories, `metrics.json`, `landmarks.csv`,
+//! ROS `map_server` maps, PNG pictures.
 
 pub mod grid_map;
 mod plots;
+pub mod thor;
 mod tum;
 
 pub use plots::{draw_errors, draw_map, write_png};
 pub use tum::{tum_line, write_tum};
 
+use crate::domain::recording::Recording;
+use crate::drivers::ekf::ReplayRun;
 use crate::metrics::Metrics;
-use crate::readers::Recording;
-use crate::replay::ReplayRun;
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use microslam::geometry::Pose2;
 use std::path::Path;
 use std::time::Instant;
-
-/// A progress bar over `len` events (drawn to stderr).
-pub fn progress_bar(len: u64) -> ProgressBar {
-    let bar = ProgressBar::new(len);
-    if let Ok(style) =
-        ProgressStyle::with_template("{spinner} replay [{bar:40}] {pos}/{len} events ({eta})")
-    {
-        bar.set_style(style.progress_chars("=> "));
-    }
-    bar
-}
 
 /// Writes `trajectory.tum`, `landmarks.csv`, `map.png` and
 /// `errors.png` (when `plots`), then `metrics.json` with the wall time since `started`.
@@ -99,28 +88,5 @@ pub fn write_truth(out: &Path, recording: &Recording) -> Result<()> {
     write_tum(
         &out.join("groundtruth.tum"),
         recording.ground_truth.iter().map(|p| (p.stamp, p.pose)),
-    )
-}
-
-/// A short human-readable summary of the metrics.
-pub fn summary(m: &Metrics, out: &Path) -> String {
-    let f = |v: Option<f64>| v.map_or_else(|| "n/a".to_owned(), |v| format!("{v:.3}"));
-    format!(
-        "{} [{} {}]: ATE se2 {} m (first pose {}), landmarks se2 {} m, {} landmarks, purity {}, \
-         NEES {}, NIS {}, dead reckoning {} m; filter {:.1} ms, wall {:.1} ms → {}",
-        m.dataset,
-        m.association,
-        m.precision,
-        f(m.ate_rmse_m.se2),
-        f(m.ate_rmse_m.first_pose),
-        f(m.landmark_rmse_m.se2),
-        m.landmarks_created,
-        f(m.association_purity),
-        f(m.nees_pose_mean),
-        f(m.nis_mean),
-        f(m.dead_reckoning_ate_rmse_m.se2),
-        m.filter_time_s * 1e3,
-        m.wall_time_s * 1e3,
-        out.display()
     )
 }

@@ -3,9 +3,10 @@
 //! No text is drawn, so no font library is needed (CI machines have no fontconfig):
 //! grid lines are 1 m apart on the map and 60 s / 0.1 m apart on the error plot.
 
-use crate::metrics::{apply, interpolate_pose};
-use crate::readers::Recording;
-use crate::replay::ReplayRun;
+use crate::domain::recording::Recording;
+use crate::domain::recording::interpolate_pose;
+use crate::drivers::ekf::ReplayRun;
+use crate::metrics::apply;
 use anyhow::{Result, anyhow};
 use microslam::geometry::Pose2;
 use nalgebra::{Matrix2, Vector2};

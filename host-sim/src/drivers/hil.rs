@@ -1,4 +1,4 @@
-//! `host-sim hil`: hardware in the loop. A dataset is streamed as `microslam::wire` frames
+//! The host side of hardware in the loop (`host-sim hil`). A dataset is streamed as `microslam::wire` frames
 //! to the firmware (`firmware-example`) — under QEMU or on a board's serial port — at full
 //! speed, without waiting for replies; the firmware's estimates are collected and compared
 //! with the host running the very code the firmware runs ([`Session`], f32, libm), fed the
@@ -9,7 +9,7 @@
 //! status request whose answer carries the firmware's counters and stack peak.
 
 use std::io::{Read, Write};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::thread;
@@ -26,8 +26,7 @@ use microslam::wire::{
 };
 use serde::Serialize;
 
-use crate::cli::HilArgs;
-use crate::readers::Recording;
+use crate::domain::recording::Recording;
 
 /// Landmarks of the firmware's EKF (`firmware_example::config::EKF_LANDMARKS`).
 pub const FIRMWARE_LANDMARKS: usize = 32;
@@ -353,116 +352,4 @@ pub fn compare(messages: usize, device: &LinkRun, host: &[ToHost]) -> Comparison
         c.device_frames_bad = Some(status.frames_bad);
     }
     c
-}
-
-/// The device's trajectory in TUM format (`t x y z qx qy qz qw`).
-pub fn tum(replies: &[ToHost]) -> String {
-    let mut out = String::new();
-    for r in replies {
-        if let ToHost::Estimate(e) = r {
-            let [x, y, th] = e.pose.map(f64::from);
-            let (s, c) = (th / 2.0).sin_cos();
-            let t = e.stamp_us as f64 * 1e-6;
-            out.push_str(&format!("{t:.6} {x} {y} 0 0 0 {s} {c}\n"));
-        }
-    }
-    out
-}
-
-/// ATE (SE(2) alignment) of the estimates in `replies` against `truth`, and over how many
-/// estimates (those inside the truth's time span).
-pub fn device_ate(replies: &[ToHost], truth: &[crate::readers::TruePose]) -> (Option<f64>, usize) {
-    let (est, gt): (Vec<Pose2<f64>>, Vec<Pose2<f64>>) = replies
-        .iter()
-        .filter_map(|r| match r {
-            ToHost::Estimate(e) => {
-                let [x, y, th] = e.pose.map(f64::from);
-                let g = crate::metrics::interpolate_pose(truth, e.stamp_us as f64 * 1e-6)?;
-                Some((Pose2::new(x, y, th), g))
-            }
-            _ => None,
-        })
-        .unzip();
-    let (_, se2) = crate::metrics::transforms(&est, &gt);
-    let ate = se2.and_then(|t| crate::metrics::position_rmse(&t, &est, &gt));
-    (ate, est.len())
-}
-
-/// `host-sim hil`.
-pub fn run_cli(args: &HilArgs, quiet: bool) -> Result<()> {
-    let recording = crate::readers::read(&args.dataset, args.robot)?;
-    let settings = if args.dataset_settings {
-        let family = args.dataset.family();
-        let tuned = crate::config::Settings::load_for(family, args.config.as_deref(), None)?;
-        Some(EkfSettings::from_config(&tuned.ekf_config::<f32>()))
-    } else {
-        None
-    };
-    let messages = messages_for(&recording, settings);
-    let (bytes, corrupted) =
-        encode_all_corrupted(&messages, args.corrupt_frames, args.corrupt_seed);
-    let host = host_replies(&bytes);
-    let timeout = Duration::from_secs(args.timeout_s);
-    if !quiet {
-        println!(
-            "{}: {} events → {} frames ({} bytes)",
-            recording.name,
-            recording.events.len(),
-            messages.len(),
-            bytes.len()
-        );
-    }
-    let run = match (&args.qemu, &args.serial) {
-        (Some(elf), None) => run_qemu(elf, bytes, host.len(), timeout)?,
-        (None, Some(port)) => run_serial(port, args.baud, bytes, host.len(), timeout)?,
-        _ => bail!("give exactly one of --qemu <elf> and --serial <port>"),
-    };
-    let mut comparison = compare(messages.len(), &run, &host);
-    comparison.corrupted_frames = corrupted;
-    (comparison.device_ate_se2_m, comparison.device_ate_poses) =
-        device_ate(&run.replies, &recording.ground_truth);
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
-    let report = args.out.join("hil.json");
-    std::fs::write(&report, serde_json::to_string_pretty(&comparison)?)?;
-    std::fs::write(args.out.join("firmware.tum"), tum(&run.replies))?;
-    if !quiet {
-        println!(
-            "{} of {} replies received, {} identical to the host bit for bit; max pose \
-             difference {:?}; device ATE(se2) {} over {} estimates; {:.1} s; report in {}",
-            comparison.received,
-            comparison.expected,
-            comparison.identical,
-            comparison.max_pose_difference,
-            comparison
-                .device_ate_se2_m
-                .map_or_else(|| "–".to_string(), |a| format!("{a:.4} m")),
-            comparison.device_ate_poses,
-            comparison.seconds,
-            report.display()
-        );
-    }
-    if comparison
-        .device_frames_bad
-        .is_some_and(|bad| bad as usize != corrupted)
-    {
-        bail!(
-            "the device counted {:?} bad frames for {corrupted} corrupted",
-            comparison.device_frames_bad
-        );
-    }
-    if comparison.received != comparison.expected || comparison.identical != comparison.expected {
-        bail!(
-            "the device's estimates differ from the host's ({} of {} identical)",
-            comparison.identical,
-            comparison.expected
-        );
-    }
-    Ok(())
-}
-
-/// Where `cargo build -p firmware-example --profile firmware` puts the QEMU ELF.
-pub fn default_firmware_elf() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../target/thumbv7em-none-eabihf/firmware/firmware-example")
 }

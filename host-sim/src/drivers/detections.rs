@@ -15,11 +15,11 @@
 //! A detection with a wrong class is *corrected* when it was associated with the map
 //! landmark of its true sign (the landmark most of whose sightings came from that sign).
 
-use super::world::{Sign, SimCamera};
-use crate::cli::{AssociationMode, Precision};
-use crate::config::Settings;
-use crate::readers::Recording;
-use crate::replay::{AssociationCounts, MapLandmark, PoseSample, ReplayRun};
+use crate::domain::config::Settings;
+use crate::domain::recording::Recording;
+use crate::domain::{AssociationMode, Precision};
+use crate::drivers::ekf::{AssociationCounts, MapLandmark, PoseSample, ReplayRun};
+use crate::inputs::camera::world::{Sign, SimCamera};
 use anyhow::{Result, bail};
 use microslam::association::{Candidates, KnownIds, LabelCheck, LandmarkLabels, Pairing};
 use microslam::ekf::{EkfSlam, UpdateOutcome, state_dim};
@@ -150,7 +150,7 @@ pub fn camera_recording(
     let mut events = Vec::with_capacity(base.events.len());
     let mut detections = Vec::new();
     let mut step = 0usize;
-    let mut truth = crate::metrics::TruthCursor::new(&base.ground_truth);
+    let mut truth = crate::domain::recording::TruthCursor::new(&base.ground_truth);
     for e in &base.events {
         let EventKind::Velocity { .. } = e.kind else {
             continue;
@@ -459,7 +459,7 @@ pub fn run_chain(
         precision: Precision::F64,
         steps: trajectory.len(),
         trajectory,
-        dead_reckoning: crate::replay::dead_reckoning(
+        dead_reckoning: crate::drivers::ekf::dead_reckoning(
             recording,
             max_gap,
             (

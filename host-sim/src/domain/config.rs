@@ -2,7 +2,7 @@
 //! `host-sim/configs/<family>.toml` (compiled in). A file given on the command line is
 //! laid over the defaults: it only needs the keys it changes.
 
-use crate::cli::AssociationMode;
+use super::AssociationMode;
 use anyhow::{Context, Result, bail};
 use microslam::association::AssociationConfig;
 use microslam::ekf::health::HealthConfig;
@@ -17,8 +17,8 @@ use std::path::Path;
 
 /// Built-in defaults per dataset family.
 const BUILTIN: &[(&str, &str)] = &[
-    ("mrclam", include_str!("../configs/mrclam.toml")),
-    ("sim", include_str!("../configs/sim.toml")),
+    ("mrclam", include_str!("../../configs/mrclam.toml")),
+    ("sim", include_str!("../../configs/sim.toml")),
 ];
 
 /// All settings of a landmark-SLAM replay.
@@ -38,7 +38,7 @@ pub struct Settings {
     pub recovery: RecoverySettings,
     /// Simulator scenario (only in `sim.toml`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub scenario: Option<crate::sim::Scenario>,
+    pub scenario: Option<Scenario>,
 }
 
 /// See `configs/mrclam.toml` for the meaning of each field.
@@ -349,6 +349,26 @@ fn merge(base: &mut toml::Table, over: toml::Table) {
             }
         }
     }
+}
+
+/// The simulated world and drive (section `[scenario]` of `configs/sim.toml`, where each
+/// field is documented).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+#[allow(missing_docs)]
+pub struct Scenario {
+    pub duration_s: f64,
+    pub odometry_rate_hz: f64,
+    pub sighting_rate_hz: f64,
+    pub landmarks: u32,
+    pub field_half_size_m: f64,
+    pub min_landmark_spacing_m: f64,
+    pub loop_radius_m: f64,
+    pub speed_mps: f64,
+    pub wobble_radps: f64,
+    pub wobble_period_s: f64,
+    pub fov_deg: f64,
+    pub max_range_m: f64,
 }
 
 #[cfg(test)]

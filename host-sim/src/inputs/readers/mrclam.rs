@@ -11,8 +11,9 @@
 //! - `Robot<k>_Groundtruth.dat` (optional: dataset 1 has none): time, x, y, θ;
 //! - `Landmark_Groundtruth.dat`: subject, x, y, σx, σy.
 
+use super::sort_events;
 use super::text::{ReadError, invalid, read_table, read_table_with};
-use super::{Recording, TrueLandmark, TruePose, sort_events};
+use crate::domain::recording::{Recording, TrueLandmark, TruePose};
 use microslam::event::{Event, EventKind, Identity, Sighting};
 use microslam::geometry::Pose2;
 use microslam::sensors::range_bearing::RangeBearing;
@@ -120,7 +121,8 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
     }
 
     let first = events.first().map(|e| e.stamp);
-    let initial_pose = first.and_then(|t| crate::metrics::interpolate_pose(&ground_truth, t));
+    let initial_pose =
+        first.and_then(|t| crate::domain::recording::interpolate_pose(&ground_truth, t));
     let name = format!(
         "mrclam/{}/robot{robot}",
         dir.file_name()

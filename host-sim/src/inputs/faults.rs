@@ -5,7 +5,7 @@
 //! [`inject_scans`] on the laser messages of a CARMEN log.
 //!
 //! ```
-//! use host_sim::faults::{inject, FaultRates};
+//! use host_sim::inputs::faults::{inject, FaultRates};
 //! use microslam::event::{Event, EventKind};
 //!
 //! let events: Vec<Event<f64>> =
@@ -16,7 +16,7 @@
 //! # Ok::<(), anyhow::Error>(())
 //! ```
 
-use crate::readers::carmen::LaserMessage;
+use crate::inputs::readers::carmen::LaserMessage;
 use anyhow::{Context, Result, bail};
 use microslam::event::{Event, EventKind};
 use rand_core::SeedableRng;

@@ -10,9 +10,10 @@ pub mod thor;
 
 pub use text::ReadError;
 
+use crate::domain::recording::Recording;
+
 use anyhow::{Result, bail};
 use microslam::event::Event;
-use microslam::geometry::Pose2;
 use std::str::FromStr;
 
 /// A dataset named on the command line: `<family>:<location>`.
@@ -52,48 +53,12 @@ impl DatasetSpec {
     }
 }
 
-/// A time-stamped ground-truth robot pose.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TruePose {
-    /// Time, seconds.
-    pub stamp: f64,
-    /// Pose in the world frame.
-    pub pose: Pose2<f64>,
-}
-
-/// A ground-truth landmark.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TrueLandmark {
-    /// Identity (MRCLAM subject number).
-    pub id: u32,
-    /// Position in the world frame, metres.
-    pub position: [f64; 2],
-}
-
-/// A dataset read into memory: events in time order and what is known to be true.
-#[derive(Clone, Debug, Default)]
-pub struct Recording {
-    /// Short name for reports (e.g. `mrclam/dataset6/robot1`).
-    pub name: String,
-    /// Sensor events, sorted by stamp (stable: equal stamps keep file order).
-    pub events: Vec<Event<f64>>,
-    /// Ground-truth robot poses, sorted by stamp (may be empty or end early).
-    pub ground_truth: Vec<TruePose>,
-    /// Ground-truth landmarks (may be empty).
-    pub landmarks: Vec<TrueLandmark>,
-    /// The robot's pose at the first event when known (the filter starts there), else
-    /// the origin.
-    pub initial_pose: Option<Pose2<f64>>,
-    /// Sightings the reader dropped (of other robots, unknown barcodes).
-    pub dropped_sightings: usize,
-}
-
 /// Reads the dataset named by `spec` for `robot`.
 pub fn read(spec: &DatasetSpec, robot: u8) -> Result<Recording> {
     match spec {
         DatasetSpec::Mrclam(dir) => {
             let (dir, robot) = mrclam_robot(dir, robot)?;
-            let path = crate::datasets::resolve("mrclam", dir)?;
+            let path = crate::domain::datasets::resolve("mrclam", dir)?;
             Ok(mrclam::read(&path, robot)?)
         }
         DatasetSpec::Carmen(_) | DatasetSpec::Thor(_) => {

@@ -8,9 +8,9 @@
 //! 25 cm of every wall into the border cells of the floor map (the seed's Kinect looked at
 //! a floor bounded by obstacles it did not need to colour). Both are options.
 
-use super::world::{Room, SimCamera, floor_colour, render};
-use crate::metrics::interpolate_pose;
-use crate::readers::TruePose;
+use crate::domain::recording::TruePose;
+use crate::domain::recording::interpolate_pose;
+use crate::inputs::camera::world::{Room, SimCamera, floor_colour, render};
 use microslam::geometry::Pose2;
 use microslam::sensors::camera::Camera;
 use rand_core::SeedableRng;
@@ -192,7 +192,7 @@ pub struct PointCounts {
 pub fn add_frame(
     map: &mut TextureMap,
     camera: &Camera<f64>,
-    frame: &super::world::RgbdFrame,
+    frame: &crate::inputs::camera::world::RgbdFrame,
     pose: &Pose2<f64>,
     settings: &TextureSettings,
     counts: &mut PointCounts,

@@ -6,10 +6,10 @@
 //! backwards 265 times and some scans are < 10 ms apart, so order and motion must never
 //! be derived from stamp differences — use the odometry pose increments between scans.
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// A laser scan message (`FLASER` front, `RLASER` rear).
 #[derive(Clone, Debug, PartialEq)]
@@ -186,6 +186,37 @@ pub fn parse<R: BufRead>(
         }
     }
     Ok(log)
+}
+
+/// The front-laser messages of `log` in file order: what the grid filters process.
+pub fn front_scans(log: &CarmenLog) -> Vec<&LaserMessage> {
+    log.lasers().filter(|l| !l.rear).collect()
+}
+
+/// A `carmen:<file>` location: the path itself when it exists, else relative to the
+/// datasets folder.
+pub fn resolve_log(spec: &str) -> Result<PathBuf> {
+    let direct = PathBuf::from(spec);
+    if direct.is_file() {
+        return Ok(direct);
+    }
+    crate::domain::datasets::dataset_path(spec)
+}
+
+/// Reads a CARMEN log.
+pub fn read_log(path: &Path) -> Result<CarmenLog> {
+    let log = read(path)?;
+    if log.lasers().next().is_none() {
+        bail!("{}: no laser scans", path.display());
+    }
+    Ok(log)
+}
+
+/// The beam count of a log's first front scan.
+pub fn beam_count(log: &CarmenLog) -> usize {
+    log.lasers()
+        .find(|l| !l.rear)
+        .map_or(180, |l| l.ranges.len())
 }
 
 #[cfg(test)]

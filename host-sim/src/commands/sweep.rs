@@ -8,12 +8,12 @@
 //! scored against ground truth; the table goes to `sweep.csv` and `sweep.json`, one row
 //! per settings × recording, with each combination's mean and worst.
 
-use crate::cli::{AssociationMode, Precision};
-use crate::config::{Settings, builtin_text};
+use crate::domain::config::{Settings, builtin_text};
+use crate::domain::recording::Recording;
+use crate::domain::{AssociationMode, Precision};
+use crate::inputs::readers::DatasetSpec;
 use crate::metrics::{Metrics, evaluate};
-use crate::readers::{DatasetSpec, Recording};
 use anyhow::{Context, Result, bail};
-use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -21,25 +21,19 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Options of `host-sim sweep`.
-#[derive(Debug, Clone, Args)]
-pub struct SweepArgs {
-    /// The grid: a settings file whose keys may hold lists of values (their Cartesian
-    /// product is replayed). Without it, the built-in settings alone.
-    #[arg(long, short)]
+/// Options of `host-sim sweep` (filled by [`crate::cli`]).
+#[derive(Debug, Clone)]
+pub struct SweepOptions {
+    /// The grid: a settings file whose keys may hold lists of values; without it, the
+    /// built-in settings alone.
     pub grid: Option<PathBuf>,
-    /// Recordings, comma-separated: `mrclam:dataset6/robot1,mrclam:dataset6/robot2`;
-    /// `mrclam:dataset6/robot1-5` names a range of robots.
-    #[arg(long, short, value_delimiter = ',', required = true)]
+    /// Recordings: `mrclam:<dir>/robot<k>` or `mrclam:<dir>/robot<a>-<b>` entries.
     pub runs: Vec<String>,
     /// Data association (default: from the settings, `known` if none).
-    #[arg(long, short)]
     pub association: Option<AssociationMode>,
     /// Scalar the filter runs on.
-    #[arg(long, value_enum, default_value_t = Precision::F64)]
     pub precision: Precision,
     /// Output folder: sweep.csv, sweep.json.
-    #[arg(long, short, default_value = "out/sweep")]
     pub out: PathBuf,
 }
 
@@ -88,7 +82,7 @@ fn parse_run(entry: &str) -> Result<RunSpec> {
     let DatasetSpec::Mrclam(dir) = &spec else {
         bail!("run `{entry}`: sweeps replay landmark datasets (`mrclam:`) only");
     };
-    let (dir, robot) = crate::readers::mrclam_robot(dir, 1)?;
+    let (dir, robot) = crate::inputs::readers::mrclam_robot(dir, 1)?;
     Ok(RunSpec {
         dataset: DatasetSpec::Mrclam(dir.to_owned()),
         robot,
@@ -306,7 +300,7 @@ pub fn run(
             else {
                 bail!("sweep job out of range");
             };
-            let run = crate::replay::replay(rec, set, mode, precision, None)?;
+            let run = crate::drivers::ekf::replay(rec, set, mode, precision, None)?;
             let m = evaluate(rec, &run);
             if let Some(p) = progress {
                 p.inc(1);
@@ -330,7 +324,7 @@ fn label_text(p: &GridPoint) -> String {
 }
 
 /// `host-sim sweep`.
-pub fn run_cli(args: &SweepArgs, quiet: bool) -> Result<()> {
+pub fn run_cli(args: &SweepOptions, quiet: bool) -> Result<()> {
     let runs = parse_runs(&args.runs)?;
     let family = runs.first().map_or("mrclam", |r| r.dataset.family());
     let grid: toml::Table = match &args.grid {
@@ -364,7 +358,7 @@ pub fn run_cli(args: &SweepArgs, quiet: bool) -> Result<()> {
         .unwrap_or(AssociationMode::Known);
     let recordings = runs
         .par_iter()
-        .map(|r| crate::readers::read(&r.dataset, r.robot))
+        .map(|r| crate::inputs::readers::read(&r.dataset, r.robot))
         .collect::<Result<Vec<_>>>()?;
     let total = (points.len() * recordings.len()) as u64;
     let progress = (!quiet).then(|| {

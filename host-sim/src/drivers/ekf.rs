@@ -1,8 +1,8 @@
 //! The estimator side of the replay, generic over the filter's scalar.
 
-use crate::cli::{AssociationMode, Precision};
-use crate::config::Settings;
-use crate::readers::Recording;
+use crate::domain::config::Settings;
+use crate::domain::recording::Recording;
+use crate::domain::{AssociationMode, Precision};
 use anyhow::{Result, bail};
 use indicatif::ProgressBar;
 use microslam::EkfError;

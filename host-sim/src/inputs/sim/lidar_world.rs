@@ -14,7 +14,9 @@
 
 use anyhow::{Result, bail};
 use microslam::geometry::{Pose2, wrap_angle};
+use microslam::grid::OccupancyGrid;
 use microslam::motion::integrate_velocity;
+use microslam::pf::GridPfConfig;
 use microslam::sensors::lidar::LidarGeometry;
 use rand_core::SeedableRng;
 use rand_distr::{Distribution, Normal, Uniform};
@@ -367,6 +369,40 @@ pub fn simulate(world: &LidarWorld, seed: u64) -> Result<LidarRecording> {
         lidar: geometry,
         scans,
     })
+}
+
+/// Grid edge in cells: 256 × 256 (12.8 m at 5 cm, 64 KB — the firmware's map size).
+pub const SIM_GRID_CELLS: usize = 256;
+
+/// The simulator's grid.
+pub type SimGrid = OccupancyGrid<SIM_GRID_CELLS, SIM_GRID_CELLS>;
+
+/// The true map: every wall segment drawn into a grid as saturated occupied cells
+/// (everything else unknown), sampled every quarter cell along each wall.
+pub fn true_map(walls: &[Wall], config: &GridPfConfig) -> Box<SimGrid> {
+    let mut grid = Box::new(SimGrid::centred(config.resolution, config.log_odds));
+    let g = *grid.geometry();
+    let step = f64::from(g.resolution) / 4.0;
+    for w in walls {
+        let len = (w.b[0] - w.a[0]).hypot(w.b[1] - w.a[1]);
+        let n = (len / step).ceil().max(1.0) as usize;
+        for i in 0..=n {
+            let f = i as f64 / n as f64;
+            let x = w.a[0] + f * (w.b[0] - w.a[0]);
+            let y = w.a[1] + f * (w.b[1] - w.a[1]);
+            if let Some((ix, iy)) = g.world_to_cell(x as f32, y as f32) {
+                grid.set_cell(ix as i32, iy as i32, config.log_odds.max);
+            }
+        }
+    }
+    grid
+}
+
+impl LidarRecording {
+    /// Beams per sweep.
+    pub fn lidar_beams(&self) -> usize {
+        self.scans.first().map_or(0, |s| s.ranges.len())
+    }
 }
 
 #[cfg(test)]

@@ -1,16 +1,15 @@
 //! The built-in deterministic simulator: a field of landmarks, a robot driving laps of a
 //! wobbly circle, noisy velocity odometry and range-bearing sightings, ground truth; and
 //! a world of walls with a ray-cast lidar for the grid particle filter
-//! ([`lidar_world`], run by [`grid`]).
+//! ([`lidar_world`]).
 //!
 //! The noise is drawn from the same figures the filter is configured with (the
 //! `[odometry]` and `[sighting]` sections), so the filter's model is exact and its NEES
 //! should sit inside the χ² band. The same seed gives the same run on every machine
 //! (xoshiro256++ and rand_distr).
 
-use crate::cli::SimArgs;
-use crate::config::Settings;
-use crate::readers::{Recording, TrueLandmark, TruePose};
+use crate::domain::config::Settings;
+use crate::domain::recording::{Recording, TrueLandmark, TruePose};
 use anyhow::{Context, Result, bail};
 use microslam::event::{Event, EventKind, Identity, Sighting};
 use microslam::geometry::{Pose2, wrap_angle};
@@ -19,30 +18,8 @@ use microslam::sensors::range_bearing::RangeBearing;
 use rand_core::SeedableRng;
 use rand_distr::{Distribution, Normal, Uniform};
 use rand_xoshiro::Xoshiro256PlusPlus;
-use serde::{Deserialize, Serialize};
 
-pub mod grid;
 pub mod lidar_world;
-
-/// The simulated world and drive (section `[scenario]` of `configs/sim.toml`, where each
-/// field is documented).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-#[allow(missing_docs)]
-pub struct Scenario {
-    pub duration_s: f64,
-    pub odometry_rate_hz: f64,
-    pub sighting_rate_hz: f64,
-    pub landmarks: u32,
-    pub field_half_size_m: f64,
-    pub min_landmark_spacing_m: f64,
-    pub loop_radius_m: f64,
-    pub speed_mps: f64,
-    pub wobble_radps: f64,
-    pub wobble_period_s: f64,
-    pub fov_deg: f64,
-    pub max_range_m: f64,
-}
 
 /// Simulates the scenario of `settings` with noise seed `seed`.
 pub fn simulate(settings: &Settings, seed: u64) -> Result<Recording> {
@@ -145,59 +122,6 @@ pub fn simulate(settings: &Settings, seed: u64) -> Result<Recording> {
         )),
         dropped_sightings: 0,
     })
-}
-
-/// `host-sim sim`: simulate, replay, score, write the results — the landmark EKF-SLAM
-/// scenario into `out/`, then (unless `--grid-particles 0`) grid SLAM and the grid
-/// localizer in the lidar world into `out/grid/slam/` and `out/grid/localize/`.
-pub fn run_cli(args: &SimArgs, quiet: bool) -> Result<()> {
-    let started = std::time::Instant::now();
-    let settings = Settings::load_for("sim", args.config.as_deref(), Some(args.association))?;
-    let recording = simulate(&settings, args.seed)?;
-    crate::replay::run_and_report(
-        &recording,
-        &settings,
-        args.association,
-        args.precision,
-        &args.out,
-        !args.no_plots,
-        quiet,
-        started,
-        None,
-    )?;
-    if args.grid_particles == 0 {
-        return Ok(());
-    }
-    let world = lidar_world::LidarWorld::office();
-    let rec = lidar_world::simulate(&world, args.seed)?;
-    let config = microslam::pf::GridPfConfig {
-        filter: microslam::pf::FilterConfig {
-            seed: args.seed,
-            ..microslam::pf::GridPfConfig::DEFAULT.filter
-        },
-        ..microslam::pf::GridPfConfig::DEFAULT
-    };
-    let out = args.out.join("grid");
-    let (slam, loc) = grid::run_and_write(&rec, config, args.grid_particles, &out)?;
-    if !quiet {
-        println!(
-            "{}: {} scans, {} particles, dead reckoning ATE {:.3} m",
-            rec.name,
-            rec.scans.len(),
-            args.grid_particles,
-            slam["odometry_ate_rmse_m"].as_f64().unwrap_or(f64::NAN)
-        );
-        for (what, m) in [("grid SLAM", &slam), ("grid localizer (true map)", &loc)] {
-            println!(
-                "  {what}: ATE {:.3} m, yaw {:.2}°, {:.2} ms/scan",
-                m["ate_rmse_m"].as_f64().unwrap_or(f64::NAN),
-                m["yaw_rmse_deg"].as_f64().unwrap_or(f64::NAN),
-                m["ms_per_scan"].as_f64().unwrap_or(f64::NAN)
-            );
-        }
-        println!("  outputs in {}", out.display());
-    }
-    Ok(())
 }
 
 #[cfg(test)]

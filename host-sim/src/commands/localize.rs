@@ -1,0 +1,73 @@
+//! `host-sim localize`: the grid localizer on a saved map (`map.yaml` + PGM) over a
+//! CARMEN log, scored with the relation metric when a relations file is found.
+
+use super::replay::{metrics_json, options_from, report, scan_progress_bar};
+use crate::domain::grid::GridOptions;
+use crate::drivers::grid::{carmen_inputs, run_localizer};
+use crate::inputs::readers::DatasetSpec;
+use crate::inputs::readers::carmen::{front_scans, read_log, resolve_log};
+use crate::metrics::relations::{self, find_relations, relation_error};
+use crate::output::grid_map::{read_map, write_outputs};
+use anyhow::{Result, bail};
+use microslam::geometry::Pose2;
+use microslam::grid::GridView;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Options of `host-sim localize`.
+#[derive(Debug, Clone)]
+pub struct LocalizeOptions {
+    /// The map: `map.yaml` (ROS map_server) next to its PGM.
+    pub map: PathBuf,
+    /// Dataset: `carmen:<file>`.
+    pub dataset: DatasetSpec,
+    /// Grid filter settings (TOML).
+    pub config: Option<PathBuf>,
+    /// Grid filter options.
+    pub grid: GridOptions,
+    /// Output folder.
+    pub out: PathBuf,
+}
+
+/// `host-sim localize --map map.yaml --dataset carmen:<file>`.
+pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
+    let start = Instant::now();
+    let DatasetSpec::Carmen(file) = &args.dataset else {
+        bail!("localize needs a lidar dataset (carmen:<file>)");
+    };
+    let path = resolve_log(file)?;
+    let log = read_log(&path)?;
+    let options = options_from(args.config.as_deref(), &args.grid, &log)?;
+    let (cells, geometry) = read_map(&args.map, &options.config.log_odds)?;
+    if (geometry.resolution - options.config.resolution).abs() > 1e-6 {
+        bail!(
+            "map resolution {} differs from the configured {}",
+            geometry.resolution,
+            options.config.resolution
+        );
+    }
+    let view = GridView::new(&cells, geometry, options.config.log_odds.occupied_above)
+        .map_err(|e| anyhow::anyhow!("map: {e}"))?;
+    let scans = front_scans(&log);
+    let inputs = carmen_inputs(&scans);
+    let pb = scan_progress_bar(scans.len(), quiet);
+    // The SLAM map's frame is the pose of the log's first scan.
+    let run = run_localizer(&inputs, &view, Pose2::IDENTITY, &options, &|i| {
+        if i % 64 == 0 {
+            pb.set_position(i as u64);
+        }
+    })?;
+    pb.finish_and_clear();
+    let rel = match find_relations(&path, args.grid.relations.as_deref()) {
+        Some(r) => Some(relation_error(&run, &relations::read(&r)?)),
+        None => None,
+    };
+    let name = path
+        .file_name()
+        .map_or_else(|| file.clone(), |n| n.to_string_lossy().to_string());
+    let wall = start.elapsed().as_secs_f64();
+    let metrics = metrics_json(&name, &run, &options, rel, None, wall);
+    write_outputs(&args.out, &run, &options.config, &metrics)?;
+    report(quiet, &name, &metrics, &args.out);
+    Ok(())
+}

@@ -1,0 +1,49 @@
+//! Layer 5: one module per subcommand. Each takes its options struct (filled by
+//! [`crate::cli`]), wires readers, drivers, metrics and outputs together, and draws the
+//! progress bars and prints the summaries.
+
+pub mod detections;
+pub mod hil;
+pub mod localize;
+pub mod replay;
+pub mod sim;
+pub mod sweep;
+pub mod texture;
+
+use crate::metrics::Metrics;
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::Path;
+
+/// A progress bar over `len` events (drawn to stderr).
+pub fn progress_bar(len: u64) -> ProgressBar {
+    let bar = ProgressBar::new(len);
+    if let Ok(style) =
+        ProgressStyle::with_template("{spinner} replay [{bar:40}] {pos}/{len} events ({eta})")
+    {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar
+}
+
+/// A short human-readable summary of the metrics.
+pub fn summary(m: &Metrics, out: &Path) -> String {
+    let f = |v: Option<f64>| v.map_or_else(|| "n/a".to_owned(), |v| format!("{v:.3}"));
+    format!(
+        "{} [{} {}]: ATE se2 {} m (first pose {}), landmarks se2 {} m, {} landmarks, purity {}, \
+         NEES {}, NIS {}, dead reckoning {} m; filter {:.1} ms, wall {:.1} ms → {}",
+        m.dataset,
+        m.association,
+        m.precision,
+        f(m.ate_rmse_m.se2),
+        f(m.ate_rmse_m.first_pose),
+        f(m.landmark_rmse_m.se2),
+        m.landmarks_created,
+        f(m.association_purity),
+        f(m.nees_pose_mean),
+        f(m.nis_mean),
+        f(m.dead_reckoning_ate_rmse_m.se2),
+        m.filter_time_s * 1e3,
+        m.wall_time_s * 1e3,
+        out.display()
+    )
+}

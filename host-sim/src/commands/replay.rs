@@ -1,0 +1,332 @@
+//! `host-sim replay`: a recorded dataset through the landmark EKF-SLAM (`mrclam:`) or
+//! grid SLAM (`carmen:`), scored against ground truth, with `metrics.json`, trajectories
+//! and pictures; `thor:` runs give the encoder + IMU dead reckoning.
+
+use crate::domain::config::Settings;
+use crate::domain::grid::{GRID_CELLS, GridOptions, GridToml, carmen_lidar, decimation_for};
+use crate::domain::recording::Recording;
+use crate::domain::{AssociationMode, FilterKind, Precision};
+use crate::drivers::ekf::replay;
+use crate::drivers::grid::{GridRun, GridRunOptions, carmen_inputs, run_slam};
+use crate::inputs::faults::{FaultRates, FaultReport};
+use crate::inputs::readers::carmen::{
+    CarmenLog, LaserMessage, beam_count, front_scans, read_log, resolve_log,
+};
+use crate::inputs::readers::{DatasetSpec, thor};
+use crate::metrics::relations::{self, RelationError, find_relations, relation_error};
+use crate::output::grid_map::{write_outputs, write_tum};
+use anyhow::{Result, bail};
+use microslam::geometry::Pose2;
+use microslam::pf::GridPfConfig;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Options of `host-sim replay`.
+#[derive(Debug, Clone)]
+pub struct ReplayOptions {
+    /// Dataset: `mrclam:<dir>`, `carmen:<file>` or `thor:<dir>`.
+    pub dataset: DatasetSpec,
+    /// Robot whose log is replayed.
+    pub robot: u8,
+    /// Data association (default: from the config file, `known` if none).
+    pub association: Option<AssociationMode>,
+    /// Estimator settings (TOML); default: the built-in defaults of the dataset.
+    pub config: Option<PathBuf>,
+    /// Output folder for metrics.json, trajectories and pictures.
+    pub out: PathBuf,
+    /// Scalar the filter runs on.
+    pub precision: Precision,
+    /// Skip the PNG pictures (faster).
+    pub no_plots: bool,
+    /// Estimator (default: grid SLAM for `carmen:` and `thor:`, else the EKF).
+    pub filter: Option<FilterKind>,
+    /// Grid filter options.
+    pub grid: GridOptions,
+    /// THOR run number (`thor:` datasets: 20 or 21).
+    pub run: u32,
+    /// Faults injected before the replay.
+    pub faults: Option<FaultRates>,
+    /// Seed of the fault generator.
+    pub fault_seed: u64,
+}
+
+/// `host-sim replay`.
+pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
+    let lidar = matches!(args.dataset, DatasetSpec::Carmen(_) | DatasetSpec::Thor(_));
+    if args.filter == Some(FilterKind::GridSlam) || (args.filter.is_none() && lidar) {
+        return grid_replay(args, quiet);
+    }
+    let started = Instant::now();
+    let settings = Settings::load_for(
+        args.dataset.family(),
+        args.config.as_deref(),
+        args.association,
+    )?;
+    let mut recording = crate::inputs::readers::read(&args.dataset, args.robot)?;
+    let faults = args.faults.filter(|f| !f.is_none()).map(|rates| {
+        let (events, counts) =
+            crate::inputs::faults::inject(&recording.events, &rates, args.fault_seed);
+        recording.events = events;
+        crate::inputs::faults::FaultReport {
+            rates,
+            seed: args.fault_seed,
+            injected: counts,
+        }
+    });
+    let mode = settings.association.mode;
+    run_and_report(
+        &recording,
+        &settings,
+        mode,
+        args.precision,
+        &args.out,
+        !args.no_plots,
+        quiet,
+        started,
+        faults,
+    )
+}
+
+/// Replays `recording`, scores it and writes `metrics.json`, the TUM trajectories and the
+/// pictures into `out`. `started` is when the process began its work (for the wall time).
+#[allow(clippy::too_many_arguments)]
+pub fn run_and_report(
+    recording: &Recording,
+    settings: &Settings,
+    mode: AssociationMode,
+    precision: Precision,
+    out: &Path,
+    plots: bool,
+    quiet: bool,
+    started: Instant,
+    faults: Option<crate::inputs::faults::FaultReport>,
+) -> Result<()> {
+    let progress = (!quiet).then(|| super::progress_bar(recording.events.len() as u64));
+    // The ground truth is written while the filter runs.
+    let metrics = std::thread::scope(|s| -> Result<_> {
+        let truth = s.spawn(|| crate::output::write_truth(out, recording));
+        let run = replay(recording, settings, mode, precision, progress.as_ref())?;
+        if let Some(p) = &progress {
+            p.finish_and_clear();
+        }
+        let mut metrics = crate::metrics::evaluate(recording, &run);
+        metrics.faults = faults;
+        truth
+            .join()
+            .map_err(|_| anyhow::anyhow!("writer thread panicked"))??;
+        crate::output::write_all(out, recording, &run, &mut metrics, plots, started)?;
+        Ok(metrics)
+    })?;
+    if !quiet {
+        println!("{}", super::summary(&metrics, out));
+    }
+    Ok(())
+}
+
+pub(crate) fn scan_progress_bar(len: usize, quiet: bool) -> indicatif::ProgressBar {
+    if quiet {
+        return indicatif::ProgressBar::hidden();
+    }
+    let pb = indicatif::ProgressBar::new(len as u64);
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "{bar:40} {pos}/{len} scans {elapsed_precise} ({per_sec})",
+    ) {
+        pb.set_style(style);
+    }
+    pb
+}
+
+pub(crate) fn options_from(
+    config: Option<&Path>,
+    grid: &GridOptions,
+    log: &CarmenLog,
+) -> Result<GridRunOptions> {
+    let mut c = match config {
+        Some(p) => GridToml::read(p)?.apply()?,
+        None => GridPfConfig::DEFAULT,
+    };
+    if let Some(k) = grid.window {
+        c.filter.shift_window_cells = k;
+    }
+    let n = beam_count(log);
+    if grid.beams.is_some() {
+        c.beam_decimation = decimation_for(n, grid.beams);
+    }
+    if !c.is_valid() {
+        bail!(
+            "grid filter settings out of range (window ≤ {})",
+            microslam::pf::correlation::MAX_SHIFT_WINDOW
+        );
+    }
+    Ok(GridRunOptions {
+        particles: grid.particles,
+        config: c,
+        lidar: carmen_lidar(n),
+    })
+}
+
+pub(crate) fn metrics_json(
+    dataset: &str,
+    run: &GridRun,
+    options: &GridRunOptions,
+    rel: Option<RelationError>,
+    faults: Option<&FaultReport>,
+    wall: f64,
+) -> serde_json::Value {
+    let scans = run.trajectory.len();
+    serde_json::json!({
+        "dataset": dataset,
+        "scans": scans,
+        "particles": options.particles,
+        "relations": rel.map(|r| serde_json::json!({
+            "used": r.used,
+            "trans_mean_m": r.trans_mean_m,
+            "trans_std_m": r.trans_std_m,
+            "rot_mean_deg": r.rot_mean_deg,
+            "rot_std_deg": r.rot_std_deg,
+        })),
+        "wall_time_s": wall,
+        "filter_time_s": run.filter_time_s,
+        "ms_per_scan": 1e3 * run.filter_time_s / scans.max(1) as f64,
+        "skipped_scans": run.skipped_scans,
+        "refused_odometry": run.refused_odometry,
+        "non_finite_beams": run.non_finite_beams,
+        "faults": faults,
+        "window": 2 * u32::from(options.config.filter.shift_window_cells) + 1,
+        "beam_decimation": options.config.beam_decimation,
+        "range_weight_exponent": options.config.range_weight_exponent,
+        "seed": options.config.filter.seed,
+    })
+}
+
+pub(crate) fn report(quiet: bool, dataset: &str, metrics: &serde_json::Value, out: &Path) {
+    if quiet {
+        return;
+    }
+    println!(
+        "{dataset}: {} scans, {} particles",
+        metrics["scans"], metrics["particles"]
+    );
+    if let Some(r) = metrics.get("relations").filter(|r| !r.is_null()) {
+        println!(
+            "  relation error ({} used): {:.4} ± {:.4} m, {:.3} ± {:.3}°",
+            r["used"],
+            r["trans_mean_m"].as_f64().unwrap_or(f64::NAN),
+            r["trans_std_m"].as_f64().unwrap_or(f64::NAN),
+            r["rot_mean_deg"].as_f64().unwrap_or(f64::NAN),
+            r["rot_std_deg"].as_f64().unwrap_or(f64::NAN)
+        );
+    }
+    println!(
+        "  wall {:.2} s, filter {:.2} s ({:.3} ms/scan); outputs in {}",
+        metrics["wall_time_s"].as_f64().unwrap_or(f64::NAN),
+        metrics["filter_time_s"].as_f64().unwrap_or(f64::NAN),
+        metrics["ms_per_scan"].as_f64().unwrap_or(f64::NAN),
+        out.display()
+    );
+}
+
+/// `host-sim replay --filter grid-slam --dataset carmen:<file>` (and `thor:<dir>`).
+fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
+    let start = Instant::now();
+    let file = match &args.dataset {
+        DatasetSpec::Carmen(f) => f,
+        DatasetSpec::Thor(dir) => {
+            return thor_replay(dir, args.run, &args.out, quiet);
+        }
+        other => bail!(
+            "grid SLAM needs a lidar dataset (carmen:<file>), not {}",
+            other.family()
+        ),
+    };
+    let path = resolve_log(file)?;
+    let log = read_log(&path)?;
+    let options = options_from(args.config.as_deref(), &args.grid, &log)?;
+    let clean = front_scans(&log);
+    // Faults (`--faults`) go into a copy of the laser messages.
+    let (faulty, faults) = match args.faults.filter(|f| !f.is_none()) {
+        Some(rates) => {
+            let (scans, injected) =
+                crate::inputs::faults::inject_scans(&clean, &rates, args.fault_seed);
+            let report = FaultReport {
+                rates,
+                seed: args.fault_seed,
+                injected,
+            };
+            (scans, Some(report))
+        }
+        None => (Vec::new(), None),
+    };
+    let scans: Vec<&LaserMessage> = if faults.is_some() {
+        faulty.iter().collect()
+    } else {
+        clean
+    };
+    let pb = scan_progress_bar(scans.len(), quiet);
+    let inputs = carmen_inputs(&scans);
+    let run = run_slam::<GRID_CELLS>(&inputs, Pose2::IDENTITY, &options, &|i| {
+        if i % 64 == 0 {
+            pb.set_position(i as u64);
+        }
+    })?;
+    pb.finish_and_clear();
+    let rel = match find_relations(&path, args.grid.relations.as_deref()) {
+        Some(r) => Some(relation_error(&run, &relations::read(&r)?)),
+        None => None,
+    };
+    let name = path
+        .file_name()
+        .map_or_else(|| file.clone(), |n| n.to_string_lossy().to_string());
+    // Wall time: the whole replay (reading, filtering, metrics) before the files are written.
+    let wall = start.elapsed().as_secs_f64();
+    let metrics = metrics_json(&name, &run, &options, rel, faults.as_ref(), wall);
+    write_outputs(&args.out, &run, &options.config, &metrics)?;
+    report(quiet, &name, &metrics, &args.out);
+    Ok(())
+}
+
+/// `host-sim replay --dataset thor:<dir> --run N`: trajectory.tum, trajectory.png (with a
+/// 1 m grid), metrics.json (length, duration, end pose).
+fn thor_replay(dir: &str, run: u32, out: &Path, quiet: bool) -> Result<()> {
+    let start = std::time::Instant::now();
+    let direct = Path::new(dir);
+    let path = if direct.is_dir() {
+        direct.to_path_buf()
+    } else {
+        crate::domain::datasets::resolve("", dir)?
+    };
+    let traj = thor::dead_reckoning(&path, run)?;
+    std::fs::create_dir_all(out)?;
+    let as_f32: Vec<(f64, Pose2<f32>)> = traj
+        .iter()
+        .map(|(t, p)| (*t, Pose2::new(p.x as f32, p.y as f32, p.theta as f32)))
+        .collect();
+    write_tum(&out.join("trajectory.tum"), &as_f32)?;
+    let length: f64 = traj
+        .windows(2)
+        .map(|w| (w[1].1.x - w[0].1.x).hypot(w[1].1.y - w[0].1.y))
+        .sum();
+    let duration = traj.last().map_or(0.0, |l| l.0) - traj.first().map_or(0.0, |f| f.0);
+    crate::output::thor::draw_trajectory(&out.join("trajectory.png"), &traj)?;
+    let end = traj.last().map_or(Pose2::IDENTITY, |l| l.1);
+    let metrics = serde_json::json!({
+        "dataset": format!("thor/run{run}"),
+        "samples": traj.len(),
+        "duration_s": duration,
+        "path_length_m": length,
+        "end_pose": [end.x, end.y, end.theta],
+        "wall_time_s": start.elapsed().as_secs_f64(),
+    });
+    std::fs::write(
+        out.join("metrics.json"),
+        serde_json::to_string_pretty(&metrics)? + "\n",
+    )?;
+    if !quiet {
+        println!(
+            "thor run {run}: {} encoder samples, {duration:.1} s, {length:.2} m driven; outputs in {}",
+            traj.len(),
+            out.display()
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,271 @@
+//! The one grid run driver: lidar scans with their odometry poses → [`GridSlam`] or
+//! [`GridLocalizer`] → the estimate at each scan (and the map). Used by
+//! `replay --filter grid-slam`, `localize` and the simulator's lidar world.
+//!
+//! The filter is predicted with the odometry pose increment between consecutive scans in
+//! **input order** (never with stamp differences: the Intel log's stamps go backwards).
+//! An odometry pose that is not finite is refused and counted
+//! ([`GridRun::refused_odometry`]), and the next good one predicts the whole motion; a scan
+//! with no usable beam is counted ([`GridRun::skipped_scans`]) and the pose held.
+
+use crate::domain::grid::{MAX_BEAMS, SUPPORTED_PARTICLES};
+use crate::inputs::readers::carmen::LaserMessage;
+use crate::inputs::sim::lidar_world::LidarRecording;
+use anyhow::{Result, anyhow, bail};
+use microslam::geometry::Pose2;
+use microslam::grid::{GridGeometry, GridView, OccupancyGrid};
+use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam, PfError, StepReport};
+use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+use std::time::Instant;
+
+/// One scan as the driver consumes it.
+#[derive(Clone, Copy, Debug)]
+pub struct GridInput<'a> {
+    /// Time stamp, seconds (reported with the estimate; never used for the motion).
+    pub stamp: f64,
+    /// Odometry pose at the scan (its increments drive the prediction).
+    pub odometry: Pose2<f32>,
+    /// Ranges, metres, in the order of the lidar geometry's beams.
+    pub ranges: &'a [f32],
+}
+
+/// Settings of a grid run besides the map.
+#[derive(Clone, Debug)]
+pub struct GridRunOptions {
+    /// Particles (one of [`SUPPORTED_PARTICLES`]).
+    pub particles: usize,
+    /// Filter settings.
+    pub config: GridPfConfig,
+    /// Lidar geometry of the scans.
+    pub lidar: LidarGeometry,
+}
+
+/// Result of a run: the estimate at each processed scan, the map, and timing.
+#[derive(Clone, Debug)]
+pub struct GridRun {
+    /// `(stamp, pose)` per processed scan, in input order.
+    pub trajectory: Vec<(f64, Pose2<f32>)>,
+    /// Final map cells (row-major) and geometry (SLAM) or the map used (localization).
+    pub cells: Vec<i8>,
+    /// Geometry of `cells`.
+    pub geometry: GridGeometry,
+    /// Seconds spent in the filter (prediction, scoring, map writes).
+    pub filter_time_s: f64,
+    /// Scans refused (no usable beam).
+    pub skipped_scans: usize,
+    /// Odometry poses refused (not finite): the prediction waits for the next good one.
+    pub refused_odometry: usize,
+    /// Ranges that were NaN or ±∞ in the processed scans (skipped beam by beam).
+    pub non_finite_beams: usize,
+}
+
+impl GridRun {
+    fn empty(cells: Vec<i8>, geometry: GridGeometry, scans: usize) -> Self {
+        Self {
+            trajectory: Vec::with_capacity(scans),
+            cells,
+            geometry,
+            filter_time_s: 0.0,
+            skipped_scans: 0,
+            refused_odometry: 0,
+            non_finite_beams: 0,
+        }
+    }
+}
+
+/// What the drive loop needs of a grid filter: SLAM and the localizer alike.
+trait GridFilter {
+    fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError>;
+    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError>;
+    fn pose(&self) -> Pose2<f32>;
+}
+
+impl<const W: usize, const H: usize, const P: usize, const B: usize> GridFilter
+    for GridSlam<'_, W, H, P, B>
+{
+    fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError> {
+        GridSlam::predict_odometry(self, from, to)
+    }
+    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
+        GridSlam::observe(self, scan)
+    }
+    fn pose(&self) -> Pose2<f32> {
+        GridSlam::pose(self)
+    }
+}
+
+impl<const P: usize, const B: usize> GridFilter for GridLocalizer<'_, P, B> {
+    fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError> {
+        GridLocalizer::predict_odometry(self, from, to)
+    }
+    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
+        GridLocalizer::observe(self, scan)
+    }
+    fn pose(&self) -> Pose2<f32> {
+        GridLocalizer::pose(self)
+    }
+}
+
+/// The drive loop, written once: predict with the odometry increment, observe the scan,
+/// record the pose.
+fn drive(
+    filter: &mut impl GridFilter,
+    inputs: &[GridInput<'_>],
+    lidar: &LidarGeometry,
+    run: &mut GridRun,
+    progress: &dyn Fn(usize),
+) -> Result<()> {
+    let mut previous: Option<Pose2<f32>> = None;
+    for (i, input) in inputs.iter().enumerate() {
+        let odom = input.odometry;
+        if !odom.is_finite() {
+            run.refused_odometry += 1;
+        } else if let Some(from) = previous.replace(odom) {
+            filter
+                .predict_odometry(&from, &odom)
+                .map_err(|e| anyhow!("scan {i}: {e}"))?;
+        }
+        let scan = LidarScan::new(input.ranges, *lidar);
+        run.non_finite_beams += scan.census().1;
+        match filter.observe(&scan) {
+            Ok(r) => run.trajectory.push((input.stamp, r.pose)),
+            Err(_) => {
+                run.skipped_scans += 1;
+                run.trajectory.push((input.stamp, filter.pose()));
+            }
+        }
+        progress(i);
+    }
+    Ok(())
+}
+
+macro_rules! dispatch_particles {
+    ($p:expr, $f:ident, [$($g:tt)*], $($arg:expr),*) => {
+        match $p {
+            8 => $f::<$($g)* 8>($($arg),*),
+            16 => $f::<$($g)* 16>($($arg),*),
+            32 => $f::<$($g)* 32>($($arg),*),
+            64 => $f::<$($g)* 64>($($arg),*),
+            100 => $f::<$($g)* 100>($($arg),*),
+            128 => $f::<$($g)* 128>($($arg),*),
+            200 => $f::<$($g)* 200>($($arg),*),
+            400 => $f::<$($g)* 400>($($arg),*),
+            other => bail!("--particles {other} is not compiled in; use one of {SUPPORTED_PARTICLES:?}"),
+        }
+    };
+}
+
+/// Grid SLAM on an `N × N` grid centred on the origin over `inputs`, from `start`.
+///
+/// Runs on a thread with a 64 MB stack: a large grid is built on the stack before it is
+/// boxed in unoptimised builds.
+pub fn run_slam<const N: usize>(
+    inputs: &[GridInput<'_>],
+    start: Pose2<f32>,
+    options: &GridRunOptions,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<GridRun> {
+    std::thread::scope(|scope| {
+        let worker = std::thread::Builder::new()
+            .stack_size(64 << 20)
+            .spawn_scoped(scope, || -> Result<GridRun> {
+                dispatch_particles!(
+                    options.particles,
+                    slam_p,
+                    [N,],
+                    inputs,
+                    start,
+                    options,
+                    progress
+                )
+            })?;
+        worker
+            .join()
+            .map_err(|_| anyhow!("grid SLAM thread panicked"))?
+    })
+}
+
+fn slam_p<const N: usize, const P: usize>(
+    inputs: &[GridInput<'_>],
+    start: Pose2<f32>,
+    options: &GridRunOptions,
+    progress: &dyn Fn(usize),
+) -> Result<GridRun> {
+    let c = options.config;
+    let mut grid = Box::new(OccupancyGrid::<N, N>::centred(c.resolution, c.log_odds));
+    let mut run = GridRun::empty(Vec::new(), *grid.geometry(), inputs.len());
+    let t0 = Instant::now();
+    {
+        let mut slam = GridSlam::<N, N, P, MAX_BEAMS>::new(&mut grid, c, start)
+            .map_err(|e| anyhow!("grid SLAM: {e}"))?;
+        drive(&mut slam, inputs, &options.lidar, &mut run, progress)?;
+    }
+    run.filter_time_s = t0.elapsed().as_secs_f64();
+    run.cells = grid.cells().to_vec();
+    Ok(run)
+}
+
+/// Localization on the fixed `map` over `inputs`, from `start` (in the map's frame).
+pub fn run_localizer(
+    inputs: &[GridInput<'_>],
+    map: &GridView<'_>,
+    start: Pose2<f32>,
+    options: &GridRunOptions,
+    progress: &dyn Fn(usize),
+) -> Result<GridRun> {
+    dispatch_particles!(
+        options.particles,
+        localize_p,
+        [],
+        inputs,
+        map,
+        start,
+        options,
+        progress
+    )
+}
+
+fn localize_p<const P: usize>(
+    inputs: &[GridInput<'_>],
+    map: &GridView<'_>,
+    start: Pose2<f32>,
+    options: &GridRunOptions,
+    progress: &dyn Fn(usize),
+) -> Result<GridRun> {
+    let mut run = GridRun::empty(map.cells().to_vec(), *map.geometry(), inputs.len());
+    let t0 = Instant::now();
+    let mut loc = GridLocalizer::<P, MAX_BEAMS>::new(*map, options.config, start)
+        .map_err(|e| anyhow!("grid localizer: {e}"))?;
+    drive(&mut loc, inputs, &options.lidar, &mut run, progress)?;
+    run.filter_time_s = t0.elapsed().as_secs_f64();
+    Ok(run)
+}
+
+/// The driver's inputs from CARMEN laser messages (odometry narrowed to `f32`).
+pub fn carmen_inputs<'a>(scans: &[&'a LaserMessage]) -> Vec<GridInput<'a>> {
+    scans
+        .iter()
+        .map(|l| GridInput {
+            stamp: l.stamp,
+            odometry: Pose2::new(l.odom[0] as f32, l.odom[1] as f32, l.odom[2] as f32),
+            ranges: &l.ranges,
+        })
+        .collect()
+}
+
+/// The driver's inputs from the simulator's lidar world.
+pub fn sim_inputs(rec: &LidarRecording) -> Vec<GridInput<'_>> {
+    rec.scans
+        .iter()
+        .map(|s| GridInput {
+            stamp: s.stamp,
+            odometry: f32_pose(&s.odometry),
+            ranges: &s.ranges,
+        })
+        .collect()
+}
+
+/// A pose narrowed to `f32`, as the grid filters take it.
+pub fn f32_pose(p: &Pose2<f64>) -> Pose2<f32> {
+    Pose2::new(p.x as f32, p.y as f32, p.theta as f32)
+}

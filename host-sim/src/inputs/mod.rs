@@ -1,0 +1,7 @@
+//! Layer 1: where events come from — dataset readers, the built-in simulator's worlds,
+//! fault injection into event streams and laser scans, and the camera world.
+
+pub mod camera;
+pub mod faults;
+pub mod readers;
+pub mod sim;
