@@ -1,4 +1,4 @@
-//! Layer 6, the top: the command line (`host-sim [replay|localize|sim|hil|texture|detections]
+//! Layer 6, the top: the command line (`host-sim [replay|localize|sim|hil|sweep|texture|detections]
 //! …`), clap only. Each subcommand's arguments are converted into the options struct of
 //! its module in [`crate::commands`]; nothing below this file imports it.
 
@@ -7,8 +7,9 @@ use crate::commands::hil::HilOptions;
 use crate::commands::localize::LocalizeOptions;
 use crate::commands::replay::ReplayOptions;
 use crate::commands::sim::SimOptions;
+use crate::commands::sweep::SweepOptions;
 use crate::commands::texture::TextureOptions;
-use crate::commands::{detections, hil, localize, replay, sim, texture};
+use crate::commands::{detections, hil, localize, replay, sim, sweep, texture};
 use crate::domain::grid::{GlobalOptions, GridOptions, SUPPORTED_PARTICLES};
 use crate::domain::{AssociationMode, FilterKind, Precision};
 use crate::inputs::faults::FaultRates;
@@ -46,6 +47,11 @@ pub enum Command {
     /// Stream a dataset to the firmware (under QEMU or on a board) and compare its
     /// estimates with the host's, bit for bit.
     Hil(HilArgs),
+    /// Replay a grid of settings (a settings file whose keys may hold lists) on a list of
+    /// recordings in parallel, e.g. `sweep -g grid.toml -r mrclam:dataset6/robot1-5`;
+    /// writes sweep.csv and sweep.json (one row per settings × recording, mean and worst
+    /// per settings).
+    Sweep(SweepArgs),
     /// Localize on a saved grid map (`map.yaml` from `replay --filter grid-slam`) with the
     /// grid particle filter.
     Localize(LocalizeArgs),
@@ -195,10 +201,11 @@ impl From<&GlobalArgs> for GlobalOptions {
 pub struct ReplayArgs {
     /// Dataset: `mrclam:<dir>` (landmarks), `carmen:<log>` (lidar) or `thor:<dir>`
     /// (encoders + IMU): a path, or a name under `$SLAM_DATASETS/<family>`, e.g.
-    /// `mrclam:dataset6`, `carmen:intel/intel-raw-part.clf`, `thor:thor`.
+    /// `mrclam:dataset6`, `carmen:intel/intel-raw-part.clf`, `thor:thor`;
+    /// `mrclam:dataset6/robot3` picks the robot (overrides `--robot`).
     #[arg(long, short)]
     pub dataset: DatasetSpec,
-    /// Robot whose log is replayed.
+    /// Robot whose log is replayed (1–5 in MRCLAM).
     #[arg(long, default_value_t = 1)]
     pub robot: u8,
     /// Data association (default: from the config file, `known` if none).
@@ -237,6 +244,40 @@ pub struct ReplayArgs {
     /// Seed of the fault generator.
     #[arg(long, default_value_t = 1)]
     pub fault_seed: u64,
+}
+
+/// Options of `host-sim sweep`.
+#[derive(Debug, Clone, Args)]
+pub struct SweepArgs {
+    /// The grid: a settings file whose keys may hold lists of values (their Cartesian
+    /// product is replayed). Without it, the built-in settings alone.
+    #[arg(long, short)]
+    pub grid: Option<PathBuf>,
+    /// Recordings, comma-separated: `mrclam:dataset6/robot1,mrclam:dataset6/robot2`;
+    /// `mrclam:dataset6/robot1-5` names a range of robots.
+    #[arg(long, short, value_delimiter = ',', required = true)]
+    pub runs: Vec<String>,
+    /// Data association (default: from the settings, `known` if none).
+    #[arg(long, short)]
+    pub association: Option<AssociationMode>,
+    /// Scalar the filter runs on.
+    #[arg(long, value_enum, default_value_t = Precision::F64)]
+    pub precision: Precision,
+    /// Output folder: sweep.csv, sweep.json.
+    #[arg(long, short, default_value = "out/sweep")]
+    pub out: PathBuf,
+}
+
+impl From<&SweepArgs> for SweepOptions {
+    fn from(a: &SweepArgs) -> Self {
+        Self {
+            grid: a.grid.clone(),
+            runs: a.runs.clone(),
+            association: a.association,
+            precision: a.precision,
+            out: a.out.clone(),
+        }
+    }
 }
 
 /// Options of `host-sim sim`.
@@ -291,7 +332,7 @@ pub struct HilArgs {
     /// Baud rate of the serial port.
     #[arg(long, default_value_t = 115_200)]
     pub baud: u32,
-    /// Dataset: `mrclam:<dir>` (EKF), as for `replay`, or `carmen:<log>` (the localizer
+    /// Dataset: `mrclam:<dir>` or `mrclam:<dir>/robot<k>` (EKF), as for `replay`, or `carmen:<log>` (the localizer
     /// on the map in the firmware's flash; needs `--map`).
     #[arg(long, short)]
     pub dataset: DatasetSpec,
@@ -302,7 +343,7 @@ pub struct HilArgs {
     /// With `carmen:`: stream only the first N scans.
     #[arg(long)]
     pub scans: Option<usize>,
-    /// Robot whose log is streamed.
+    /// Robot whose log is streamed (1–5 in MRCLAM).
     #[arg(long, default_value_t = 1)]
     pub robot: u8,
     /// Output folder: hil.json (the comparison) and firmware.tum (the device's trajectory).
@@ -497,6 +538,7 @@ pub fn run(cli: &Cli) -> Result<()> {
         Some(Command::Replay(args)) => replay::run_cli(&args.into(), cli.quiet),
         Some(Command::Sim(args)) => sim::run_cli(&args.into(), cli.quiet),
         Some(Command::Hil(args)) => hil::run_cli(&args.into(), cli.quiet),
+        Some(Command::Sweep(args)) => sweep::run_cli(&args.into(), cli.quiet),
         Some(Command::Localize(args)) => localize::localize_cli(&args.into(), cli.quiet),
         Some(Command::ExportMap(args)) => {
             crate::commands::hil_localizer::export_cli(&args.map, &args.out, args.levels, cli.quiet)

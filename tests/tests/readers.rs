@@ -147,3 +147,18 @@ fn missing_file_is_named() {
     let e = error_of(dir.path());
     assert!(e.contains("Robot1_Odometry.dat"), "{e}");
 }
+
+#[test]
+fn a_robot_is_named_in_the_dataset_or_by_number() {
+    let by_name = readers::read(&DatasetSpec::Mrclam("dataset6/robot3".into()), 1).unwrap();
+    assert_eq!(by_name.name, "mrclam/dataset6/robot3");
+    let by_number = readers::read(&DatasetSpec::Mrclam("dataset6".into()), 3).unwrap();
+    assert_eq!(by_name.events.len(), by_number.events.len());
+    // A robot the folder lacks: the error names the file and the robots present.
+    let err = readers::read(&DatasetSpec::Mrclam("dataset6".into()), 7).unwrap_err();
+    let text = format!("{err:#}");
+    assert!(text.contains("Robot7_Odometry.dat"), "{text}");
+    assert!(text.contains("[1, 2, 3, 4, 5]"), "{text}");
+    let err = readers::read(&DatasetSpec::Mrclam("dataset6/robot0".into()), 1).unwrap_err();
+    assert!(format!("{err:#}").contains("robot1 … robot5"), "{err:#}");
+}

@@ -1,5 +1,6 @@
 //! Known-identity association: a fixed-capacity table from external ids to state slots.
 
+use crate::ekf::health::Supervisor;
 use crate::ekf::{EkfSlam, UpdateOutcome};
 use crate::error::{EkfError, MapFull};
 use crate::scalar::Real;
@@ -105,6 +106,32 @@ pub fn observe_known<T: Real, const N: usize, const P: usize, const L: usize>(
         let outcome = slam.update(index, z)?;
         return Ok(Observed::Updated { index, outcome });
     }
+    add_known(slam, ids, id, z)
+}
+
+/// [`observe_known`] with the update run by `supervisor`: large innovations weighted
+/// down, a lost filter recovered (see [`crate::ekf::health`]).
+pub fn observe_known_supervised<T: Real, const N: usize, const P: usize, const L: usize>(
+    slam: &mut EkfSlam<T, N, P>,
+    ids: &mut KnownIds<L>,
+    id: u32,
+    z: &RangeBearing<T>,
+    supervisor: &mut Supervisor<T>,
+) -> Result<Observed<T>, EkfError> {
+    if let Some(index) = ids.get(id) {
+        let outcome = supervisor.update(slam, index, z)?;
+        return Ok(Observed::Updated { index, outcome });
+    }
+    add_known(slam, ids, id, z)
+}
+
+/// Adds a landmark for the new `id` and binds the id to it.
+fn add_known<T: Real, const N: usize, const P: usize, const L: usize>(
+    slam: &mut EkfSlam<T, N, P>,
+    ids: &mut KnownIds<L>,
+    id: u32,
+    z: &RangeBearing<T>,
+) -> Result<Observed<T>, EkfError> {
     if ids.len() >= L {
         return Err(EkfError::MapFull);
     }

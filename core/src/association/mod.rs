@@ -23,5 +23,5 @@ mod labels;
 pub use compatibility::{AssociationConfig, Candidate, Candidates, Pairing};
 pub use icnn::icnn;
 pub use jcbb::{BatchTooLarge, Jcbb, JcbbOutcome};
-pub use known_ids::{KnownIds, Observed, observe_known};
+pub use known_ids::{KnownIds, Observed, observe_known, observe_known_supervised};
 pub use labels::{LabelCheck, LandmarkLabels};

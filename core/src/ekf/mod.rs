@@ -94,6 +94,7 @@ use crate::sensors::range_bearing::{RangeBearing, RangeBearingSensor};
 use nalgebra::{ArrayStorage, Matrix2, Matrix2x3, Matrix3, SVector, Vector2};
 
 pub mod covariance;
+pub mod health;
 
 pub use covariance::{CovarianceView, factor_len};
 use covariance::{internal_entry, ldl, mwgs, pivot, row_start, strict_row};

@@ -7,6 +7,7 @@
 //! waiting for replies.
 
 use crate::ekf::EkfConfig;
+use crate::ekf::health::HealthStatus;
 use crate::gate::ChiSquareGate;
 use crate::geometry::Pose2;
 use crate::motion::{IncrementNoise, VelocityNoise};
@@ -314,6 +315,9 @@ pub struct Estimate {
     pub covariance: [f32; 6],
     /// The device's counters after the event.
     pub status: Status,
+    /// The EKF supervision's fault flags and counters after the event
+    /// ([`crate::ekf::health`]; all zero on the grid estimator).
+    pub health: HealthStatus,
 }
 
 /// Where the localizer stands (see [`crate::pf::GridLocalizer`]).

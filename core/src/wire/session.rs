@@ -9,7 +9,8 @@
 //! [`ToHost::Status`].
 
 use crate::association::KnownIds;
-use crate::association::{Observed, observe_known};
+use crate::association::{Observed, observe_known_supervised};
+use crate::ekf::health::{HealthConfig, HealthStatus, Supervisor};
 use crate::ekf::{EkfConfig, EkfSlam, UpdateOutcome};
 use crate::geometry::Pose2;
 use crate::pf::{GridLocalizer, GridSlam, LocalizerState, PfError, StepReport};
@@ -204,6 +205,7 @@ pub struct Session<'a, const N: usize, const P: usize, const L: usize> {
     ekf: &'a mut EkfSlam<f32, N, P>,
     ekf_config: EkfConfig<f32>,
     ids: KnownIds<L>,
+    supervisor: Supervisor<f32>,
     grid: Option<&'a mut dyn GridEstimator>,
     grid_setup: Option<GridSetup>,
     localizer: Result<&'a mut dyn LocalizerEstimator, Refusal>,
@@ -222,6 +224,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             ekf,
             ekf_config,
             ids: KnownIds::new(),
+            supervisor: Supervisor::new(HealthConfig::DEFAULT_F32),
             grid: None,
             grid_setup: None,
             localizer: Err(Refusal::NoMap),
@@ -286,6 +289,12 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
     /// The estimator in use.
     pub fn active(&self) -> EstimatorKind {
         self.active
+    }
+
+    /// The supervision of the EKF's updates (its settings are
+    /// [`HealthConfig::DEFAULT_F32`]).
+    pub fn supervisor(&self) -> &Supervisor<f32> {
+        &self.supervisor
     }
 
     /// The EKF.
@@ -441,7 +450,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             return StepResult::Ignored;
         }
         let z = RangeBearing::new(range, bearing);
-        match observe_known(self.ekf, &mut self.ids, id, &z) {
+        match observe_known_supervised(self.ekf, &mut self.ids, id, &z, &mut self.supervisor) {
             Ok(Observed::Added { .. }) => StepResult::Added,
             Ok(Observed::Updated {
                 outcome: UpdateOutcome::Accepted { .. },
@@ -521,6 +530,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             let _ = self.ekf.init(config, Pose2::new(0.0, 0.0, 0.0));
         }
         self.ids.clear();
+        self.supervisor.reset();
         self.assembler.clear();
         if let Some(grid) = self.grid.as_deref_mut()
             && grid.reset(pose).is_err()
@@ -557,6 +567,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
                 pose: [pose.x, pose.y, pose.theta],
                 covariance: grid.pose_covariance(),
                 status: self.status,
+                health: HealthStatus::default(),
             };
         }
         let pose = self.ekf.pose();
@@ -577,6 +588,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
                 p[(2, 2)],
             ],
             status: self.status,
+            health: self.supervisor.status(),
         }
     }
 }

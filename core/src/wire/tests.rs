@@ -1,6 +1,7 @@
 //! Round trips, worst-case sizes, corruption, resynchronisation after garbage.
 
 use super::*;
+use crate::ekf::health::HealthStatus;
 use heapless::Vec;
 use proptest::prelude::*;
 
@@ -146,6 +147,13 @@ fn largest_messages_fit_the_declared_limits() {
         pose: [1.0; 3],
         covariance: [1.0; 6],
         status,
+        health: HealthStatus {
+            flags: u8::MAX,
+            refused_in_row: u16::MAX,
+            recoveries: u16::MAX,
+            downweighted: u32::MAX,
+            gated: u32::MAX,
+        },
     });
     let payload = body_of(&worst_estimate);
     assert!(payload.len() <= MAX_PAYLOAD_LEN, "{}", payload.len());

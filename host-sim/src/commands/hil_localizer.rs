@@ -138,17 +138,21 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
     }
     let run = run_qemu(elf, bytes, host.len(), Duration::from_secs(args.timeout_s))?;
     let comparison = compare(messages.len(), &run, &host);
-    let relation_error = crate::metrics::relations::find_relations(&path, None)
-        .map(|r| -> Result<_> {
+    let relation_error = match crate::metrics::relations::find_relations(&path, None) {
+        Ok(r) => {
             let rels = crate::metrics::relations::read(&r)?;
-            Ok(crate::metrics::relations::evaluate(
+            Some(crate::metrics::relations::evaluate(
                 &trajectory(&run.replies, &scans, &last_chunks),
                 &rels,
                 1e-3,
             ))
-        })
-        .transpose()?
-        .filter(|e| e.used > 0);
+            .filter(|e| e.used > 0)
+        }
+        Err(note) => {
+            eprintln!("note: {note}");
+            None
+        }
+    };
     let report = LocalizerHil {
         replies_identical: comparison.identical,
         replies_expected: comparison.expected,

@@ -9,6 +9,7 @@ pub mod hil_localizer;
 pub mod localize;
 pub mod replay;
 pub mod sim;
+pub mod sweep;
 pub mod texture;
 
 use crate::drivers::grid::GridRun;

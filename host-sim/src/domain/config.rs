@@ -6,6 +6,7 @@ use super::AssociationMode;
 use anyhow::{Context, Result, bail};
 use microslam::association::AssociationConfig;
 use microslam::ekf::EkfConfig;
+use microslam::ekf::health::HealthConfig;
 use microslam::gate::{ChiSquareGate, chi_square_quantile};
 use microslam::geometry::Pose2;
 use microslam::motion::{IncrementNoise, VelocityNoise};
@@ -30,6 +31,9 @@ pub struct Settings {
     pub sighting: SightingSettings,
     /// Data association.
     pub association: AssociationSettings,
+    /// Robust weighting and recovery of the EKF's updates (`[recovery]`; off when absent).
+    #[serde(default)]
+    pub recovery: RecoverySettings,
     /// Simulator scenario (only in `sim.toml`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scenario: Option<Scenario>,
@@ -85,6 +89,32 @@ pub struct AssociationSettings {
     pub ambiguity_margin: f64,
 }
 
+/// `[recovery]`: the fields of [`microslam::ekf::health::HealthConfig`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecoverySettings {
+    /// Innovations beyond this many standard deviations are down-weighted (Huber); 0: off.
+    pub huber_sigma: f64,
+    /// Gate refusals in a row that declare the filter lost; 0: no recovery.
+    pub lost_after: u16,
+    /// Standard deviation added to x and y at a recovery, m.
+    pub position_std: f64,
+    /// Standard deviation added to the heading at a recovery, rad.
+    pub heading_std: f64,
+}
+
+impl Default for RecoverySettings {
+    /// Off: no weighting, no recovery.
+    fn default() -> Self {
+        Self {
+            huber_sigma: 0.0,
+            lost_after: 0,
+            position_std: 0.0,
+            heading_std: 0.0,
+        }
+    }
+}
+
 impl Settings {
     /// The built-in defaults of a dataset family (`mrclam`, `sim`).
     pub fn builtin(family: &str) -> Result<Self> {
@@ -103,14 +133,31 @@ impl Settings {
         path: Option<&Path>,
         mode: Option<AssociationMode>,
     ) -> Result<Self> {
+        let over = match path {
+            Some(path) => {
+                let text = std::fs::read_to_string(path)
+                    .with_context(|| format!("cannot read config {}", path.display()))?;
+                toml::from_str(&text).with_context(|| format!("config {}", path.display()))?
+            }
+            None => toml::Table::new(),
+        };
+        let origin = match path {
+            Some(p) => format!("config {}", p.display()),
+            None => format!("built-in config {family}.toml"),
+        };
+        Self::load_over(family, over, mode, &origin)
+    }
+
+    /// Like [`Settings::load_for`] with the overrides already parsed (`over`, laid over
+    /// the built-in defaults); `origin` names them in errors.
+    pub fn load_over(
+        family: &str,
+        over: toml::Table,
+        mode: Option<AssociationMode>,
+        origin: &str,
+    ) -> Result<Self> {
         let mut base: toml::Table = toml::from_str(builtin_text(family)?)?;
-        if let Some(path) = path {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("cannot read config {}", path.display()))?;
-            let over: toml::Table =
-                toml::from_str(&text).with_context(|| format!("config {}", path.display()))?;
-            merge(&mut base, over);
-        }
+        merge(&mut base, over);
         let unknown = base.remove("unknown_ids");
         if let Some(mode) = mode {
             let mut table = toml::Table::new();
@@ -133,10 +180,7 @@ impl Settings {
         }
         let settings: Self = toml::Value::Table(base)
             .try_into()
-            .with_context(|| match path {
-                Some(p) => format!("config {}", p.display()),
-                None => format!("built-in config {family}.toml"),
-            })?;
+            .with_context(|| origin.to_owned())?;
         settings.validate()?;
         Ok(settings)
     }
@@ -185,6 +229,15 @@ impl Settings {
         if a.new_landmark_probability < a.individual_probability {
             bail!("new_landmark_probability must not be below individual_probability");
         }
+        let r = &self.recovery;
+        if [r.huber_sigma, r.position_std, r.heading_std]
+            .iter()
+            .any(|v| !(v.is_finite() && *v >= 0.0))
+        {
+            bail!(
+                "[recovery] huber_sigma, position_std and heading_std must be finite and non-negative"
+            );
+        }
         if s.mount.iter().any(|v| !v.is_finite()) {
             bail!("sensor mount must be finite");
         }
@@ -226,6 +279,17 @@ impl Settings {
         }
     }
 
+    /// The supervision settings of the EKF's updates (`[recovery]`).
+    pub fn health_config<T: Real>(&self) -> HealthConfig<T> {
+        let r = &self.recovery;
+        HealthConfig {
+            huber_sigma: T::lit(r.huber_sigma),
+            lost_after: r.lost_after,
+            recovery_position_std: T::lit(r.position_std),
+            recovery_heading_std: T::lit(r.heading_std),
+        }
+    }
+
     /// The association configuration in scalar `T`.
     pub fn association_config<T: Real>(&self) -> AssociationConfig<T> {
         let a = &self.association;
@@ -242,7 +306,8 @@ impl Settings {
     }
 }
 
-fn builtin_text(family: &str) -> Result<&'static str> {
+/// The built-in settings file of a dataset family, as TOML text.
+pub fn builtin_text(family: &str) -> Result<&'static str> {
     BUILTIN
         .iter()
         .find(|(f, _)| *f == family)

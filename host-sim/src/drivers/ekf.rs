@@ -6,7 +6,8 @@ use crate::domain::{AssociationMode, Precision};
 use anyhow::{Result, bail};
 use indicatif::ProgressBar;
 use microslam::EkfError;
-use microslam::association::{Jcbb, KnownIds, Observed, Pairing, icnn, observe_known};
+use microslam::association::{Jcbb, KnownIds, Observed, Pairing, icnn, observe_known_supervised};
+use microslam::ekf::health::Supervisor;
 use microslam::ekf::{EkfSlam, UpdateOutcome, factor_len, state_dim};
 use microslam::event::{EventKind, Identity};
 use microslam::geometry::Pose2;
@@ -72,6 +73,10 @@ pub struct AssociationCounts {
     pub odometry_refused: usize,
     /// Predictions the filter refused (the filter then stays where it was).
     pub predictions_refused: usize,
+    /// Sightings accepted with a Huber down-weighting (`[recovery] huber_sigma`).
+    pub downweighted: usize,
+    /// Recoveries: the filter was declared lost and its pose covariance inflated.
+    pub recoveries: usize,
 }
 
 /// Everything a replay produced.
@@ -171,6 +176,7 @@ struct Replayer<T: Real> {
     slam: Box<Slam<T>>,
     ids: KnownIds<MAX_LANDMARKS>,
     jcbb: Jcbb<T, MAX_BATCH, MAX_CANDIDATES>,
+    supervisor: Supervisor<T>,
     mode: AssociationMode,
     settings: Settings,
     true_ids: Vec<BTreeMap<u32, usize>>,
@@ -196,6 +202,7 @@ impl<T: Real> Replayer<T> {
             slam,
             ids: KnownIds::new(),
             jcbb: Jcbb::new(settings.association_config::<T>()),
+            supervisor: Supervisor::new(settings.health_config::<T>()),
             mode,
             settings: settings.clone(),
             true_ids: Vec::new(),
@@ -303,6 +310,9 @@ impl<T: Real> Replayer<T> {
                 }
             })
             .collect();
+        let health = self.supervisor.status();
+        self.counts.downweighted = health.downweighted as usize;
+        self.counts.recoveries = usize::from(health.recoveries);
         Ok(ReplayRun {
             mode: self.mode,
             precision,
@@ -381,7 +391,14 @@ impl<T: Real> Replayer<T> {
                         self.counts.dropped += 1;
                         continue;
                     };
-                    match observe_known(&mut self.slam, &mut self.ids, id, &z) {
+                    let r = observe_known_supervised(
+                        &mut self.slam,
+                        &mut self.ids,
+                        id,
+                        &z,
+                        &mut self.supervisor,
+                    );
+                    match r {
                         Ok(Observed::Updated { index, outcome }) => {
                             self.updated(index, Ok(outcome), identity)
                         }
@@ -424,7 +441,7 @@ impl<T: Real> Replayer<T> {
     fn apply(&mut self, pairing: Pairing, z: &RangeBearing<T>, truth: Identity) {
         match pairing {
             Pairing::Landmark(j) => {
-                let r = self.slam.update(j, z);
+                let r = self.supervisor.update(&mut self.slam, j, z);
                 self.updated(j, r, truth);
             }
             Pairing::New => {

@@ -8,7 +8,7 @@
 use std::path::Path;
 
 use anyhow::{Result, bail};
-use microslam::ekf::{EkfConfig, EkfSlam, state_dim};
+use microslam::ekf::{EkfConfig, EkfSlam, factor_len, state_dim};
 use microslam::geometry::Pose2;
 use microslam::grid::MapImage;
 use microslam::grid::map_image::{DEFAULT_LAYER_LEVELS, encode_map_image_with_layers};
@@ -151,7 +151,7 @@ pub fn localizer_messages(
 /// localizer on `image`, fed the same bytes.
 pub fn host_localizer_replies(bytes: &[u8], image: &[u8]) -> Result<Vec<ToHost>> {
     let map = MapImage::parse(image)?;
-    let mut ekf = Box::new(EkfSlam::<f32, { state_dim(FIRMWARE_LANDMARKS) }>::new(
+    let mut ekf = Box::new(EkfSlam::<f32, { state_dim(FIRMWARE_LANDMARKS) }, { factor_len(FIRMWARE_LANDMARKS) }>::new(
         EkfConfig::MICROCONTROLLER,
     ));
     let mut localizer =
@@ -163,7 +163,7 @@ pub fn host_localizer_replies(bytes: &[u8], image: &[u8]) -> Result<Vec<ToHost>>
             .map_err(|e| anyhow::anyhow!("localizer layers: {e}"))?;
     }
     let mut localizer = Box::new(localizer);
-    let mut session = Session::<_, FIRMWARE_LANDMARKS>::new(&mut ekf, EkfConfig::MICROCONTROLLER)
+    let mut session = Session::<_, _, FIRMWARE_LANDMARKS>::new(&mut ekf, EkfConfig::MICROCONTROLLER)
         .with_localizer(
             Ok(&mut *localizer as &mut dyn LocalizerEstimator),
             FIRMWARE_GRID_SETUP,

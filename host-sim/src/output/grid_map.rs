@@ -2,7 +2,7 @@
 //! trajectory, TUM trajectories — and reading a saved map back for localization.
 
 use crate::drivers::grid::GridRun;
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use microslam::geometry::Pose2;
 use microslam::grid::{GridGeometry, LogOdds};
 use microslam::pf::GridPfConfig;

@@ -37,7 +37,7 @@ impl FromStr for DatasetSpec {
             Some(("carmen", file)) if !file.is_empty() => Ok(Self::Carmen(file.to_owned())),
             Some(("thor", dir)) if !dir.is_empty() => Ok(Self::Thor(dir.to_owned())),
             _ => Err(format!(
-                "unknown dataset `{s}`: expected `mrclam:<dir>` (e.g. mrclam:dataset6), `carmen:<file>` or `thor:<dir>`"
+                "unknown dataset `{s}`: expected `mrclam:<dir>` (e.g. mrclam:dataset6, or mrclam:dataset6/robot3 for one robot), `carmen:<file>` or `thor:<dir>`"
             )),
         }
     }
@@ -58,6 +58,7 @@ impl DatasetSpec {
 pub fn read(spec: &DatasetSpec, robot: u8) -> Result<Recording> {
     match spec {
         DatasetSpec::Mrclam(dir) => {
+            let (dir, robot) = mrclam_robot(dir, robot)?;
             let path = crate::domain::datasets::resolve("mrclam", dir)?;
             Ok(mrclam::read(&path, robot)?)
         }
@@ -67,6 +68,21 @@ pub fn read(spec: &DatasetSpec, robot: u8) -> Result<Recording> {
                 spec.family()
             )
         }
+    }
+}
+
+/// The MRCLAM folder and robot of `mrclam:<dir>`: a trailing `/robot<k>` (e.g.
+/// `dataset6/robot3`) names the robot and overrides `robot` (the `--robot` option).
+pub fn mrclam_robot(dir: &str, robot: u8) -> Result<(&str, u8)> {
+    let Some((folder, last)) = dir.trim_end_matches('/').rsplit_once('/') else {
+        return Ok((dir, robot));
+    };
+    let Some(k) = last.strip_prefix("robot") else {
+        return Ok((dir, robot));
+    };
+    match k.parse::<u8>() {
+        Ok(k) if (1..=5).contains(&k) => Ok((folder, k)),
+        _ => bail!("`mrclam:{dir}`: `{last}` is not a robot; MRCLAM robots are robot1 … robot5"),
     }
 }
 

@@ -36,6 +36,16 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
     }
 
     let odo_path = file(format!("Robot{robot}_Odometry.dat"));
+    if !odo_path.exists() {
+        let found: Vec<u8> = (1..=9)
+            .filter(|k| file(format!("Robot{k}_Odometry.dat")).exists())
+            .collect();
+        anyhow::bail!(
+            "robot {robot} is not in {}: no {} (robots there: {found:?})",
+            dir.display(),
+            odo_path.display()
+        );
+    }
     let meas_path = file(format!("Robot{robot}_Measurement.dat"));
     let gt_path = file(format!("Robot{robot}_Groundtruth.dat"));
     // The three large files are parsed in parallel, straight into events and poses.
