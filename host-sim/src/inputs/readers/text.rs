@@ -139,7 +139,7 @@ pub fn visit_table<const C: usize>(
                 found = trimmed.split_ascii_whitespace().count();
                 return Err(bad(LineProblem::TooManyFields { expected: C, found }));
             }
-            let v: f64 = field.parse().map_err(|_| {
+            let v: f64 = fast_float2::parse(field).map_err(|_| {
                 bad(LineProblem::NotANumber {
                     column: column + 1,
                     text: field.to_owned(),
