@@ -136,17 +136,17 @@ fn slam_at_the_edge_of_the_grid_counts_its_off_grid_points() {
     let off = used.iter().filter(|a| 1.5 + a.cos() >= 1.6).count() as u32;
     assert!(used.iter().all(|a| (1.5 + a.cos() - 1.6).abs() > 0.01));
     assert!(off > 0 && (off as usize) < used.len());
-    let mut slam =
-        GridSlam::<SIDE, SIDE, 16, 64>::new(&mut grid, config, Pose2::new(1.5, 0.0, 0.0))
-            .expect("valid");
-    let report = slam
-        .observe(&LidarScan::new(&ranges, geometry))
-        .expect("a usable scan");
-    let map = report.map;
+    let map = {
+        let mut slam =
+            GridSlam::<SIDE, SIDE, 16, 64>::new(&mut grid, config, Pose2::new(1.5, 0.0, 0.0))
+                .expect("valid");
+        slam.observe(&LidarScan::new(&ranges, geometry))
+            .expect("a usable scan")
+            .map
+    };
     assert_eq!(map.beams as usize, used.len(), "{map:?}");
     assert_eq!(map.off_grid, off, "{map:?}");
     assert_eq!(map.hits, map.beams - off, "{map:?}");
     assert_eq!(map.rays_skipped, 0, "{map:?}");
-    drop(slam);
     assert_eq!(grid.off_grid_points(), off);
 }

@@ -5,11 +5,11 @@
 //! new landmark refused only with `MapFull` when the table is full), and refused steps change
 //! nothing.
 
-use microslam::{EkfError, Real};
 use microslam::ekf::{EkfConfig, EkfSlam, UpdateOutcome, factor_len, state_dim};
 use microslam::geometry::{Pose2, wrap_angle, wrap_near};
 use microslam::motion::{MotionStep, compose_increment, integrate_velocity};
 use microslam::sensors::range_bearing::{MIN_RANGE, RangeBearing};
+use microslam::{EkfError, Real};
 use nalgebra::{DMatrix, DVector, Matrix2, SMatrix};
 use proptest::prelude::*;
 
@@ -147,7 +147,11 @@ fn apply<T: Real>(ekf: &mut Slam<T>, op: &Op) -> (Result<(), EkfError>, Done) {
                 ekf.add_landmark(&RangeBearing::new(T::ONE, v)).is_err(),
                 ekf.update(0, &RangeBearing::new(T::ONE, v)).is_err(),
             ];
-            let outcome = if results[which] { Err(EkfError::NonFiniteInput) } else { Ok(()) };
+            let outcome = if results[which] {
+                Err(EkfError::NonFiniteInput)
+            } else {
+                Ok(())
+            };
             (outcome, Done::Nothing)
         }
     }

@@ -73,9 +73,14 @@ fn jcbb_on_the_simulator_finds_every_landmark() {
         })
         .collect();
     assert!(seen.len() > 5, "{seen:?}");
-    let run =
-        host_sim::drivers::ekf::replay(&rec, &settings, AssociationMode::Jcbb, Precision::F32, None)
-            .unwrap();
+    let run = host_sim::drivers::ekf::replay(
+        &rec,
+        &settings,
+        AssociationMode::Jcbb,
+        Precision::F32,
+        None,
+    )
+    .unwrap();
     let m = evaluate(&rec, &run);
     println!("JCBB, f32, seed 1: {m:?}");
     // One landmark per landmark seen, none twice, none missed.

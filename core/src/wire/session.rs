@@ -1024,8 +1024,9 @@ mod tests {
         let setup = GridSetup::EXAMPLE;
 
         // Without a map: both commands refused, the EKF stays.
-        let mut ekf = EkfSlam::<f32, { state_dim(4) }>::new(EkfConfig::DEFAULT_F32);
-        let mut plain = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+        let mut ekf =
+            EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut plain = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
         let replies: std::vec::Vec<_> = bytes.iter().filter_map(|&b| plain.receive(b)).collect();
         let refused = |seq, reason| ToHost::Refused {
             seq,
@@ -1035,7 +1036,7 @@ mod tests {
         assert_eq!(replies[0], refused(1, Refusal::NotLocalizing));
         assert_eq!(replies[1], refused(2, Refusal::NoMap));
         drop(plain);
-        let mut bad = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32)
+        let mut bad = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32)
             .with_localizer(Err(Refusal::BadMap { code: 6 }), setup);
         let replies: std::vec::Vec<_> = bytes.iter().filter_map(|&b| bad.receive(b)).collect();
         assert_eq!(replies[1], refused(2, Refusal::BadMap { code: 6 }));
@@ -1047,7 +1048,7 @@ mod tests {
             .unwrap()
             .with_layers(layers, RelocalizationConfig::DEFAULT)
             .unwrap();
-        let mut session = Session::<_, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32)
+        let mut session = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32)
             .with_localizer(Ok(&mut loc), setup);
         let replies: std::vec::Vec<_> = bytes.iter().filter_map(|&b| session.receive(b)).collect();
         drop(session);

@@ -190,7 +190,8 @@ impl Preset {
             c.beam_decimation = decimation_for(lidar_beams, beams)?;
         } else if self == Self::Microcontroller && c.beam_decimation == 1 {
             // The firmware's settings were tuned with its beam count.
-            c.beam_decimation = decimation_for(lidar_beams, MICROCONTROLLER_BEAMS.min(lidar_beams))?;
+            c.beam_decimation =
+                decimation_for(lidar_beams, MICROCONTROLLER_BEAMS.min(lidar_beams))?;
         }
         Ok(c)
     }

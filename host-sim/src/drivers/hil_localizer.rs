@@ -151,9 +151,11 @@ pub fn localizer_messages(
 /// localizer on `image`, fed the same bytes.
 pub fn host_localizer_replies(bytes: &[u8], image: &[u8]) -> Result<Vec<ToHost>> {
     let map = MapImage::parse(image)?;
-    let mut ekf = Box::new(EkfSlam::<f32, { state_dim(FIRMWARE_LANDMARKS) }, { factor_len(FIRMWARE_LANDMARKS) }>::new(
-        EkfConfig::MICROCONTROLLER,
-    ));
+    let mut ekf = Box::new(EkfSlam::<
+        f32,
+        { state_dim(FIRMWARE_LANDMARKS) },
+        { factor_len(FIRMWARE_LANDMARKS) },
+    >::new(EkfConfig::MICROCONTROLLER));
     let mut localizer =
         FirmwareLocalizer::new(map.view(), FIRMWARE_LOCALIZER_CONFIG, Pose2::IDENTITY)
             .map_err(|e| anyhow::anyhow!("localizer: {e}"))?;
@@ -163,10 +165,11 @@ pub fn host_localizer_replies(bytes: &[u8], image: &[u8]) -> Result<Vec<ToHost>>
             .map_err(|e| anyhow::anyhow!("localizer layers: {e}"))?;
     }
     let mut localizer = Box::new(localizer);
-    let mut session = Session::<_, _, FIRMWARE_LANDMARKS>::new(&mut ekf, EkfConfig::MICROCONTROLLER)
-        .with_localizer(
-            Ok(&mut *localizer as &mut dyn LocalizerEstimator),
-            FIRMWARE_GRID_SETUP,
-        );
+    let mut session =
+        Session::<_, _, FIRMWARE_LANDMARKS>::new(&mut ekf, EkfConfig::MICROCONTROLLER)
+            .with_localizer(
+                Ok(&mut *localizer as &mut dyn LocalizerEstimator),
+                FIRMWARE_GRID_SETUP,
+            );
     Ok(bytes.iter().filter_map(|&b| session.receive(b)).collect())
 }
