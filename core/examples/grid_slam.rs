@@ -95,12 +95,13 @@ fn main() {
 
 #[cfg(test)]
 mod tests {
-    /// Deterministic (seeded filter, noiseless scans): measured 0.0099 m against 0.8336 m
-    /// for dead reckoning; bound = measured + 5 %.
+    /// Deterministic (seeded filter, noiseless scans): measured 0.0306 m against 0.8336 m
+    /// for dead reckoning (with the shift prior of `GridPfConfig::MICROCONTROLLER`);
+    /// bound = measured + 5 %.
     #[test]
     fn slam_stays_on_the_map_where_dead_reckoning_drifts() {
         let (slam, dead_reckoning) = super::run().expect("the example's drive is valid");
-        assert!(slam <= 0.0104, "grid SLAM {slam} m");
+        assert!(slam <= 0.0322, "grid SLAM {slam} m");
         assert!(dead_reckoning >= 0.79, "dead reckoning {dead_reckoning} m");
     }
 }
