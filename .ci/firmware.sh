@@ -124,6 +124,7 @@ awk '/^ekf /{
     /^grid /{
         split($2, p, "="); split($3, b, "="); split($4, w, "=");
         printf "%-40s %s\n", "grid_p" p[2] "_b" b[2] "_w9_step_instructions", w[2];
+    }
     /^localizer /{
         split($2, p, "="); split($4, w, "=");
         printf "%-40s %s\n", "localizer_p" p[2] "_b90_w9_step_instructions", w[2];

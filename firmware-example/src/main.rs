@@ -15,13 +15,17 @@ use microslam::wire::Session;
 use panic_probe as _;
 use static_cell::ConstStaticCell;
 
-/// The EKF, zero bytes at reset (`.bss`), handed out once as `&'static mut`: the 18 KB
-/// covariance never passes through the stack.
+/// The EKF, zero bytes at reset (`.bss`), handed out once as `&'static mut`: the 35 KB
+/// covariance factor never passes through the stack.
 static EKF: ConstStaticCell<Ekf> = ConstStaticCell::new(Ekf::new(ZEROED_EKF_CONFIG));
 
 /// The session type of this firmware.
-type FirmwareSession =
-    Session<'static, { microslam::ekf::state_dim(EKF_LANDMARKS) }, EKF_LANDMARKS>;
+type FirmwareSession = Session<
+    'static,
+    { microslam::ekf::state_dim(EKF_LANDMARKS) },
+    { microslam::ekf::factor_len(EKF_LANDMARKS) },
+    EKF_LANDMARKS,
+>;
 
 #[entry]
 fn main() -> ! {
