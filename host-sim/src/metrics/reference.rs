@@ -1,5 +1,5 @@
 //! Global consistency of a run: ATE against a reference trajectory (a corrected log or a
-//! TUM file, [`crate::readers::reference`]) whose poses are matched to the run's by stamp.
+//! TUM file, [`crate::inputs::readers::reference`]) whose poses are matched to the run's by stamp.
 //!
 //! The relation metric ([`super::relations`]) scores relative poses a few metres apart
 //! and so rewards local accuracy; a map bent over the whole building scores well there.
