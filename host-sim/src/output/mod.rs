@@ -7,7 +7,7 @@ pub mod thor;
 mod tum;
 
 pub use plots::{draw_errors, draw_map, write_png};
-pub use tum::{tum_line, write_tum};
+pub use tum::{tum_line, tum_text, write_tum};
 
 use crate::domain::recording::Recording;
 use crate::drivers::ekf::ReplayRun;
