@@ -177,15 +177,19 @@ fn bad_bags_name_the_file_and_the_topic() {
         "{e}"
     );
     // A topic named that the bag does not have.
+    let scanned = dir.path().join("scanned.mcap");
+    small_bag(&scanned, |bag| {
+        write_ros(bag, "/scan", laser_scan_schema, 1.0, &scan()).unwrap();
+    });
     let e = error(
-        &missing,
+        &scanned,
         &BagOptions {
             odom_topic: "/wheel_odom".into(),
             ..BagOptions::default()
         },
     );
     assert!(
-        e.contains("/wheel_odom") && e.contains("no_scan.mcap"),
+        e.contains("/wheel_odom") && e.contains("scanned.mcap") && e.contains("/odom, /scan"),
         "{e}"
     );
 

@@ -150,9 +150,9 @@ impl McapFile {
         self.write_raw(topic, &schema, &T::get_message_encoding(), stamp, &buf)
     }
 
-    /// The log time the next message gets at `stamp` (never before the last one).
-    pub fn time_of(&self, stamp: f64) -> f64 {
-        stamp_ns(stamp).max(self.last_ns) as f64 * 1e-9
+    /// The log time, ns, a message at `stamp` gets now (never before the last one).
+    pub fn log_time_ns(&self, stamp: f64) -> u64 {
+        stamp_ns(stamp).max(self.last_ns)
     }
 
     /// Writes the summary and index and closes the file.

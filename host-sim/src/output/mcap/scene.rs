@@ -88,9 +88,8 @@ pub struct Mark {
     pub covariance: Option<[[f64; 2]; 2]>,
 }
 
-/// A foxglove timestamp of `t` seconds.
-pub fn timestamp(t: f64) -> Timestamp {
-    let ns = super::stamp_ns(t);
+/// A foxglove timestamp of `ns` nanoseconds.
+pub fn timestamp(ns: u64) -> Timestamp {
     Timestamp::new((ns / 1_000_000_000) as u32, (ns % 1_000_000_000) as u32)
 }
 
@@ -236,8 +235,8 @@ impl<'f> RunRecorder<'f> {
 
     /// Records one step.
     pub fn step(&mut self, s: &Step<'_>) -> Result<()> {
-        let t = self.file.time_of(s.stamp);
-        let ts = Some(timestamp(t));
+        let t = s.stamp;
+        let ts = Some(timestamp(self.file.log_time_ns(t)));
         let f = self.frames.clone();
         let odom = s.odometry.unwrap_or(s.pose);
         let map_to_odom = s.pose.compose(&odom.inverse());
@@ -371,7 +370,7 @@ impl<'f> RunRecorder<'f> {
         g: &GridGeometry,
         log_odds: &LogOdds,
     ) -> Result<()> {
-        let t = self.file.time_of(stamp);
+        let t = stamp;
         let (x0, y0, x1, y1) = crate::output::grid_map::known_box(cells, g, 2);
         let (w, h) = (x1 - x0, y1 - y0);
         let mut data = Vec::with_capacity(4 * w * h);
@@ -390,7 +389,7 @@ impl<'f> RunRecorder<'f> {
             r#type: NumericType::Uint8 as i32,
         };
         let grid = Grid {
-            timestamp: Some(timestamp(t)),
+            timestamp: Some(timestamp(self.file.log_time_ns(t))),
             frame_id: self.frames.map.clone(),
             pose: Some(pose3(&Pose2::new(
                 f64::from(g.origin_x) + x0 as f64 * res,
@@ -415,8 +414,8 @@ impl<'f> RunRecorder<'f> {
     /// Records landmarks at `stamp` on `/landmarks` (estimated: orange ellipses) or
     /// `/true_landmarks` (`truth`: green spheres), each with its id.
     pub fn landmarks(&mut self, stamp: f64, marks: &[Mark], truth: bool) -> Result<()> {
-        let t = self.file.time_of(stamp);
-        let ts = Some(timestamp(t));
+        let t = stamp;
+        let ts = Some(timestamp(self.file.log_time_ns(t)));
         let (topic, rgb) = if truth {
             ("true_landmarks", (0.1, 0.7, 0.2))
         } else {
