@@ -84,7 +84,8 @@ fn an_intel_grid_slam_recording_reads_back() {
 
     let (ch, stats) = channels(&path);
     let n = 300u64;
-    let counted = |every: usize| n.div_ceil(every as u64) + u64::from((n - 1) % every as u64 != 0);
+    let counted =
+        |every: usize| n.div_ceil(every as u64) + u64::from(!(n - 1).is_multiple_of(every as u64));
     let expected = [
         ("/tf", "foxglove.FrameTransforms", n),
         ("/pose", "foxglove.PoseInFrame", n),

@@ -640,7 +640,7 @@ mod tests {
         let t = msg::Time::from_seconds(12.999_999_999_9);
         assert_eq!((t.sec, t.nanosec), (13, 0));
         assert!((msg::Time::from_seconds(-1.25).seconds() + 1.25).abs() < 1e-12);
-        for yaw in [-3.1, -1.0, 0.0, 0.5, 3.14] {
+        for yaw in [-3.1, -1.0, 0.0, 0.5, 3.1] {
             assert!((msg::Quaternion::from_yaw(yaw).yaw() - yaw).abs() < 1e-12);
         }
     }

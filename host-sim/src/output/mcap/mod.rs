@@ -62,6 +62,9 @@ impl McapFile {
         let writer = mcap::WriteOptions::new()
             .profile(profile)
             .library(format!("host-sim {}", env!("CARGO_PKG_VERSION")))
+            // Compress on the writing thread: zstd's worker threads would compete with
+            // the filter's (grid particles are scored on all cores).
+            .compression_threads(0)
             .create(BufWriter::new(file))
             .with_context(|| format!("writing {}", path.display()))?;
         Ok(Self {

@@ -230,7 +230,7 @@ impl<'f> RunRecorder<'f> {
     }
 
     fn is_due(&self, every: usize) -> bool {
-        self.index % every == 0 || self.index + 1 >= self.steps
+        self.index.is_multiple_of(every) || self.index + 1 >= self.steps
     }
 
     /// Records one step.
