@@ -239,9 +239,15 @@ fn a_sim_recording_has_the_landmark_and_the_grid_runs() {
         let p = e.spheres[0].pose.unwrap().position.unwrap();
         assert_eq!((p.x, p.y), (l.position[0], l.position[1]));
     }
-    // The estimated landmarks carry 3σ ellipses.
-    let (_, data) = messages(&path, "/ekf/landmarks").pop().unwrap();
-    let update = SceneUpdate::decode(data.as_slice()).unwrap();
-    assert!(!update.entities.is_empty());
-    assert!(update.entities.iter().all(|e| e.cylinders.len() == 1));
+    // The estimated landmarks grow in number as the map is built, each with a 3σ ellipse.
+    let updates: Vec<SceneUpdate> = messages(&path, "/ekf/landmarks")
+        .iter()
+        .map(|(_, d)| SceneUpdate::decode(d.as_slice()).unwrap())
+        .collect();
+    assert!(updates.len() > 10, "{} map snapshots", updates.len());
+    let counts: Vec<usize> = updates.iter().map(|u| u.entities.len()).collect();
+    assert!(counts.windows(2).all(|w| w[0] <= w[1]), "{counts:?}");
+    assert!(counts[0] < counts[counts.len() - 1], "{counts:?}");
+    let last = updates.last().unwrap();
+    assert!(last.entities.iter().all(|e| e.cylinders.len() == 1));
 }

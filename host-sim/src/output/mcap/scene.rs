@@ -12,7 +12,7 @@
 //! | `/scan` | `foxglove.LaserScan` | the lidar scan in `laser` |
 //! | `/particles` | `foxglove.PosesInFrame` | the particle cloud (throttled) |
 //! | `/map` | `foxglove.Grid` | the occupancy grid, RGBA, cropped to the known area (throttled) |
-//! | `/landmarks` | `foxglove.SceneUpdate` | estimated landmarks: 3σ ellipses and ids |
+//! | `/landmarks` | `foxglove.SceneUpdate` | estimated landmarks as the map grows: 3σ ellipses and ids |
 //! | `/true_landmarks` | `foxglove.SceneUpdate` | true landmarks with their ids |
 //!
 //! Throttled topics get about [`Throttle`]'s number of messages over the run, and always
@@ -469,7 +469,8 @@ impl<'f> RunRecorder<'f> {
 /// Records a landmark EKF-SLAM replay after the run: the estimate with its covariance,
 /// dead reckoning as the odometry frame and the ground truth at most every `min_gap_s`
 /// seconds of the recording (odometry comes at ~67 Hz in MRCLAM), the true landmarks at
-/// the start and the final map (ellipses, ids) at the end.
+/// the start, the map as it grew ([`ReplayRun::map_history`]) and the final map (ellipses,
+/// ids) at the end.
 pub fn record_ekf_run(
     file: &mut McapFile,
     prefix: &str,
@@ -499,11 +500,26 @@ pub fn record_ekf_run(
     if !true_marks.is_empty() {
         rec.landmarks(first, &true_marks, true)?;
     }
+    let marks = |ls: &mut dyn Iterator<Item = ([f64; 2], [[f64; 2]; 2], Option<u32>)>| {
+        ls.enumerate()
+            .map(|(k, (position, covariance, id))| Mark {
+                id: id.unwrap_or(k as u32),
+                position,
+                covariance: Some(covariance),
+            })
+            .collect::<Vec<_>>()
+    };
+    let mut snapshots = run.map_history.iter().peekable();
     let mut truth = TruthCursor::new(&recording.ground_truth);
     for i in kept {
         let Some(p) = run.trajectory.get(i) else {
             continue;
         };
+        // The map snapshots up to this step, in time order with the steps.
+        while let Some(m) = snapshots.next_if(|m| m.stamp <= p.stamp) {
+            let ls = &mut m.landmarks.iter().map(|l| (l.position, l.covariance, l.id));
+            rec.landmarks(m.stamp, &marks(ls), false)?;
+        }
         rec.step(&Step {
             stamp: p.stamp,
             pose: p.pose,
@@ -515,17 +531,11 @@ pub fn record_ekf_run(
         })?;
     }
     let end = run.trajectory.last().map_or(first, |p| p.stamp);
-    let marks: Vec<Mark> = run
+    let ls = &mut run
         .landmarks
         .iter()
-        .enumerate()
-        .map(|(k, l)| Mark {
-            id: l.id.unwrap_or(k as u32),
-            position: l.position,
-            covariance: Some(l.covariance),
-        })
-        .collect();
-    rec.landmarks(end, &marks, false)
+        .map(|l| (l.position, l.covariance, l.id));
+    rec.landmarks(end, &marks(ls), false)
 }
 
 /// An estimate a device sent: stamp, pose and (when it has one) the pose covariance
