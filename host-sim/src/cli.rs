@@ -1,4 +1,4 @@
-//! Layer 6, the top: the command line (`host-sim [replay|localize|sim|hil|sweep|texture|detections]
+//! Layer 6, the top: the command line (`host-sim [replay|localize|sim|hil|sweep|texture|detections|export-rosbag]
 //! …`), clap only. Each subcommand's arguments are converted into the options struct of
 //! its module in [`crate::commands`]; nothing below this file imports it.
 
@@ -14,6 +14,7 @@ use crate::domain::grid::{GlobalOptions, GridOptions, SUPPORTED_PARTICLES};
 use crate::domain::{AssociationMode, FilterKind, Precision};
 use crate::inputs::faults::FaultRates;
 use crate::inputs::readers::DatasetSpec;
+use crate::inputs::readers::rosbag::BagOptions;
 use anyhow::Result;
 use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
@@ -64,6 +65,64 @@ pub enum Command {
     /// Sign detections (box centre + depth, wrong class ids) → range/bearing → EKF-SLAM on
     /// the simulator; ATE and the share of wrong class ids the association corrected.
     Detections(DetectionsArgs),
+    /// Write a CARMEN log as a ROS 2 bag (MCAP: LaserScan, Odometry, /tf_static), e.g.
+    /// for `replay --dataset rosbag:<file.mcap>`.
+    ExportRosbag(ExportRosbagArgs),
+}
+
+/// Topics and lidar mount of a ROS 2 bag (`rosbag:<file.mcap>`, `export-rosbag`).
+#[derive(Debug, Clone, Args)]
+pub struct BagArgs {
+    /// `sensor_msgs/msg/LaserScan` topic.
+    #[arg(long, default_value = "/scan")]
+    pub scan_topic: String,
+    /// `nav_msgs/msg/Odometry` topic.
+    #[arg(long, default_value = "/odom")]
+    pub odom_topic: String,
+    /// `sensor_msgs/msg/Imu` topic (read when the bag has it).
+    #[arg(long, default_value = "/imu")]
+    pub imu_topic: String,
+    /// Static transforms topic (the lidar mount, when the bag has it).
+    #[arg(long, default_value = "/tf_static")]
+    pub tf_static_topic: String,
+    /// Lidar mount `x,y,yaw` (m, m, rad) in the robot frame; overrides /tf_static.
+    #[arg(long, value_parser = mount, allow_negative_numbers = true)]
+    pub lidar_mount: Option<[f64; 3]>,
+}
+
+fn mount(text: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{e}"))?;
+    <[f64; 3]>::try_from(v).map_err(|_| "expected x,y,yaw".to_owned())
+}
+
+impl From<&BagArgs> for BagOptions {
+    fn from(a: &BagArgs) -> Self {
+        Self {
+            scan_topic: a.scan_topic.clone(),
+            odom_topic: a.odom_topic.clone(),
+            imu_topic: a.imu_topic.clone(),
+            tf_static_topic: a.tf_static_topic.clone(),
+            lidar_mount: a.lidar_mount,
+        }
+    }
+}
+
+/// Options of `host-sim export-rosbag`.
+#[derive(Debug, Clone, Args)]
+pub struct ExportRosbagArgs {
+    /// The CARMEN log: `carmen:<log>`, e.g. `carmen:intel/intel-raw-part.clf`.
+    #[arg(long, short)]
+    pub dataset: DatasetSpec,
+    /// The bag to write.
+    #[arg(long, short, default_value = "out/rosbag.mcap")]
+    pub out: PathBuf,
+    /// Topics (and lidar mount) of the bag.
+    #[command(flatten)]
+    pub bag: BagArgs,
 }
 
 /// A particle count the grid filters are compiled for ([`SUPPORTED_PARTICLES`]).
@@ -139,6 +198,12 @@ pub struct LocalizeArgs {
     /// Global localization trials instead of one tracked run.
     #[command(flatten)]
     pub global: GlobalArgs,
+    /// Record the run into this MCAP file (Foxglove schemas).
+    #[arg(long)]
+    pub mcap: Option<PathBuf>,
+    /// ROS 2 bag topics (`rosbag:` datasets).
+    #[command(flatten)]
+    pub bag: BagArgs,
 }
 
 /// Options of global localization trials (`host-sim localize --global`,
@@ -244,6 +309,12 @@ pub struct ReplayArgs {
     /// Seed of the fault generator.
     #[arg(long, default_value_t = 1)]
     pub fault_seed: u64,
+    /// Record the run into this MCAP file (Foxglove schemas; open it in Foxglove).
+    #[arg(long)]
+    pub mcap: Option<PathBuf>,
+    /// ROS 2 bag topics (`rosbag:` datasets).
+    #[command(flatten)]
+    pub bag: BagArgs,
 }
 
 /// Options of `host-sim sweep`.
@@ -317,6 +388,9 @@ pub struct SimArgs {
     /// `out/grid/global/`).
     #[command(flatten)]
     pub global: GlobalArgs,
+    /// Record the runs into this MCAP file (topics under /ekf, /grid_slam, /grid_localize).
+    #[arg(long)]
+    pub mcap: Option<PathBuf>,
 }
 
 /// Options of `host-sim hil`.
@@ -367,6 +441,9 @@ pub struct HilArgs {
     /// EKF settings (TOML) laid over the dataset's defaults, with `--dataset-settings`.
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Record the device's estimates into this MCAP file (Foxglove schemas).
+    #[arg(long)]
+    pub mcap: Option<PathBuf>,
 }
 
 /// Options of `host-sim export-map`.
@@ -454,6 +531,8 @@ impl From<&ReplayArgs> for ReplayOptions {
             run: a.run,
             faults: a.faults,
             fault_seed: a.fault_seed,
+            mcap: a.mcap.clone(),
+            bag: (&a.bag).into(),
         }
     }
 }
@@ -467,6 +546,8 @@ impl From<&LocalizeArgs> for LocalizeOptions {
             grid: (&a.grid).into(),
             out: a.out.clone(),
             global: (&a.global).into(),
+            mcap: a.mcap.clone(),
+            bag: (&a.bag).into(),
         }
     }
 }
@@ -484,6 +565,7 @@ impl From<&SimArgs> for SimOptions {
             grid_preset: a.grid_preset,
             grid_config: a.grid_config.clone(),
             global: (&a.global).into(),
+            mcap: a.mcap.clone(),
         }
     }
 }
@@ -504,6 +586,7 @@ impl From<&HilArgs> for HilOptions {
             config: a.config.clone(),
             map: a.map.clone(),
             scans: a.scans,
+            mcap: a.mcap.clone(),
         }
     }
 }
@@ -545,6 +628,9 @@ pub fn run(cli: &Cli) -> Result<()> {
         }
         Some(Command::Texture(args)) => texture::texture_cli(&args.into(), cli.quiet),
         Some(Command::Detections(args)) => detections::detections_cli(&args.into(), cli.quiet),
+        Some(Command::ExportRosbag(a)) => {
+            crate::commands::rosbag::export_cli(&a.dataset, &a.out, &(&a.bag).into(), cli.quiet)
+        }
         None => sim::run_cli(&SimOptions::default(), cli.quiet),
     }
 }

@@ -24,6 +24,24 @@ pub fn tum(replies: &[ToHost]) -> String {
     }))
 }
 
+/// The device's estimates (EKF or localizer replies): stamp, pose, covariance.
+pub fn device_estimates(replies: &[ToHost]) -> Vec<crate::output::mcap::scene::DeviceEstimate> {
+    replies
+        .iter()
+        .filter_map(|r| match r {
+            ToHost::Estimate(e) | ToHost::Localization { estimate: e, .. } => {
+                let [x, y, th] = e.pose.map(f64::from);
+                Some((
+                    e.stamp_us as f64 * 1e-6,
+                    Pose2::new(x, y, th),
+                    Some(e.covariance.map(f64::from)),
+                ))
+            }
+            _ => None,
+        })
+        .collect()
+}
+
 /// ATE (SE(2) alignment) of the estimates in `replies` against `truth`, and over how many
 /// estimates (those inside the truth's time span).
 pub fn device_ate(
@@ -60,6 +78,8 @@ pub struct HilOptions {
     pub dataset: DatasetSpec,
     /// Robot whose log is streamed.
     pub robot: u8,
+    /// Record the device's estimates into this MCAP file.
+    pub mcap: Option<PathBuf>,
     /// Output folder: hil.json (the comparison) and firmware.tum (the device's trajectory).
     pub out: PathBuf,
     /// Give up waiting for replies after this many seconds.
@@ -92,6 +112,7 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
             scans: args.scans,
             out: &args.out,
             timeout_s: args.timeout_s,
+            mcap: args.mcap.as_deref(),
         };
         return run_cli(&options, quiet);
     }
@@ -132,6 +153,17 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
     let report = args.out.join("hil.json");
     std::fs::write(&report, serde_json::to_string_pretty(&comparison)?)?;
     std::fs::write(args.out.join("firmware.tum"), tum(&run.replies))?;
+    if let Some(mut file) = super::open_mcap(args.mcap.as_deref())? {
+        crate::output::mcap::scene::record_estimates(
+            &mut file,
+            "",
+            &device_estimates(&run.replies),
+            &recording.ground_truth,
+            None,
+            0.1,
+        )?;
+        super::close_mcap(Some(file), quiet)?;
+    }
     if !quiet {
         println!(
             "{} of {} replies received, {} identical to the host bit for bit; max pose \

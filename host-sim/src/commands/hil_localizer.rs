@@ -105,6 +105,8 @@ pub struct LocalizerHilOptions<'a> {
     pub out: &'a Path,
     /// Give up waiting for replies after this many seconds.
     pub timeout_s: u64,
+    /// Record the device's estimates (with the scans) into this MCAP file.
+    pub mcap: Option<&'a Path>,
 }
 
 /// `host-sim hil --dataset carmen:<log> --map <map.yaml>`.
@@ -176,6 +178,33 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
         .into_iter()
         .map(|(t, [x, y, th])| (t, Pose2::new(x, y, th)));
     std::fs::write(args.out.join("firmware.tum"), tum_text(poses))?;
+    if let Some(mut file) = super::open_mcap(args.mcap)? {
+        // The estimate after each scan's last chunk, with its covariance and the scan.
+        let (estimates, ranges): (Vec<_>, Vec<&[f32]>) = scans
+            .iter()
+            .zip(&last_chunks)
+            .filter_map(|(laser, &i)| match run.replies.get(i) {
+                Some(ToHost::Localization { estimate: e, .. }) => {
+                    let [x, y, th] = e.pose.map(f64::from);
+                    let pose = Pose2::new(x, y, th);
+                    let cov = Some(e.covariance.map(f64::from));
+                    Some(((laser.stamp, pose, cov), laser.ranges.as_slice()))
+                }
+                _ => None,
+            })
+            .unzip();
+        let lidar =
+            crate::domain::grid::carmen_lidar(crate::inputs::readers::carmen::beam_count(&log));
+        crate::output::mcap::scene::record_estimates(
+            &mut file,
+            "",
+            &estimates,
+            &[],
+            Some((&ranges, &lidar)),
+            0.0,
+        )?;
+        super::close_mcap(Some(file), quiet)?;
+    }
     if !quiet {
         println!(
             "{} of {} replies identical to the host bit for bit; relation error {}; {:.1} s; report in {}",

@@ -1,11 +1,12 @@
 //! `host-sim localize`: the grid localizer on a saved map (`map.yaml` + PGM) over a
 //! CARMEN log, scored with the relation metric when a relations file is found.
 
-use super::replay::{metrics_json, options_from, report, scan_progress_bar, with_reference};
+use super::replay::{lidar_log, metrics_json, report, scan_progress_bar, with_reference};
 use crate::domain::grid::{GlobalOptions, GridOptions};
-use crate::drivers::grid::{carmen_inputs, run_localizer};
+use crate::drivers::grid::{carmen_inputs, run_localizer_observed};
 use crate::inputs::readers::DatasetSpec;
-use crate::inputs::readers::carmen::{front_scans, read_log, resolve_log};
+use crate::inputs::readers::carmen::{front_scans, resolve_log};
+use crate::inputs::readers::rosbag::BagOptions;
 use crate::output::grid_map::write_outputs;
 use anyhow::{Result, bail};
 use microslam::geometry::Pose2;
@@ -29,6 +30,10 @@ pub struct LocalizeOptions {
     pub out: PathBuf,
     /// Global localization trials instead of one tracked run (when enabled).
     pub global: GlobalOptions,
+    /// Record the run into this MCAP file (Foxglove schemas).
+    pub mcap: Option<PathBuf>,
+    /// Topics and lidar mount of `rosbag:` datasets.
+    pub bag: BagOptions,
 }
 
 /// `host-sim localize --map map.yaml --dataset carmen:<file>`.
@@ -45,12 +50,17 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
         );
     }
     let start = Instant::now();
-    let DatasetSpec::Carmen(file) = &args.dataset else {
-        bail!("localize needs a lidar dataset (carmen:<file>)");
+    let (DatasetSpec::Carmen(file) | DatasetSpec::Rosbag(file)) = &args.dataset else {
+        bail!("localize needs a lidar dataset (carmen:<file> or rosbag:<file.mcap>)");
     };
     let path = resolve_log(file)?;
-    let log = read_log(&path)?;
-    let options = options_from(args.config.as_deref(), &args.grid, &log)?;
+    let (log, options) = lidar_log(
+        &args.dataset,
+        &path,
+        args.config.as_deref(),
+        &args.grid,
+        &args.bag,
+    )?;
     let RosMap { cells, geometry } = RosMap::read(&args.map, &options.config.log_odds)?;
     if (geometry.resolution - options.config.resolution).abs() > 1e-6 {
         bail!(
@@ -65,11 +75,23 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
     let inputs = carmen_inputs(&scans);
     let pb = scan_progress_bar(scans.len(), quiet);
     // The SLAM map's frame is the pose of the log's first scan.
-    let run = run_localizer(&inputs, &view, Pose2::IDENTITY, &options, &|i| {
-        if i % 64 == 0 {
-            pb.set_position(i as u64);
-        }
-    })?;
+    let mut mcap = super::open_mcap(args.mcap.as_deref())?;
+    let log_odds = options.config.log_odds;
+    let run =
+        super::recorded_grid_run(mcap.as_mut(), "", inputs.len(), log_odds, &[], false, |o| {
+            run_localizer_observed(
+                &inputs,
+                &view,
+                Pose2::IDENTITY,
+                &options,
+                &|i| {
+                    if i % 64 == 0 {
+                        pb.set_position(i as u64);
+                    }
+                },
+                o,
+            )
+        })?;
     pb.finish_and_clear();
     let rel = super::relation_error_for(&path, args.grid.relations.as_deref(), &run)?;
     let name = path
@@ -83,5 +105,5 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
     )?;
     write_outputs(&args.out, &run, &options.config, &metrics)?;
     report(quiet, &name, &metrics, &args.out);
-    Ok(())
+    super::close_mcap(mcap, quiet)
 }

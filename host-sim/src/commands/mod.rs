@@ -8,14 +8,19 @@ pub mod hil;
 pub mod hil_localizer;
 pub mod localize;
 pub mod replay;
+pub mod rosbag;
 pub mod sim;
 pub mod sweep;
 pub mod texture;
 
-use crate::drivers::grid::GridRun;
+use crate::drivers::grid::{GridObserver, GridRun};
 use crate::metrics::Metrics;
 use crate::metrics::relations::{self, RelationError, find_relations, relation_error};
+use crate::output::mcap::McapFile;
+use crate::output::mcap::scene::{GridRecording, RunRecorder, Throttle};
 use indicatif::{ProgressBar, ProgressStyle};
+use microslam::geometry::Pose2;
+use microslam::grid::LogOdds;
 use std::path::Path;
 
 /// A progress bar over `len` events (drawn to stderr).
@@ -64,6 +69,49 @@ pub(crate) fn relation_error_for(
         Err(why) => {
             eprintln!("note: {why}");
             Ok(None)
+        }
+    }
+}
+
+/// The `--mcap` file, created when one is asked for.
+pub(crate) fn open_mcap(path: Option<&Path>) -> anyhow::Result<Option<McapFile>> {
+    path.map(|p| McapFile::create(p, "")).transpose()
+}
+
+/// Finishes the `--mcap` file (summary and index) and says where it is.
+pub(crate) fn close_mcap(file: Option<McapFile>, quiet: bool) -> anyhow::Result<()> {
+    if let Some(f) = file {
+        let n = f.messages;
+        let path = f.finish()?;
+        if !quiet {
+            println!("  MCAP recording: {} ({n} messages)", path.display());
+        }
+    }
+    Ok(())
+}
+
+/// A grid run (`run` given its observer), recorded into `file` under `prefix` when there
+/// is one: `steps` scans, the true pose of each in `truth` (or none), the map recorded as
+/// it grows (`growing`, SLAM) or once (localization).
+pub(crate) fn recorded_grid_run(
+    file: Option<&mut McapFile>,
+    prefix: &str,
+    steps: usize,
+    log_odds: LogOdds,
+    truth: &[Pose2<f64>],
+    growing: bool,
+    run: impl FnOnce(Option<&mut dyn GridObserver>) -> anyhow::Result<GridRun>,
+) -> anyhow::Result<GridRun> {
+    match file {
+        None => run(None),
+        Some(f) => {
+            let mut rec = GridRecording {
+                recorder: RunRecorder::new(f, prefix, steps, Throttle::default()),
+                log_odds,
+                truth,
+                growing_map: growing,
+            };
+            run(Some(&mut rec))
         }
     }
 }

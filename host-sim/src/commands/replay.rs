@@ -7,11 +7,12 @@ use crate::domain::grid::{GRID_CELLS, GridOptions, Preset, carmen_lidar};
 use crate::domain::recording::Recording;
 use crate::domain::{AssociationMode, FilterKind, Precision};
 use crate::drivers::ekf::replay;
-use crate::drivers::grid::{GridRun, GridRunOptions, carmen_inputs, run_slam};
+use crate::drivers::grid::{GridRun, GridRunOptions, carmen_inputs, run_slam_observed};
 use crate::inputs::faults::{FaultRates, FaultReport};
 use crate::inputs::readers::carmen::{
     CarmenLog, LaserMessage, beam_count, front_scans, read_log, resolve_log,
 };
+use crate::inputs::readers::rosbag::{self, BagOptions};
 use crate::inputs::readers::{DatasetSpec, thor};
 use crate::metrics::relations::RelationError;
 use crate::output::grid_map::write_outputs;
@@ -48,11 +49,18 @@ pub struct ReplayOptions {
     pub faults: Option<FaultRates>,
     /// Seed of the fault generator.
     pub fault_seed: u64,
+    /// Record the run into this MCAP file (Foxglove schemas).
+    pub mcap: Option<PathBuf>,
+    /// Topics and lidar mount of `rosbag:` datasets.
+    pub bag: BagOptions,
 }
 
 /// `host-sim replay`.
 pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
-    let lidar = matches!(args.dataset, DatasetSpec::Carmen(_) | DatasetSpec::Thor(_));
+    let lidar = matches!(
+        args.dataset,
+        DatasetSpec::Carmen(_) | DatasetSpec::Thor(_) | DatasetSpec::Rosbag(_)
+    );
     if args.filter == Some(FilterKind::GridSlam) || (args.filter.is_none() && lidar) {
         return grid_replay(args, quiet);
     }
@@ -74,6 +82,7 @@ pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
         }
     });
     let mode = settings.association.mode;
+    let mut mcap = super::open_mcap(args.mcap.as_deref())?;
     run_and_report(
         &recording,
         &settings,
@@ -84,11 +93,14 @@ pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
         quiet,
         started,
         faults,
-    )
+        mcap.as_mut().map(|f| (f, "")),
+    )?;
+    super::close_mcap(mcap, quiet)
 }
 
 /// Replays `recording`, scores it and writes `metrics.json`, the TUM trajectories and the
 /// pictures into `out`. `started` is when the process began its work (for the wall time).
+/// With `mcap` (a file and a topic prefix), the run is recorded there too.
 #[allow(clippy::too_many_arguments)]
 pub fn run_and_report(
     recording: &Recording,
@@ -100,6 +112,7 @@ pub fn run_and_report(
     quiet: bool,
     started: Instant,
     faults: Option<crate::inputs::faults::FaultReport>,
+    mcap: Option<(&mut crate::output::mcap::McapFile, &str)>,
 ) -> Result<()> {
     let progress = (!quiet).then(|| super::progress_bar(recording.events.len() as u64));
     // The ground truth is written while the filter runs.
@@ -115,6 +128,9 @@ pub fn run_and_report(
             .join()
             .map_err(|_| anyhow::anyhow!("writer thread panicked"))??;
         crate::output::write_all(out, recording, &run, &mut metrics, plots, started)?;
+        if let Some((file, prefix)) = mcap {
+            crate::output::mcap::scene::record_ekf_run(file, prefix, recording, &run, 0.1)?;
+        }
         Ok(metrics)
     })?;
     if !quiet {
@@ -141,7 +157,15 @@ pub(crate) fn options_from(
     grid: &GridOptions,
     log: &CarmenLog,
 ) -> Result<GridRunOptions> {
-    let n = beam_count(log);
+    options_for_beams(config, grid, beam_count(log))
+}
+
+/// The grid run's settings for a lidar of `n` beams (CARMEN geometry).
+pub(crate) fn options_for_beams(
+    config: Option<&Path>,
+    grid: &GridOptions,
+    n: usize,
+) -> Result<GridRunOptions> {
     let mut c = grid
         .preset
         .unwrap_or_else(|| Preset::for_particles(grid.particles))
@@ -184,6 +208,7 @@ pub(crate) fn metrics_json(
         })),
         "wall_time_s": wall,
         "filter_time_s": run.filter_time_s,
+        "recording_time_s": run.observer_time_s,
         "ms_per_scan": 1e3 * run.filter_time_s / scans.max(1) as f64,
         "skipped_scans": run.skipped_scans,
         "refused_odometry": run.refused_odometry,
@@ -253,18 +278,23 @@ pub(crate) fn report(quiet: bool, dataset: &str, metrics: &serde_json::Value, ou
 fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
     let start = Instant::now();
     let file = match &args.dataset {
-        DatasetSpec::Carmen(f) => f,
+        DatasetSpec::Carmen(f) | DatasetSpec::Rosbag(f) => f,
         DatasetSpec::Thor(dir) => {
             return thor_replay(dir, args.run, &args.out, quiet);
         }
         other => bail!(
-            "grid SLAM needs a lidar dataset (carmen:<file>), not {}",
+            "grid SLAM needs a lidar dataset (carmen:<file> or rosbag:<file.mcap>), not {}",
             other.family()
         ),
     };
     let path = resolve_log(file)?;
-    let log = read_log(&path)?;
-    let options = options_from(args.config.as_deref(), &args.grid, &log)?;
+    let (log, options) = lidar_log(
+        &args.dataset,
+        &path,
+        args.config.as_deref(),
+        &args.grid,
+        &args.bag,
+    )?;
     let clean = front_scans(&log);
     // Faults (`--faults`) go into a copy of the laser messages.
     let (faulty, faults) = match args.faults.filter(|f| !f.is_none()) {
@@ -287,11 +317,22 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
     };
     let pb = scan_progress_bar(scans.len(), quiet);
     let inputs = carmen_inputs(&scans);
-    let run = run_slam::<GRID_CELLS>(&inputs, Pose2::IDENTITY, &options, &|i| {
-        if i % 64 == 0 {
-            pb.set_position(i as u64);
-        }
-    })?;
+    let mut mcap = super::open_mcap(args.mcap.as_deref())?;
+    let log_odds = options.config.log_odds;
+    let run =
+        super::recorded_grid_run(mcap.as_mut(), "", inputs.len(), log_odds, &[], true, |o| {
+            run_slam_observed::<GRID_CELLS>(
+                &inputs,
+                Pose2::IDENTITY,
+                &options,
+                &|i| {
+                    if i % 64 == 0 {
+                        pb.set_position(i as u64);
+                    }
+                },
+                o,
+            )
+        })?;
     pb.finish_and_clear();
     let rel = super::relation_error_for(&path, args.grid.relations.as_deref(), &run)?;
     let name = path
@@ -306,7 +347,35 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
     )?;
     write_outputs(&args.out, &run, &options.config, &metrics)?;
     report(quiet, &name, &metrics, &args.out);
-    Ok(())
+    super::close_mcap(mcap, quiet)
+}
+
+/// The laser messages and grid settings of a lidar dataset at `path`: a CARMEN log, or a
+/// ROS 2 bag (its scans as laser messages, its lidar geometry).
+pub(crate) fn lidar_log(
+    spec: &DatasetSpec,
+    path: &Path,
+    config: Option<&Path>,
+    grid: &GridOptions,
+    bag: &BagOptions,
+) -> Result<(CarmenLog, GridRunOptions)> {
+    if !matches!(spec, DatasetSpec::Rosbag(_)) {
+        let log = read_log(path)?;
+        let options = options_from(config, grid, &log)?;
+        return Ok((log, options));
+    }
+    let bag = rosbag::read(path, bag)?;
+    let mut options = options_for_beams(config, grid, bag.lidar_beams())?;
+    options.lidar = bag.lidar;
+    let log = CarmenLog {
+        messages: bag
+            .scans
+            .into_iter()
+            .map(crate::inputs::readers::carmen::Message::Laser)
+            .collect(),
+        ..CarmenLog::default()
+    };
+    Ok((log, options))
 }
 
 /// `host-sim replay --dataset thor:<dir> --run N`: trajectory.tum, trajectory.png (with a

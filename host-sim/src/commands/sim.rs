@@ -8,7 +8,9 @@ use crate::domain::AssociationMode;
 use crate::domain::Precision;
 use crate::domain::config::Settings;
 use crate::domain::grid::{GlobalOptions, Preset};
-use crate::drivers::grid::{GridRunOptions, f32_pose, run_localizer, run_slam, sim_inputs};
+use crate::drivers::grid::{
+    GridRunOptions, f32_pose, run_localizer_observed, run_slam_observed, sim_inputs,
+};
 use crate::inputs::sim::lidar_world::{LidarRecording, SIM_GRID_CELLS, true_map};
 use crate::inputs::sim::simulate;
 use crate::metrics::grid::{ate_m, odometry_ate_m, yaw_rmse_deg};
@@ -45,6 +47,9 @@ pub struct SimOptions {
     pub grid_config: Option<PathBuf>,
     /// Global localization trials on the grid SLAM map (when enabled).
     pub global: GlobalOptions,
+    /// Record the runs into this MCAP file (topics under `/ekf`, `/grid_slam`,
+    /// `/grid_localize`).
+    pub mcap: Option<PathBuf>,
 }
 
 impl Default for SimOptions {
@@ -60,6 +65,7 @@ impl Default for SimOptions {
             grid_preset: None,
             grid_config: None,
             global: GlobalOptions::default(),
+            mcap: None,
         }
     }
 }
@@ -71,6 +77,7 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
     let started = std::time::Instant::now();
     let settings = Settings::load_for("sim", args.config.as_deref(), Some(args.association))?;
     let recording = simulate(&settings, args.seed)?;
+    let mut mcap = super::open_mcap(args.mcap.as_deref())?;
     run_and_report(
         &recording,
         &settings,
@@ -81,9 +88,10 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
         quiet,
         started,
         None,
+        mcap.as_mut().map(|f| (f, "ekf")),
     )?;
     if args.grid_particles == 0 {
-        return Ok(());
+        return super::close_mcap(mcap, quiet);
     }
     let world = crate::inputs::sim::lidar_world::LidarWorld::office();
     let rec = crate::inputs::sim::lidar_world::simulate(&world, args.seed)?;
@@ -99,7 +107,7 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
         ..preset
     };
     let out = args.out.join("grid");
-    let (slam, loc) = run_and_write(&rec, config, args.grid_particles, &out)?;
+    let (slam, loc) = run_and_write(&rec, config, args.grid_particles, &out, mcap.as_mut())?;
     if args.global.enabled {
         super::global::sim_cli(&rec, config, args.grid_particles, &args.global, &out, quiet)?;
     }
@@ -121,7 +129,7 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
         }
         println!("  outputs in {}", out.display());
     }
-    Ok(())
+    super::close_mcap(mcap, quiet)
 }
 
 /// Particle counts `host-sim sim --grid-particles` accepts.
@@ -129,12 +137,14 @@ pub const SIM_PARTICLES: [usize; 4] = [16, 32, 64, 200];
 
 /// Runs SLAM and the localizer with `particles` particles, writing
 /// `out/slam/` and `out/localize/` (map.pgm, map.yaml, map.png, trajectory.tum,
-/// groundtruth.tum, metrics.json). Returns the two metrics documents.
+/// groundtruth.tum, metrics.json), and recording both into `mcap` (under `/grid_slam` and
+/// `/grid_localize`) when given. Returns the two metrics documents.
 pub fn run_and_write(
     rec: &LidarRecording,
     config: GridPfConfig,
     particles: usize,
     out: &Path,
+    mut mcap: Option<&mut crate::output::mcap::McapFile>,
 ) -> Result<(serde_json::Value, serde_json::Value)> {
     let started = Instant::now();
     if !SIM_PARTICLES.contains(&particles) {
@@ -148,12 +158,25 @@ pub fn run_and_write(
         config,
         lidar: rec.lidar,
     };
-    let slam = run_slam::<SIM_GRID_CELLS>(&inputs, start, &options, &|_| {})?;
+    let truth_poses: Vec<Pose2<f64>> = rec.scans.iter().map(|s| s.truth).collect();
+    let n = inputs.len();
+    let lo = config.log_odds;
+    let slam = super::recorded_grid_run(
+        mcap.as_deref_mut(),
+        "grid_slam",
+        n,
+        lo,
+        &truth_poses,
+        true,
+        |o| run_slam_observed::<SIM_GRID_CELLS>(&inputs, start, &options, &|_| {}, o),
+    )?;
     let slam_wall = started.elapsed().as_secs_f64();
     let map = true_map(&rec.world.walls, &config);
     let view = map.view();
     let started = Instant::now();
-    let loc = run_localizer(&inputs, &view, start, &options, &|_| {})?;
+    let loc = super::recorded_grid_run(mcap, "grid_localize", n, lo, &truth_poses, false, |o| {
+        run_localizer_observed(&inputs, &view, start, &options, &|_| {}, o)
+    })?;
     let loc_wall = started.elapsed().as_secs_f64();
     let truth: Vec<(f64, Pose2<f32>)> = rec
         .scans

@@ -468,6 +468,7 @@ pub fn run_chain(
             ),
         ),
         landmarks,
+        map_history: Vec::new(),
         nis,
         sightings,
         counts,

@@ -51,6 +51,29 @@ pub struct MapLandmark {
     pub true_ids: BTreeMap<u32, usize>,
 }
 
+/// A landmark's estimate at one moment of a replay.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LandmarkEstimate {
+    /// Estimated position.
+    pub position: [f64; 2],
+    /// Its 2 × 2 covariance.
+    pub covariance: [[f64; 2]; 2],
+    /// The id the estimator bound it to (known-id mode only).
+    pub id: Option<u32>,
+}
+
+/// The map at one moment of a replay (for recordings such as `--mcap`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MapSnapshot {
+    /// Time, s.
+    pub stamp: f64,
+    /// The landmarks then, in the filter's order.
+    pub landmarks: Vec<LandmarkEstimate>,
+}
+
+/// Snapshots of the map a replay keeps, spread evenly over the recording's time span.
+pub const MAP_SNAPSHOTS: usize = 200;
+
 /// What the association did with the sightings.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct AssociationCounts {
@@ -92,6 +115,8 @@ pub struct ReplayRun {
     pub dead_reckoning: Vec<(f64, Pose2<f64>)>,
     /// The final map.
     pub landmarks: Vec<MapLandmark>,
+    /// The map as it grew: up to [`MAP_SNAPSHOTS`] snapshots after sighting batches.
+    pub map_history: Vec<MapSnapshot>,
     /// NIS of each accepted update.
     pub nis: Vec<f64>,
     /// Odometry steps.
@@ -213,6 +238,24 @@ impl<T: Real> Replayer<T> {
         })
     }
 
+    /// The landmarks' estimates now.
+    fn landmark_estimates(&self) -> Vec<LandmarkEstimate> {
+        (0..self.slam.landmark_count())
+            .map(|j| {
+                let p = self.slam.landmark(j).unwrap_or_default();
+                let c = self.slam.landmark_covariance(j).unwrap_or_default();
+                LandmarkEstimate {
+                    position: [p[0].to_f64(), p[1].to_f64()],
+                    covariance: [
+                        [c[(0, 0)].to_f64(), c[(0, 1)].to_f64()],
+                        [c[(1, 0)].to_f64(), c[(1, 1)].to_f64()],
+                    ],
+                    id: self.ids.id_of(j),
+                }
+            })
+            .collect()
+    }
+
     fn run(
         mut self,
         recording: &Recording,
@@ -228,6 +271,10 @@ impl<T: Real> Replayer<T> {
         let mut sightings = 0;
         let mut steps = 0;
         let mut batch: Vec<(RangeBearing<T>, Identity)> = Vec::with_capacity(MAX_BATCH);
+        let span = events.last().map_or(0.0, |e| e.stamp) - events.first().map_or(0.0, |e| e.stamp);
+        let snapshot_every = span / MAP_SNAPSHOTS as f64;
+        let mut next_snapshot = f64::NEG_INFINITY;
+        let mut map_history = Vec::new();
         // One clock around the whole loop: a clock read per step cost as much as a
         // prediction.
         let clock = Instant::now();
@@ -287,6 +334,13 @@ impl<T: Real> Replayer<T> {
                         j += 1;
                     }
                     self.observe_batch(&batch);
+                    if t >= next_snapshot {
+                        map_history.push(MapSnapshot {
+                            stamp: t,
+                            landmarks: self.landmark_estimates(),
+                        });
+                        next_snapshot = t + snapshot_every;
+                    }
                     i = j;
                 }
                 _ => i += 1,
@@ -296,19 +350,15 @@ impl<T: Real> Replayer<T> {
         if let Some(p) = progress {
             p.set_position(events.len() as u64);
         }
-        let landmarks = (0..self.slam.landmark_count())
-            .map(|j| {
-                let p = self.slam.landmark(j).unwrap_or_default();
-                let c = self.slam.landmark_covariance(j).unwrap_or_default();
-                MapLandmark {
-                    position: [p[0].to_f64(), p[1].to_f64()],
-                    covariance: [
-                        [c[(0, 0)].to_f64(), c[(0, 1)].to_f64()],
-                        [c[(1, 0)].to_f64(), c[(1, 1)].to_f64()],
-                    ],
-                    id: self.ids.id_of(j),
-                    true_ids: self.true_ids.get(j).cloned().unwrap_or_default(),
-                }
+        let landmarks = self
+            .landmark_estimates()
+            .into_iter()
+            .enumerate()
+            .map(|(j, l)| MapLandmark {
+                position: l.position,
+                covariance: l.covariance,
+                id: l.id,
+                true_ids: self.true_ids.get(j).cloned().unwrap_or_default(),
             })
             .collect();
         let health = self.supervisor.status();
@@ -320,6 +370,7 @@ impl<T: Real> Replayer<T> {
             trajectory,
             dead_reckoning: Vec::new(),
             landmarks,
+            map_history,
             nis: self.nis,
             steps,
             sightings,

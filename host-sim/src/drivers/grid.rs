@@ -49,8 +49,11 @@ pub struct GridRun {
     pub cells: Vec<i8>,
     /// Geometry of `cells`.
     pub geometry: GridGeometry,
-    /// Seconds spent in the filter (prediction, scoring, map writes).
+    /// Seconds spent in the filter (prediction, scoring, map writes), the observer's time
+    /// excluded.
     pub filter_time_s: f64,
+    /// Seconds spent in the observer (e.g. writing an MCAP recording).
+    pub observer_time_s: f64,
     /// Scans refused (no usable beam).
     pub skipped_scans: usize,
     /// Odometry poses refused (not finite): the prediction waits for the next good one.
@@ -66,6 +69,7 @@ impl GridRun {
             cells,
             geometry,
             filter_time_s: 0.0,
+            observer_time_s: 0.0,
             skipped_scans: 0,
             refused_odometry: 0,
             non_finite_beams: 0,
@@ -73,11 +77,45 @@ impl GridRun {
     }
 }
 
+/// What a run looks like after one scan: for recordings of the run (`--mcap`).
+#[derive(Clone, Copy, Debug)]
+pub struct GridStep<'a> {
+    /// Index of the scan in the inputs.
+    pub index: usize,
+    /// Its stamp, s.
+    pub stamp: f64,
+    /// Its odometry pose.
+    pub odometry: Pose2<f32>,
+    /// The estimate after the scan.
+    pub pose: Pose2<f32>,
+    /// The particles' pose covariance `[xx, xy, xθ, yy, yθ, θθ]`.
+    pub covariance: [f32; 6],
+    /// The scan's ranges.
+    pub ranges: &'a [f32],
+    /// The lidar geometry.
+    pub lidar: &'a LidarGeometry,
+    /// The particles.
+    pub particles: &'a [Pose2<f32>],
+    /// The map after the scan, when [`GridObserver::wants_map`] asked for it.
+    pub map: Option<GridView<'a>>,
+}
+
+/// Sees every step of a grid run (e.g. to record it).
+pub trait GridObserver: Send {
+    /// Whether step `index` should carry the map (copying it costs time).
+    fn wants_map(&self, index: usize) -> bool;
+    /// Called after each scan.
+    fn step(&mut self, step: &GridStep<'_>) -> Result<()>;
+}
+
 /// What the drive loop needs of a grid filter: SLAM and the localizer alike.
 trait GridFilter {
     fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError>;
     fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError>;
     fn pose(&self) -> Pose2<f32>;
+    fn particles(&self) -> &[Pose2<f32>];
+    fn covariance(&self) -> [f32; 6];
+    fn view(&self) -> GridView<'_>;
 }
 
 impl<const W: usize, const H: usize, const P: usize, const B: usize> GridFilter
@@ -92,6 +130,15 @@ impl<const W: usize, const H: usize, const P: usize, const B: usize> GridFilter
     fn pose(&self) -> Pose2<f32> {
         GridSlam::pose(self)
     }
+    fn particles(&self) -> &[Pose2<f32>] {
+        self.filter().poses()
+    }
+    fn covariance(&self) -> [f32; 6] {
+        self.filter().pose_covariance()
+    }
+    fn view(&self) -> GridView<'_> {
+        self.map().view()
+    }
 }
 
 impl<const P: usize, const B: usize> GridFilter for GridLocalizer<'_, P, B> {
@@ -104,16 +151,26 @@ impl<const P: usize, const B: usize> GridFilter for GridLocalizer<'_, P, B> {
     fn pose(&self) -> Pose2<f32> {
         GridLocalizer::pose(self)
     }
+    fn particles(&self) -> &[Pose2<f32>] {
+        self.filter().poses()
+    }
+    fn covariance(&self) -> [f32; 6] {
+        self.filter().pose_covariance()
+    }
+    fn view(&self) -> GridView<'_> {
+        *self.map()
+    }
 }
 
 /// The drive loop, written once: predict with the odometry increment, observe the scan,
-/// record the pose.
+/// record the pose (and show the step to `observer`).
 fn drive(
     filter: &mut impl GridFilter,
     inputs: &[GridInput<'_>],
     lidar: &LidarGeometry,
     run: &mut GridRun,
     progress: &dyn Fn(usize),
+    mut observer: Option<&mut dyn GridObserver>,
 ) -> Result<()> {
     let mut previous: Option<Pose2<f32>> = None;
     for (i, input) in inputs.iter().enumerate() {
@@ -133,6 +190,21 @@ fn drive(
                 run.skipped_scans += 1;
                 run.trajectory.push((input.stamp, filter.pose()));
             }
+        }
+        if let Some(o) = observer.as_deref_mut() {
+            let t0 = Instant::now();
+            o.step(&GridStep {
+                index: i,
+                stamp: input.stamp,
+                odometry: odom,
+                pose: filter.pose(),
+                covariance: filter.covariance(),
+                ranges: input.ranges,
+                lidar,
+                particles: filter.particles(),
+                map: o.wants_map(i).then(|| filter.view()),
+            })?;
+            run.observer_time_s += t0.elapsed().as_secs_f64();
         }
         progress(i);
     }
@@ -165,6 +237,17 @@ pub fn run_slam<const N: usize>(
     options: &GridRunOptions,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<GridRun> {
+    run_slam_observed::<N>(inputs, start, options, progress, None)
+}
+
+/// [`run_slam`] with every step shown to `observer`.
+pub fn run_slam_observed<const N: usize>(
+    inputs: &[GridInput<'_>],
+    start: Pose2<f32>,
+    options: &GridRunOptions,
+    progress: &(dyn Fn(usize) + Sync),
+    observer: Option<&mut dyn GridObserver>,
+) -> Result<GridRun> {
     std::thread::scope(|scope| {
         let worker = std::thread::Builder::new()
             .stack_size(64 << 20)
@@ -176,7 +259,8 @@ pub fn run_slam<const N: usize>(
                     inputs,
                     start,
                     options,
-                    progress
+                    progress,
+                    observer
                 )
             })?;
         worker
@@ -190,6 +274,7 @@ fn slam_p<const N: usize, const P: usize>(
     start: Pose2<f32>,
     options: &GridRunOptions,
     progress: &dyn Fn(usize),
+    observer: Option<&mut dyn GridObserver>,
 ) -> Result<GridRun> {
     let c = options.config;
     let mut grid = Box::new(OccupancyGrid::<N, N>::centred(c.resolution, c.log_odds));
@@ -198,9 +283,16 @@ fn slam_p<const N: usize, const P: usize>(
     {
         let mut slam = GridSlam::<N, N, P, MAX_BEAMS>::new(&mut grid, c, start)
             .map_err(|e| anyhow!("grid SLAM: {e}"))?;
-        drive(&mut slam, inputs, &options.lidar, &mut run, progress)?;
+        drive(
+            &mut slam,
+            inputs,
+            &options.lidar,
+            &mut run,
+            progress,
+            observer,
+        )?;
     }
-    run.filter_time_s = t0.elapsed().as_secs_f64();
+    run.filter_time_s = t0.elapsed().as_secs_f64() - run.observer_time_s;
     run.cells = grid.cells().to_vec();
     Ok(run)
 }
@@ -213,6 +305,18 @@ pub fn run_localizer(
     options: &GridRunOptions,
     progress: &dyn Fn(usize),
 ) -> Result<GridRun> {
+    run_localizer_observed(inputs, map, start, options, progress, None)
+}
+
+/// [`run_localizer`] with every step shown to `observer`.
+pub fn run_localizer_observed(
+    inputs: &[GridInput<'_>],
+    map: &GridView<'_>,
+    start: Pose2<f32>,
+    options: &GridRunOptions,
+    progress: &dyn Fn(usize),
+    observer: Option<&mut dyn GridObserver>,
+) -> Result<GridRun> {
     dispatch_particles!(
         options.particles,
         localize_p,
@@ -221,7 +325,8 @@ pub fn run_localizer(
         map,
         start,
         options,
-        progress
+        progress,
+        observer
     )
 }
 
@@ -231,13 +336,21 @@ fn localize_p<const P: usize>(
     start: Pose2<f32>,
     options: &GridRunOptions,
     progress: &dyn Fn(usize),
+    observer: Option<&mut dyn GridObserver>,
 ) -> Result<GridRun> {
     let mut run = GridRun::empty(map.cells().to_vec(), *map.geometry(), inputs.len());
     let t0 = Instant::now();
     let mut loc = GridLocalizer::<P, MAX_BEAMS>::new(*map, options.config, start)
         .map_err(|e| anyhow!("grid localizer: {e}"))?;
-    drive(&mut loc, inputs, &options.lidar, &mut run, progress)?;
-    run.filter_time_s = t0.elapsed().as_secs_f64();
+    drive(
+        &mut loc,
+        inputs,
+        &options.lidar,
+        &mut run,
+        progress,
+        observer,
+    )?;
+    run.filter_time_s = t0.elapsed().as_secs_f64() - run.observer_time_s;
     Ok(run)
 }
 

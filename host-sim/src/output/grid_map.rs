@@ -9,13 +9,17 @@ use microslam::pf::GridPfConfig;
 use std::path::Path;
 
 /// Occupancy probability of a cell value.
-fn probability(value: i8, log_odds: &LogOdds) -> f64 {
+pub(crate) fn probability(value: i8, log_odds: &LogOdds) -> f64 {
     let l = f64::from(value) * f64::from(log_odds.nats_per_unit());
     1.0 / (1.0 + (-l).exp())
 }
 
 /// The bounding box `(x0, y0, x1, y1)` (exclusive ends) of the known cells plus a margin.
-fn known_box(cells: &[i8], g: &GridGeometry, margin: usize) -> (usize, usize, usize, usize) {
+pub(crate) fn known_box(
+    cells: &[i8],
+    g: &GridGeometry,
+    margin: usize,
+) -> (usize, usize, usize, usize) {
     let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
     for (i, c) in cells.iter().enumerate() {
         if *c != 0 {

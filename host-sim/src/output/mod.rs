@@ -1,8 +1,10 @@
 //! Layer 4: files written after a run: TUM trajectories, `metrics.json`, `landmarks.csv`,
-//! ROS `map_server` maps, PNG pictures.
+//! ROS `map_server` maps, PNG pictures, MCAP recordings and ROS 2 bags.
 
 pub mod grid_map;
+pub mod mcap;
 mod plots;
+pub mod rosbag;
 pub mod thor;
 mod tum;
 

@@ -6,6 +6,7 @@
 pub mod carmen;
 pub mod mrclam;
 pub mod reference;
+pub mod rosbag;
 mod text;
 pub mod thor;
 
@@ -27,6 +28,9 @@ pub enum DatasetSpec {
     Carmen(String),
     /// THOR `.npz` files: a folder, or a name under the datasets folder (`thor:thor`).
     Thor(String),
+    /// A ROS 2 bag: an MCAP file with `sensor_msgs/msg/LaserScan` and
+    /// `nav_msgs/msg/Odometry` messages (`rosbag:<file.mcap>`).
+    Rosbag(String),
 }
 
 impl FromStr for DatasetSpec {
@@ -36,8 +40,9 @@ impl FromStr for DatasetSpec {
             Some(("mrclam", dir)) if !dir.is_empty() => Ok(Self::Mrclam(dir.to_owned())),
             Some(("carmen", file)) if !file.is_empty() => Ok(Self::Carmen(file.to_owned())),
             Some(("thor", dir)) if !dir.is_empty() => Ok(Self::Thor(dir.to_owned())),
+            Some(("rosbag", file)) if !file.is_empty() => Ok(Self::Rosbag(file.to_owned())),
             _ => Err(format!(
-                "unknown dataset `{s}`: expected `mrclam:<dir>` (e.g. mrclam:dataset6, or mrclam:dataset6/robot3 for one robot), `carmen:<file>` or `thor:<dir>`"
+                "unknown dataset `{s}`: expected `mrclam:<dir>` (e.g. mrclam:dataset6, or mrclam:dataset6/robot3 for one robot), `carmen:<file>`, `thor:<dir>` or `rosbag:<file.mcap>`"
             )),
         }
     }
@@ -50,6 +55,7 @@ impl DatasetSpec {
             Self::Mrclam(_) => "mrclam",
             Self::Carmen(_) => "carmen",
             Self::Thor(_) => "thor",
+            Self::Rosbag(_) => "rosbag",
         }
     }
 }
@@ -62,7 +68,7 @@ pub fn read(spec: &DatasetSpec, robot: u8) -> Result<Recording> {
             let path = crate::domain::datasets::resolve("mrclam", dir)?;
             Ok(mrclam::read(&path, robot)?)
         }
-        DatasetSpec::Carmen(_) | DatasetSpec::Thor(_) => {
+        DatasetSpec::Carmen(_) | DatasetSpec::Thor(_) | DatasetSpec::Rosbag(_) => {
             bail!(
                 "`{}` datasets are replayed with `--filter grid-slam`",
                 spec.family()
