@@ -471,6 +471,7 @@ pub fn run_chain(
         nis,
         sightings,
         counts,
+        calibration: crate::drivers::ekf::Calibration::default(),
         filter_time,
     };
     Ok(ChainRun { run, classes })
