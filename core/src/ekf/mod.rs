@@ -13,6 +13,17 @@
 //! | [`EkfSlam::add_landmark`] | two new rows, the robot rows move down | O(n) |
 //! | [`EkfSlam::innovation`], [`EkfSlam::pose_covariance`], one entry of [`EkfSlam::active_covariance`] | reads | O(n) |
 //!
+//! # Self-calibration
+//!
+//! Systematic sensor errors can be estimated as states instead of being covered by
+//! noise: [`EkfSlam::estimate_odometry_scale`] (speed and turn-rate scale factors,
+//! `(s_v v, s_ω ω)` drive the prediction) and [`EkfSlam::estimate_range_bias`] (sightings
+//! measure `r + b₀ + b₂ β²`). Each takes one two-state *calibration slot* before the
+//! landmarks — in the mean after the pose, in the factor first — so it costs a landmark
+//! slot and no memory; [`EkfSlam::landmark_state`] gives a landmark's place in the public
+//! state. Prediction stays O(n): the robot's rows gain `F_s L_s` in the slot's columns,
+//! left of the robot block, so the factor stays triangular and `D` is computed as before.
+//!
 //! Corrections to seed 1: the measurement model is polar on both sides (eq. 12 mixes a
 //! Cartesian prediction with a polar measurement), and all noise is configuration (eq. 9's
 //! constant `Q` is gone).
@@ -328,8 +339,8 @@ pub struct EkfSlam<T: Real, const N: usize, const P: usize> {
     mean: SVector<T, N>,
     /// `L` and `D`, packed (see [`covariance`]); beyond the active part it stays zero.
     factor: [T; P],
-    /// Number of active two-state slots: the odometry scale slot, when estimated, then
-    /// the landmarks (fixed-size integers keep the layout the same on 32- and 64-bit).
+    /// Number of active two-state slots: the calibration slots, then the landmarks
+    /// (fixed-size integers keep the layout the same on 32- and 64-bit).
     slots: u16,
     /// Which calibration slots come before the landmarks, as bits: [`SCALE_SLOT`] (the
     /// odometry scale factors, then slot 0) and [`BIAS_SLOT`] (the range bias, after them).
@@ -423,7 +434,8 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     }
 
     /// Dimension of the active part of the state, `3 + 2n` for `n` active slots (the
-    /// landmarks, plus one when the odometry scale factors are estimated).
+    /// landmarks and the calibration slots, [`EkfSlam::estimate_odometry_scale`] and
+    /// [`EkfSlam::estimate_range_bias`]).
     pub fn active_dim(&self) -> usize {
         3 + 2 * usize::from(self.slots)
     }
@@ -449,8 +461,9 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         (self.calibration & BIAS_SLOT != 0).then(|| usize::from(self.calibration & SCALE_SLOT != 0))
     }
 
-    /// Appends a calibration slot (flag `bit`) with independent priors `variances` and
-    /// mean `mean`; only before the first landmark. The robot rows move two rows down.
+    /// Appends a calibration slot (flag `bit`) with mean `mean` and independent priors of
+    /// standard deviations `stds`; only before the first landmark. The robot rows move two
+    /// rows down.
     fn add_calibration_slot(
         &mut self,
         bit: u16,
@@ -533,10 +546,10 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// and `turn_std` and are constant (no process noise). They take the first
     /// landmark slot: [`EkfSlam::MAX_LANDMARKS`] − 1 landmarks remain.
     ///
-    /// Only before the first landmark, once after [`EkfSlam::init`]. Errors (state
-    /// unchanged): [`EkfError::InvalidNoise`] for a negative or non-finite figure,
-    /// [`EkfError::MapFull`] when a landmark exists, the factors are already estimated or
-    /// there is no slot.
+    /// Only before the first landmark and before [`EkfSlam::estimate_range_bias`], once
+    /// after [`EkfSlam::init`]. Errors (state unchanged): [`EkfError::InvalidNoise`] for a
+    /// negative or non-finite figure, [`EkfError::MapFull`] when a landmark or a
+    /// calibration slot exists or there is no slot.
     pub fn estimate_odometry_scale(&mut self, speed_std: T, turn_std: T) -> Result<(), EkfError> {
         if self.calibration != 0 {
             return self.reject(EkfError::MapFull);
