@@ -307,7 +307,8 @@ fn dataset_ekf_settings_travel_over_the_wire() {
     let dir = host_sim::domain::datasets::resolve("mrclam", "dataset6").expect("MRCLAM dataset 6");
     let recording = host_sim::inputs::readers::mrclam::read(&dir, 1).expect("robot 1 reads");
     let tuned = Settings::load_for("mrclam", None, None).expect("mrclam settings");
-    let settings = EkfSettings::from_config(&tuned.ekf_config::<f32>());
+    let settings = EkfSettings::from_config(&tuned.ekf_config::<f32>())
+        .with_calibration(tuned.calibration_priors());
     let with = host_sim::drivers::hil::messages_for(&recording, Some(settings));
     let without = host_sim::drivers::hil::messages_for(&recording, None);
     assert_eq!(with.len(), without.len() + 1);

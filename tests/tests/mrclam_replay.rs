@@ -84,8 +84,14 @@ fn check_known(robot: u8) {
         .find(|k| k.0 == robot)
         .expect("robot");
     let [e0, e2] = m.calibration.range_bias.expect("range bias estimated");
-    assert!((e0 - b0).abs() < 0.03 && (e2 - b2).abs() < 0.15, "{e0} {e2}");
-    let [sv, sw] = m.calibration.odometry_scale.expect("odometry scale estimated");
+    assert!(
+        (e0 - b0).abs() < 0.03 && (e2 - b2).abs() < 0.15,
+        "{e0} {e2}"
+    );
+    let [sv, sw] = m
+        .calibration
+        .odometry_scale
+        .expect("odometry scale estimated");
     assert!((0.9..0.98).contains(&sv) && sw == 1.0, "{sv} {sw}");
     // f32, as on the microcontroller, within 1 mm of f64.
     let m32 = run(robot, AssociationMode::Known, Precision::F32);

@@ -313,6 +313,19 @@ impl Settings {
         }
     }
 
+    /// The self-calibration priors in the order of the wire's `EkfSettings::calibration`:
+    /// speed scale, turn-rate scale, range bias offset, range bias curvature (0: off).
+    pub fn calibration_priors(&self) -> [f32; 4] {
+        let (o, s) = (&self.odometry, &self.sighting);
+        [
+            o.speed_scale_std,
+            o.turn_scale_std,
+            s.range_bias_offset_std,
+            s.range_bias_curvature_std,
+        ]
+        .map(|v| v as f32)
+    }
+
     /// The supervision settings of the EKF's updates (`[recovery]`).
     pub fn health_config<T: Real>(&self) -> HealthConfig<T> {
         let r = &self.recovery;
