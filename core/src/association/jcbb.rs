@@ -117,6 +117,7 @@ impl<T: Real, const B: usize, const K: usize> Jcbb<T, B, K> {
         let candidates = candidates.get(..m).unwrap_or(&[]);
         let mut search = Search::<T, B, K> {
             covariance: slam.active_covariance(),
+            first_landmark: slam.landmark_state(0),
             candidates,
             thresholds: &self.joint_thresholds,
             pairs: [(0, 0); B],
@@ -169,6 +170,8 @@ impl<T: Real, const B: usize, const K: usize> Jcbb<T, B, K> {
 /// State of one branch-and-bound search.
 struct Search<'a, T: Real, const B: usize, const K: usize> {
     covariance: CovarianceView<'a, T>,
+    /// Public state index of landmark 0's x ([`EkfSlam::landmark_state`]).
+    first_landmark: usize,
     candidates: &'a [Candidates<T, K>],
     thresholds: &'a [T; B],
     /// The current hypothesis: (sighting, candidate index) for each of `depth` pairings.
@@ -275,7 +278,7 @@ impl<T: Real, const B: usize, const K: usize> Search<'_, T, B, K> {
             new.innovation.jacobian_robot,
             new.innovation.jacobian_landmark,
         );
-        let jk = 3 + 2 * new.landmark;
+        let jk = self.first_landmark + 2 * new.landmark;
         let p = self.covariance;
         let p_rr = p.block::<3, 3>(0, 0)?;
         let p_r_jk = p.block::<3, 2>(0, jk)?;
@@ -287,7 +290,7 @@ impl<T: Real, const B: usize, const K: usize> Search<'_, T, B, K> {
                 old.innovation.jacobian_robot,
                 old.innovation.jacobian_landmark,
             );
-            let ja = 3 + 2 * old.landmark;
+            let ja = self.first_landmark + 2 * old.landmark;
             let p_ja_r = p.block::<2, 3>(ja, 0)?;
             let p_ja_jk = p.block::<2, 2>(ja, jk)?;
             // C[a][k] = H_a P H_kᵀ, H nonzero on the robot and the landmark columns.

@@ -13,6 +13,17 @@
 //! | [`EkfSlam::add_landmark`] | two new rows, the robot rows move down | O(n) |
 //! | [`EkfSlam::innovation`], [`EkfSlam::pose_covariance`], one entry of [`EkfSlam::active_covariance`] | reads | O(n) |
 //!
+//! # Self-calibration
+//!
+//! Systematic sensor errors can be estimated as states instead of being covered by
+//! noise: [`EkfSlam::estimate_odometry_scale`] (speed and turn-rate scale factors,
+//! `(s_v v, s_ω ω)` drive the prediction) and [`EkfSlam::estimate_range_bias`] (sightings
+//! measure `r + b₀ + b₂ β²`). Each takes one two-state *calibration slot* before the
+//! landmarks — in the mean after the pose, in the factor first — so it costs a landmark
+//! slot and no memory; [`EkfSlam::landmark_state`] gives a landmark's place in the public
+//! state. Prediction stays O(n): the robot's rows gain `F_s L_s` in the slot's columns,
+//! left of the robot block, so the factor stays triangular and `D` is computed as before.
+//!
 //! Corrections to seed 1: the measurement model is polar on both sides (eq. 12 mixes a
 //! Cartesian prediction with a polar measurement), and all noise is configuration (eq. 9's
 //! constant `Q` is gone).
@@ -125,6 +136,13 @@ pub const MAX_POSITION_VARIANCE: f64 = 1.0e4;
 /// the observation model needs; predictions and new landmarks that would go further are
 /// refused ([`EkfError::NumericalFailure`]). Keep the map origin near the work area.
 pub const MAX_COORDINATE: f64 = 1.0e5;
+
+/// Bit of the odometry scale factors' calibration slot.
+const SCALE_SLOT: u16 = 1;
+/// Bit of the range bias' calibration slot.
+const BIAS_SLOT: u16 = 2;
+/// Calibration slots there can be (odometry scale, range bias).
+const MAX_CALIBRATION_SLOTS: usize = 2;
 
 /// Bytes an `f32` filter uses beyond its mean and covariance factor (configuration,
 /// counters).
@@ -321,20 +339,24 @@ pub struct EkfSlam<T: Real, const N: usize, const P: usize> {
     mean: SVector<T, N>,
     /// `L` and `D`, packed (see [`covariance`]); beyond the active part it stays zero.
     factor: [T; P],
-    /// Number of active landmarks (`u32` keeps the layout the same on 32- and 64-bit).
-    landmarks: u32,
+    /// Number of active two-state slots: the calibration slots, then the landmarks
+    /// (fixed-size integers keep the layout the same on 32- and 64-bit).
+    slots: u16,
+    /// Which calibration slots come before the landmarks, as bits: [`SCALE_SLOT`] (the
+    /// odometry scale factors, then slot 0) and [`BIAS_SLOT`] (the range bias, after them).
+    calibration: u16,
     config: EkfConfig<T>,
     counters: EkfCounters,
 }
 
 /// One scalar measurement row: `(index inside the factor, coefficient)` for the five
-/// states a sighting depends on.
-type SparseRow<T> = [(usize, T); 5];
+/// states a sighting depends on, and the two of the range bias (zero when not estimated).
+type SparseRow<T> = [(usize, T); 7];
 
 impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// Checked at compile time wherever the type is constructed.
     const DIMENSIONS_ARE_VALID: () = assert!(
-        N >= 3 && (N - 3).is_multiple_of(2) && P == N * (N + 1) / 2,
+        N >= 3 && (N - 3).is_multiple_of(2) && P == N * (N + 1) / 2 && N < 2 * u16::MAX as usize,
         "EkfSlam<T, N, P> needs N = 3 + 2 * max_landmarks and P = N (N + 1) / 2: \
          use state_dim() and factor_len()"
     );
@@ -351,7 +373,8 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         Self {
             mean: SVector::from_array_storage(ArrayStorage([[T::ZERO; N]; 1])),
             factor: [T::ZERO; P],
-            landmarks: 0,
+            slots: 0,
+            calibration: 0,
             config,
             counters: EkfCounters {
                 predictions: 0,
@@ -379,7 +402,8 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         self.mean[0] = pose.x;
         self.mean[1] = pose.y;
         self.mean[2] = wrap_angle(pose.theta);
-        self.landmarks = 0;
+        self.slots = 0;
+        self.calibration = 0;
         self.config = config;
         self.counters = EkfCounters::default();
         Ok(())
@@ -406,12 +430,137 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
 
     /// Number of landmarks in the state.
     pub fn landmark_count(&self) -> usize {
-        self.landmarks as usize
+        usize::from(self.slots.saturating_sub(self.calibration_slots() as u16))
     }
 
-    /// Dimension of the active part of the state, `3 + 2n`.
+    /// Dimension of the active part of the state, `3 + 2n` for `n` active slots (the
+    /// landmarks and the calibration slots, [`EkfSlam::estimate_odometry_scale`] and
+    /// [`EkfSlam::estimate_range_bias`]).
     pub fn active_dim(&self) -> usize {
-        3 + 2 * self.landmark_count()
+        3 + 2 * usize::from(self.slots)
+    }
+
+    /// Index of landmark `index`'s x in the public state order (`[x, y, θ, …]`, as in
+    /// [`EkfSlam::active_mean`] and [`EkfSlam::active_covariance`]); its y follows.
+    pub fn landmark_state(&self, index: usize) -> usize {
+        3 + 2 * self.landmark_slot(index)
+    }
+
+    /// Number of calibration slots before the landmarks.
+    fn calibration_slots(&self) -> usize {
+        self.calibration.count_ones() as usize
+    }
+
+    /// Index of landmark `index` inside the factor (see [`covariance`]).
+    fn landmark_slot(&self, index: usize) -> usize {
+        index + self.calibration_slots()
+    }
+
+    /// The slot of the range bias, when it is estimated.
+    fn bias_slot(&self) -> Option<usize> {
+        (self.calibration & BIAS_SLOT != 0).then(|| usize::from(self.calibration & SCALE_SLOT != 0))
+    }
+
+    /// Appends a calibration slot (flag `bit`) with mean `mean` and independent priors of
+    /// standard deviations `stds`; only before the first landmark. The robot rows move two
+    /// rows down.
+    fn add_calibration_slot(
+        &mut self,
+        bit: u16,
+        mean: [T; 2],
+        stds: [T; 2],
+    ) -> Result<(), EkfError> {
+        let valid = |v: T| v.finite() && v >= T::ZERO;
+        if !stds.iter().all(|&v| valid(v)) {
+            return self.reject(EkfError::InvalidNoise);
+        }
+        let slot = self.calibration_slots();
+        if usize::from(self.slots) != slot
+            || self.calibration & bit != 0
+            || slot >= Self::MAX_LANDMARKS
+        {
+            return self.reject(EkfError::MapFull);
+        }
+        let (l, d) = self.robot_block();
+        let r0 = 2 * slot;
+        // The robot rows' columns 0..r0 (coupling to the earlier calibration slots).
+        let mut coupling = [[T::ZERO; 3]; 2 * MAX_CALIBRATION_SLOTS];
+        for (c, row) in coupling.iter_mut().enumerate().take(r0) {
+            for (a, v) in row.iter_mut().enumerate() {
+                *v = strict_row(&self.factor, r0 + a)
+                    .get(c)
+                    .copied()
+                    .unwrap_or(T::ZERO);
+            }
+        }
+        if let Some(rows) = self.factor.get_mut(row_start(r0)..row_start(r0 + 5)) {
+            rows.fill(T::ZERO);
+        }
+        for (i, std) in stds.iter().enumerate() {
+            if let Some(p) = self.factor.get_mut(row_start(r0 + i) + r0 + i) {
+                *p = *std * *std;
+            }
+        }
+        self.mean[3 + r0] = mean[0];
+        self.mean[3 + r0 + 1] = mean[1];
+        self.slots += 1;
+        self.calibration |= bit;
+        for (c, row) in coupling.iter().enumerate().take(r0) {
+            for (a, v) in row.iter().enumerate() {
+                if let Some(e) = self.factor.get_mut(row_start(r0 + 2 + a) + c) {
+                    *e = *v;
+                }
+            }
+        }
+        self.set_robot_block(&l, &d);
+        Ok(())
+    }
+
+    /// Makes the range bias of the sightings two more states, `b₀` and `b₂`: the sensor
+    /// then measures `r + b₀ + b₂ β²` for a landmark at range `r` and bearing `β` (a
+    /// camera whose ranges are too long straight ahead and too short at the image edges
+    /// has `b₀ > 0`, `b₂ < 0`). Both start at 0 with standard deviations `offset_std` (m)
+    /// and `curvature_std` (m/rad²) and are constant; every sighting of a landmark from
+    /// another bearing makes them observable. They take the next slot (after the
+    /// odometry scale factors, when those are estimated): one landmark less.
+    ///
+    /// Only before the first landmark, once after [`EkfSlam::init`]. Errors (state
+    /// unchanged): [`EkfError::InvalidNoise`] for a negative or non-finite figure,
+    /// [`EkfError::MapFull`] when a landmark exists, the bias is already estimated or
+    /// there is no slot.
+    pub fn estimate_range_bias(&mut self, offset_std: T, curvature_std: T) -> Result<(), EkfError> {
+        self.add_calibration_slot(BIAS_SLOT, [T::ZERO, T::ZERO], [offset_std, curvature_std])
+    }
+
+    /// The estimated range bias `(b₀, b₂)`, or `None` when it is not estimated
+    /// ([`EkfSlam::estimate_range_bias`]).
+    pub fn range_bias(&self) -> Option<(T, T)> {
+        let s = self.bias_slot()?;
+        Some((self.mean[3 + 2 * s], self.mean[4 + 2 * s]))
+    }
+
+    /// Makes the odometry's speed and turn-rate scale factors `(s_v, s_ω)` two more
+    /// states, estimated with the landmarks: [`EkfSlam::predict_velocity`] then moves the
+    /// robot by `(s_v v, s_ω ω)`, and every sighting corrects the factors through their
+    /// correlation with the pose. They start at 1 with standard deviations `speed_std`
+    /// and `turn_std` and are constant (no process noise). They take the first
+    /// landmark slot: [`EkfSlam::MAX_LANDMARKS`] − 1 landmarks remain.
+    ///
+    /// Only before the first landmark and before [`EkfSlam::estimate_range_bias`], once
+    /// after [`EkfSlam::init`]. Errors (state unchanged): [`EkfError::InvalidNoise`] for a
+    /// negative or non-finite figure, [`EkfError::MapFull`] when a landmark or a
+    /// calibration slot exists or there is no slot.
+    pub fn estimate_odometry_scale(&mut self, speed_std: T, turn_std: T) -> Result<(), EkfError> {
+        if self.calibration != 0 {
+            return self.reject(EkfError::MapFull);
+        }
+        self.add_calibration_slot(SCALE_SLOT, [T::ONE, T::ONE], [speed_std, turn_std])
+    }
+
+    /// The estimated odometry scale factors `(s_v, s_ω)`, or `None` when they are not
+    /// estimated ([`EkfSlam::estimate_odometry_scale`]).
+    pub fn odometry_scale(&self) -> Option<(T, T)> {
+        (self.calibration & SCALE_SLOT != 0).then(|| (self.mean[3], self.mean[4]))
     }
 
     /// Current robot pose estimate.
@@ -426,14 +575,17 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
 
     /// Position of landmark `index`, or `None` when there is no such landmark.
     pub fn landmark(&self, index: usize) -> Option<Vector2<T>> {
-        (index < self.landmark_count())
-            .then(|| self.mean.fixed_rows::<2>(3 + 2 * index).into_owned())
+        (index < self.landmark_count()).then(|| {
+            self.mean
+                .fixed_rows::<2>(self.landmark_state(index))
+                .into_owned()
+        })
     }
 
     /// 2 × 2 covariance of landmark `index`, or `None` when there is no such landmark
     /// (O(index)).
     pub fn landmark_covariance(&self, index: usize) -> Option<Matrix2<T>> {
-        let i = 2 * index;
+        let i = 2 * self.landmark_slot(index);
         (index < self.landmark_count())
             .then(|| Matrix2::from_fn(|r, c| internal_entry(&self.factor, i + r, i + c)))
     }
@@ -531,6 +683,25 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         (coupled + own, largest)
     }
 
+    /// The range bias' first factor index `bi` and its two rows of `L` (unit diagonal
+    /// included) over columns `0..=bi + 1`, when the bias is estimated.
+    fn bias_rows(&self) -> Option<(usize, [[T; 2 * MAX_CALIBRATION_SLOTS]; 2])> {
+        let bi = 2 * self.bias_slot()?;
+        let mut rows = [[T::ZERO; 2 * MAX_CALIBRATION_SLOTS]; 2];
+        for (a, row) in rows.iter_mut().enumerate() {
+            for (c, v) in row.iter_mut().enumerate().take(bi + a) {
+                *v = strict_row(&self.factor, bi + a)
+                    .get(c)
+                    .copied()
+                    .unwrap_or(T::ZERO);
+            }
+            if let Some(v) = row.get_mut(bi + a) {
+                *v = T::ONE;
+            }
+        }
+        Some((bi, rows))
+    }
+
     /// The robot's three rows over the landmark columns `c < 2n` (`L_rm`), mutable.
     fn robot_coupling_mut(&mut self) -> Option<[&mut [T]; 3]> {
         let r0 = self.active_dim() - 3;
@@ -552,7 +723,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         }
         let step = compose_increment(&self.pose(), increment);
         let q = self.config.increment_noise.covariance(increment);
-        self.apply_motion(&step, &[q[(0, 0)], q[(1, 1)], q[(2, 2)]])
+        self.apply_motion(&step, &[q[(0, 0)], q[(1, 1)], q[(2, 2)]], None)
     }
 
     /// Prediction with velocities `(v, ω)` held for `dt` seconds (seed 2, eq. 6), with the
@@ -570,9 +741,16 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         if dt == T::ZERO {
             return Ok(());
         }
-        let step = integrate_velocity(&self.pose(), v, omega, dt);
         let q = self.config.velocity_noise.covariance(v, omega, dt);
-        self.apply_motion(&step, &[q[(0, 0)], q[(1, 1)]])
+        let Some((sv, sw)) = self.odometry_scale() else {
+            let step = integrate_velocity(&self.pose(), v, omega, dt);
+            return self.apply_motion(&step, &[q[(0, 0)], q[(1, 1)]], None);
+        };
+        let step = integrate_velocity(&self.pose(), sv * v, sw * omega, dt);
+        // ∂pose'/∂(s_v, s_ω): the input Jacobian's columns times the measured v and ω.
+        let g = &step.wrt_input;
+        let wrt_scale = [0, 1, 2].map(|a| [g[(a, 0)] * v, g[(a, 1)] * omega]);
+        self.apply_motion(&step, &[q[(0, 0)], q[(1, 1)]], Some(&wrt_scale))
     }
 
     /// Adds the positive semi-definite `added` to the robot pose covariance, `P_RR`,
@@ -605,17 +783,19 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             return self.reject(EkfError::InvalidNoise);
         };
         let g = Matrix3::from_fn(|i, j| la[i][j]);
-        match self.robot_map(&Matrix3::identity(), &g, &da) {
+        match self.robot_map(&Matrix3::identity(), &g, &da, None) {
             Ok(()) => Ok(()),
             Err(e) => self.reject(e),
         }
     }
 
-    /// `P' = F P Fᵀ + G Q Gᵀ` for a motion step, mean ← new pose.
+    /// `P' = F P Fᵀ + G Q Gᵀ` for a motion step, mean ← new pose; `wrt_scale` is
+    /// ∂pose'/∂(s_v, s_ω) when the odometry scale factors are states.
     fn apply_motion<const U: usize>(
         &mut self,
         step: &MotionStep<T, U>,
         q: &[T; U],
+        wrt_scale: Option<&[[T; 2]; 3]>,
     ) -> Result<(), EkfError> {
         let far = T::lit(MAX_COORDINATE);
         let inside = step.pose.x.abs() <= far && step.pose.y.abs() <= far;
@@ -629,7 +809,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             g.set_column(u, &step.wrt_input.column(u));
             weights[u] = qu;
         }
-        if let Err(e) = self.robot_map(&step.wrt_pose, &g, &weights) {
+        if let Err(e) = self.robot_map(&step.wrt_pose, &g, &weights, wrt_scale) {
             return self.reject(e);
         }
         self.mean[0] = step.pose.x;
@@ -644,7 +824,18 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// `S [F L_rr | G]` with weights `(D_r, q)`. `S` is the diagonal congruence that
     /// caps the robot's variances (see [`MAX_POSITION_VARIANCE`]); it is the identity
     /// unless a cap is exceeded. Checks everything before writing.
-    fn robot_map(&mut self, f: &Matrix3<T>, g: &Matrix3<T>, q: &[T; 3]) -> Result<(), EkfError> {
+    ///
+    /// With the odometry scale factors as states (slot 0, factor rows 0 and 1, before
+    /// every other state) the map also has `F_s = ∂pose'/∂s` (`wrt_scale`): the robot's
+    /// rows gain `S F_s L_s`, with `L_s = [[1, 0], [l₁₀, 1]]` the scale rows of `L`; they
+    /// lie in columns 0 and 1, left of the robot's own block, which stays as above.
+    fn robot_map(
+        &mut self,
+        f: &Matrix3<T>,
+        g: &Matrix3<T>,
+        q: &[T; 3],
+        wrt_scale: Option<&[[T; 2]; 3]>,
+    ) -> Result<(), EkfError> {
         let (p_rr, coupling) = self.robot_summary();
         let new_rr =
             f * p_rr * f.transpose() + g * Matrix3::from_diagonal(&(*q).into()) * g.transpose();
@@ -670,9 +861,23 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         let (l, d) = mwgs(w, &weights);
         // |F L_rm| ≤ 3 · max|F| · max|L_rm|.
         let coupling_bound = T::lit(3.0) * max_abs(f.iter().copied()) * coupling;
-        if !new_rr.iter().all(|v| v.finite()) || !all_finite(&l, &d) || !coupling_bound.finite() {
+        // S F_s L_s, rows of the robot over columns 0 and 1.
+        let l10 = self.factor.get(1).copied().unwrap_or(T::ZERO);
+        let scale_terms = wrt_scale.map(|fs| {
+            [0, 1, 2].map(|a| {
+                let (f0, f1) = (scale[a] * fs[a][0], scale[a] * fs[a][1]);
+                [f0 + f1 * l10, f1]
+            })
+        });
+        let scale_ok = scale_terms.is_none_or(|t| t.iter().flatten().all(|v| v.finite()));
+        if !new_rr.iter().all(|v| v.finite())
+            || !all_finite(&l, &d)
+            || !coupling_bound.finite()
+            || !scale_ok
+        {
             return Err(EkfError::NumericalFailure);
         }
+        let with_scale = scale_terms.filter(|_| self.calibration & SCALE_SLOT != 0);
         if let Some([ra, rb, rc]) = self.robot_coupling_mut() {
             for ((a, b), c) in ra.iter_mut().zip(rb.iter_mut()).zip(rc.iter_mut()) {
                 let (x, y, z) = (*a, *b, *c);
@@ -680,18 +885,35 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
                 *b = f[(1, 0)] * x + f[(1, 1)] * y + f[(1, 2)] * z;
                 *c = f[(2, 0)] * x + f[(2, 1)] * y + f[(2, 2)] * z;
             }
+            if let Some(t) = with_scale {
+                for (row, added) in [ra, rb, rc].into_iter().zip(t) {
+                    for (slot, v) in row.iter_mut().zip(added) {
+                        *slot += v;
+                    }
+                }
+            }
         }
         self.set_robot_block(&l, &d);
         Ok(())
     }
 
-    /// The two measurement rows of a sighting of landmark `index` with Jacobians
+    /// The two measurement rows of a sighting of the landmark in slot `index` with Jacobians
     /// `hr` (robot) and `hl` (landmark), as sparse rows over the factor's order.
-    fn sparse_rows(&self, index: usize, hr: &Matrix2x3<T>, hl: &Matrix2<T>) -> [SparseRow<T>; 2] {
+    fn sparse_rows(
+        &self,
+        index: usize,
+        hr: &Matrix2x3<T>,
+        hl: &Matrix2<T>,
+        hb: [T; 2],
+    ) -> [SparseRow<T>; 2] {
         let r0 = self.active_dim() - 3;
         let li = 2 * index;
+        let bi = 2 * self.bias_slot().unwrap_or(0);
         [0, 1].map(|r| {
+            let hb = if r == 0 { hb } else { [T::ZERO; 2] };
             [
+                (bi, hb[0]),
+                (bi + 1, hb[1]),
                 (li, hl[(r, 0)]),
                 (li + 1, hl[(r, 1)]),
                 (r0, hr[(r, 0)]),
@@ -728,14 +950,33 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         if index >= self.landmark_count() {
             return Err(EkfError::UnknownLandmark);
         }
-        let landmark = self.mean.fixed_rows::<2>(3 + 2 * index).into_owned();
-        let pred = self
+        let landmark = self
+            .mean
+            .fixed_rows::<2>(self.landmark_state(index))
+            .into_owned();
+        let mut pred = self
             .config
             .sensor
             .predict(&self.pose(), &landmark)
             .ok_or(EkfError::LandmarkOnSensor)?;
+        // With the range bias: r + b₀ + b₂ β², its Jacobian by the chain rule.
+        let mut hb = [T::ZERO; 2];
+        if let Some((b0, b2)) = self.range_bias() {
+            let beta = pred.z.bearing;
+            pred.z.range += b0 + b2 * beta * beta;
+            let k = T::lit(2.0) * b2 * beta;
+            for c in 0..3 {
+                let below = pred.wrt_robot[(1, c)];
+                pred.wrt_robot[(0, c)] += k * below;
+            }
+            for c in 0..2 {
+                let below = pred.wrt_landmark[(1, c)];
+                pred.wrt_landmark[(0, c)] += k * below;
+            }
+            hb = [T::ONE, beta * beta];
+        }
         let (hr, hl) = (pred.wrt_robot, pred.wrt_landmark);
-        let [h0, h1] = self.sparse_rows(index, &hr, &hl);
+        let [h0, h1] = self.sparse_rows(self.landmark_slot(index), &hr, &hl, hb);
         let k = self.active_dim();
         let (Some(f0), Some(f1)) = (f0.get_mut(..k), f1.get_mut(..k)) else {
             return Err(EkfError::NumericalFailure);
@@ -1088,10 +1329,33 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             Ok(r) => r,
             Err(e) => return self.reject(e),
         };
-        if self.landmark_count() >= Self::MAX_LANDMARKS {
+        if usize::from(self.slots) >= Self::MAX_LANDMARKS {
             return self.reject(EkfError::MapFull);
         }
-        let g = self.config.sensor.landmark_from(&self.pose(), z);
+        // With the range bias, the landmark is placed at the corrected range
+        // r − b₀ − b₂ β; its Jacobians gain ∂/∂β of the correction and ∂/∂(b₀, b₂).
+        let bias = self.range_bias();
+        let corrected = match bias {
+            Some((b0, b2)) => {
+                RangeBearing::new(z.range - b0 - b2 * z.bearing * z.bearing, z.bearing)
+            }
+            None => *z,
+        };
+        if !corrected.is_valid() {
+            return self.reject(EkfError::InvalidRange);
+        }
+        let mut g = self.config.sensor.landmark_from(&self.pose(), &corrected);
+        let mut g_bias = Matrix2::zeros();
+        if let Some((_, b2)) = bias {
+            let beta = z.bearing;
+            let k = T::lit(-2.0) * b2 * beta;
+            for a in 0..2 {
+                let dr = g.wrt_measurement[(a, 0)];
+                g.wrt_measurement[(a, 1)] += dr * k;
+                g_bias[(a, 0)] = -dr;
+                g_bias[(a, 1)] = -dr * beta * beta;
+            }
+        }
         // Last-resort cap, as for the robot: scale the new rows (a congruence).
         let (p_rr, coupling) = self.robot_summary();
         let p_ll = g.wrt_robot * p_rr * g.wrt_robot.transpose()
@@ -1101,7 +1365,8 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             (p_ll[(1, 1)], MAX_POSITION_VARIANCE),
         ]);
         let s = Matrix2::from_diagonal(&scale.into());
-        let (gr, gz) = (s * g.wrt_robot, s * g.wrt_measurement);
+        let (gr, gz, g_bias) = (s * g.wrt_robot, s * g.wrt_measurement, s * g_bias);
+        let bias_rows = self.bias_rows();
         let (lr, dr_meas) = Self::decorrelate(&r);
         let gz_lr = gz * Matrix2::new(T::ONE, T::ZERO, lr, T::ONE);
         let (lrr, dr) = self.robot_block();
@@ -1158,6 +1423,20 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
                 }
             }
         }
+        // The range bias' part, G_b L_b, in the columns of the bias and before.
+        if let Some((bi, lb)) = bias_rows {
+            for c in 0..=bi + 1 {
+                let (l0, l1) = (
+                    lb[0].get(c).copied().unwrap_or(T::ZERO),
+                    lb[1].get(c).copied().unwrap_or(T::ZERO),
+                );
+                for a in 0..2 {
+                    if let Some(slot) = self.factor.get_mut(row_start(r0 + a) + c) {
+                        *slot += g_bias[(a, 0)] * l0 + g_bias[(a, 1)] * l1;
+                    }
+                }
+            }
+        }
         // The new 5 × 5 block: rows r0 … r0 + 4, columns r0 ….
         for a in 0..5 {
             let start = row_start(r0 + a) + r0;
@@ -1169,7 +1448,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         }
         self.mean.fixed_rows_mut::<2>(k).copy_from(&g.landmark);
         let index = self.landmark_count();
-        self.landmarks += 1;
+        self.slots = self.slots.saturating_add(1);
         Ok(index)
     }
 }

@@ -117,6 +117,14 @@ pub struct EkfSettings {
     pub sensor_mount: [f32; 3],
     /// Gate on the squared Mahalanobis distance.
     pub gate_threshold: f32,
+    /// Self-calibration priors, standard deviations (0: not estimated): odometry speed
+    /// scale, turn-rate scale ([`EkfSlam::estimate_odometry_scale`]), range bias offset
+    /// (m) and curvature (m/rad²) ([`EkfSlam::estimate_range_bias`]). Taken at the next
+    /// reset.
+    ///
+    /// [`EkfSlam::estimate_odometry_scale`]: crate::ekf::EkfSlam::estimate_odometry_scale
+    /// [`EkfSlam::estimate_range_bias`]: crate::ekf::EkfSlam::estimate_range_bias
+    pub calibration: [f32; 4],
 }
 
 impl EkfSettings {
@@ -146,6 +154,15 @@ impl EkfSettings {
             bearing_std: config.bearing_std,
             sensor_mount: [m.x, m.y, m.theta],
             gate_threshold: config.gate.threshold,
+            calibration: [0.0; 4],
+        }
+    }
+
+    /// The same settings with self-calibration priors (see [`EkfSettings::calibration`]).
+    pub fn with_calibration(self, calibration: [f32; 4]) -> Self {
+        Self {
+            calibration,
+            ..self
         }
     }
 

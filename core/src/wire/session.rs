@@ -204,6 +204,8 @@ pub struct Session<'a, const N: usize, const P: usize, const L: usize> {
     decoder: FrameDecoder<MAX_FRAME_LEN>,
     ekf: &'a mut EkfSlam<f32, N, P>,
     ekf_config: EkfConfig<f32>,
+    /// Self-calibration priors applied at each reset ([`EkfSettings::calibration`]).
+    calibration: [f32; 4],
     ids: KnownIds<L>,
     supervisor: Supervisor<f32>,
     grid: Option<&'a mut dyn GridEstimator>,
@@ -223,6 +225,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             decoder: FrameDecoder::new(),
             ekf,
             ekf_config,
+            calibration: [0.0; 4],
             ids: KnownIds::new(),
             supervisor: Supervisor::new(HealthConfig::DEFAULT_F32),
             grid: None,
@@ -506,6 +509,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
                 let config = settings.to_config();
                 if self.ekf.set_config(config).is_ok() {
                     self.ekf_config = config;
+                    self.calibration = settings.calibration;
                 } else {
                     self.status.rejected = self.status.rejected.saturating_add(1);
                 }
@@ -528,6 +532,14 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
         if self.ekf.init(config, pose).is_err() {
             // A non-finite pose: restart at the origin instead.
             let _ = self.ekf.init(config, Pose2::new(0.0, 0.0, 0.0));
+        }
+        let [speed, turn, offset, curvature] = self.calibration;
+        let scale = (speed > 0.0 || turn > 0.0)
+            .then(|| self.ekf.estimate_odometry_scale(speed, turn).is_ok());
+        let bias = (offset > 0.0 || curvature > 0.0)
+            .then(|| self.ekf.estimate_range_bias(offset, curvature).is_ok());
+        if scale == Some(false) || bias == Some(false) {
+            self.status.rejected = self.status.rejected.saturating_add(1);
         }
         self.ids.clear();
         self.supervisor.reset();

@@ -121,7 +121,10 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
         let family = args.dataset.family();
         let tuned =
             crate::domain::config::Settings::load_for(family, args.config.as_deref(), None)?;
-        Some(EkfSettings::from_config(&tuned.ekf_config::<f32>()))
+        Some(
+            EkfSettings::from_config(&tuned.ekf_config::<f32>())
+                .with_calibration(tuned.calibration_priors()),
+        )
     } else {
         None
     };

@@ -56,6 +56,21 @@ pub struct OdometrySettings {
     /// Odometry reporting a faster turn (rad/s) is refused as an outlier.
     #[serde(default = "unlimited")]
     pub max_turn_rate_radps: f64,
+    /// Prior standard deviation of the odometry's speed scale factor, estimated as a
+    /// state of the filter (0: not estimated; with `turn_scale_std`).
+    #[serde(default)]
+    pub speed_scale_std: f64,
+    /// Prior standard deviation of the odometry's turn-rate scale factor, estimated as a
+    /// state of the filter (0: not estimated; with `speed_scale_std`).
+    #[serde(default)]
+    pub turn_scale_std: f64,
+}
+
+impl OdometrySettings {
+    /// `true` when the odometry scale factors are estimated (either prior is positive).
+    pub fn estimates_scale(&self) -> bool {
+        self.speed_scale_std > 0.0 || self.turn_scale_std > 0.0
+    }
 }
 
 fn unlimited() -> f64 {
@@ -73,6 +88,21 @@ pub struct SightingSettings {
     pub min_range: f64,
     pub max_range: f64,
     pub mount: [f64; 3],
+    /// Prior standard deviation of the range bias offset `b₀` (m), estimated as a state
+    /// (0: not estimated; with `range_bias_curvature_std`).
+    #[serde(default)]
+    pub range_bias_offset_std: f64,
+    /// Prior standard deviation of the range bias curvature `b₂` (m/rad²), estimated as
+    /// a state (0: not estimated; with `range_bias_offset_std`).
+    #[serde(default)]
+    pub range_bias_curvature_std: f64,
+}
+
+impl SightingSettings {
+    /// `true` when the range bias is estimated (either prior is positive).
+    pub fn estimates_bias(&self) -> bool {
+        self.range_bias_offset_std > 0.0 || self.range_bias_curvature_std > 0.0
+    }
 }
 
 /// See `configs/mrclam.toml` for the meaning of each field.
@@ -201,8 +231,12 @@ impl Settings {
             o.angular_std,
             o.angular_std_per_radps,
             o.angular_std_per_mps,
+            o.speed_scale_std,
+            o.turn_scale_std,
             s.range_std,
             s.bearing_std,
+            s.range_bias_offset_std,
+            s.range_bias_curvature_std,
             s.min_range,
             a.batch_window_s,
             a.ambiguity_margin,
@@ -277,6 +311,19 @@ impl Settings {
                 2,
             ))),
         }
+    }
+
+    /// The self-calibration priors in the order of the wire's `EkfSettings::calibration`:
+    /// speed scale, turn-rate scale, range bias offset, range bias curvature (0: off).
+    pub fn calibration_priors(&self) -> [f32; 4] {
+        let (o, s) = (&self.odometry, &self.sighting);
+        [
+            o.speed_scale_std,
+            o.turn_scale_std,
+            s.range_bias_offset_std,
+            s.range_bias_curvature_std,
+        ]
+        .map(|v| v as f32)
     }
 
     /// The supervision settings of the EKF's updates (`[recovery]`).

@@ -472,6 +472,7 @@ pub fn run_chain(
         nis,
         sightings,
         counts,
+        calibration: crate::drivers::ekf::Calibration::default(),
         filter_time,
     };
     Ok(ChainRun { run, classes })

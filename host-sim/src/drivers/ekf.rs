@@ -102,6 +102,16 @@ pub struct AssociationCounts {
     pub recoveries: usize,
 }
 
+/// Self-calibration the filter estimated as states, at the end of the run (`None` where
+/// it was not estimated).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Calibration {
+    /// Odometry speed and turn-rate scale factors `[s_v, s_ω]`.
+    pub odometry_scale: Option<[f64; 2]>,
+    /// Range bias `[b₀ (m), b₂ (m/rad²)]`: ranges measured `r + b₀ + b₂ β²`.
+    pub range_bias: Option<[f64; 2]>,
+}
+
 /// Everything a replay produced.
 #[derive(Clone, Debug)]
 pub struct ReplayRun {
@@ -125,6 +135,8 @@ pub struct ReplayRun {
     pub sightings: usize,
     /// Association counts.
     pub counts: AssociationCounts,
+    /// Self-calibration estimated as states.
+    pub calibration: Calibration,
     /// Time of the replay loop: prediction, association and update of every event, and
     /// recording the pose estimates (reading, scoring and writing excluded).
     pub filter_time: Duration,
@@ -223,6 +235,22 @@ impl<T: Real> Replayer<T> {
         let start = Pose2::new(lit(start.x), lit(start.y), lit(start.theta));
         if let Err(e) = slam.init(config, start) {
             bail!("filter settings refused: {e}");
+        }
+        let o = &settings.odometry;
+        if o.estimates_scale()
+            && let Err(e) =
+                slam.estimate_odometry_scale(lit(o.speed_scale_std), lit(o.turn_scale_std))
+        {
+            bail!("odometry scale estimation refused: {e}");
+        }
+        let sg = &settings.sighting;
+        if sg.estimates_bias()
+            && let Err(e) = slam.estimate_range_bias(
+                lit(sg.range_bias_offset_std),
+                lit(sg.range_bias_curvature_std),
+            )
+        {
+            bail!("range bias estimation refused: {e}");
         }
         Ok(Self {
             slam,
@@ -375,6 +403,16 @@ impl<T: Real> Replayer<T> {
             steps,
             sightings,
             counts: self.counts,
+            calibration: Calibration {
+                odometry_scale: self
+                    .slam
+                    .odometry_scale()
+                    .map(|(a, b)| [a.to_f64(), b.to_f64()]),
+                range_bias: self
+                    .slam
+                    .range_bias()
+                    .map(|(a, b)| [a.to_f64(), b.to_f64()]),
+            },
             filter_time: self.filter_time,
         })
     }

@@ -94,6 +94,8 @@ pub struct Metrics {
     pub counts: crate::drivers::ekf::AssociationCounts,
     /// Sightings dropped by the reader (other robots, unknown barcodes).
     pub reader_dropped_sightings: usize,
+    /// Self-calibration the filter estimated (odometry scale, range bias).
+    pub calibration: crate::drivers::ekf::Calibration,
     /// Faults injected into the event stream (`replay --faults`), if any.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub faults: Option<crate::inputs::faults::FaultReport>,
@@ -153,6 +155,7 @@ pub fn evaluate(recording: &Recording, run: &ReplayRun) -> Metrics {
         precision: format!("{:?}", run.precision).to_lowercase(),
         filter_time_s: run.filter_time.as_secs_f64(),
         counts: run.counts,
+        calibration: run.calibration,
         reader_dropped_sightings: recording.dropped_sightings,
         faults: None,
         se2_alignment,
