@@ -7,13 +7,14 @@ use crate::domain::grid::{GRID_CELLS, GridOptions, Preset, carmen_lidar};
 use crate::domain::recording::Recording;
 use crate::domain::{AssociationMode, FilterKind, Precision};
 use crate::drivers::ekf::replay;
-use crate::drivers::grid::{GridRun, GridRunOptions, carmen_inputs, run_slam};
+use crate::drivers::grid::{GridRun, GridRunOptions, carmen_inputs, run_slam_recorded};
 use crate::inputs::faults::{FaultRates, FaultReport};
 use crate::inputs::readers::carmen::{
     CarmenLog, LaserMessage, beam_count, front_scans, read_log, resolve_log,
 };
 use crate::inputs::readers::{DatasetSpec, thor};
 use crate::metrics::relations::RelationError;
+use crate::output::animation::{Animation, AnimationSettings, write_gif};
 use crate::output::grid_map::{write_outputs, write_tum};
 use anyhow::{Result, bail};
 use microslam::geometry::Pose2;
@@ -37,6 +38,8 @@ pub struct ReplayOptions {
     pub precision: Precision,
     /// Skip the PNG pictures (faster).
     pub no_plots: bool,
+    /// Animated GIF of the grid map being built (grid runs).
+    pub animate: Option<PathBuf>,
     /// Estimator (default: grid SLAM for `carmen:` and `thor:`, else the EKF).
     pub filter: Option<FilterKind>,
     /// Grid filter options.
@@ -52,7 +55,14 @@ pub struct ReplayOptions {
 /// `host-sim replay`.
 pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
     let lidar = matches!(args.dataset, DatasetSpec::Carmen(_) | DatasetSpec::Thor(_));
-    if args.filter == Some(FilterKind::GridSlam) || (args.filter.is_none() && lidar) {
+    let grid = args.filter == Some(FilterKind::GridSlam) || (args.filter.is_none() && lidar);
+    if args.animate.is_some() && !(grid && matches!(args.dataset, DatasetSpec::Carmen(_))) {
+        bail!(
+            "--animate draws grid SLAM on a lidar log (carmen:<file>), not a {} replay",
+            args.dataset.family()
+        );
+    }
+    if grid {
         return grid_replay(args, quiet);
     }
     let started = Instant::now();
@@ -286,11 +296,18 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
     };
     let pb = scan_progress_bar(scans.len(), quiet);
     let inputs = carmen_inputs(&scans);
-    let run = run_slam::<GRID_CELLS>(&inputs, Pose2::IDENTITY, &options, &|i| {
+    let animation = AnimationSettings::default();
+    let every = args
+        .animate
+        .as_ref()
+        .map_or(0, |_| animation.snapshot_every(inputs.len()));
+    let progress = |i: usize| {
         if i % 64 == 0 {
             pb.set_position(i as u64);
         }
-    })?;
+    };
+    let run =
+        run_slam_recorded::<GRID_CELLS>(&inputs, Pose2::IDENTITY, &options, &progress, every)?;
     pb.finish_and_clear();
     let rel = super::relation_error_for(&path, args.grid.relations.as_deref(), &run)?;
     let name = path
@@ -303,7 +320,22 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
         &run,
         &args.grid,
     )?;
-    write_outputs(&args.out, &run, &options.config, &metrics)?;
+    write_outputs(&args.out, &run, &options.config, &metrics, None)?;
+    if let Some(gif) = &args.animate {
+        let title = format!("Grid SLAM: {name}");
+        write_gif(
+            gif,
+            &Animation {
+                run: &run,
+                inputs: &inputs,
+                lidar: &options.lidar,
+                log_odds: &options.config.log_odds,
+                truth: None,
+                title: &title,
+            },
+            &animation,
+        )?;
+    }
     report(quiet, &name, &metrics, &args.out);
     Ok(())
 }
@@ -330,7 +362,11 @@ fn thor_replay(dir: &str, run: u32, out: &Path, quiet: bool) -> Result<()> {
         .map(|w| (w[1].1.x - w[0].1.x).hypot(w[1].1.y - w[0].1.y))
         .sum();
     let duration = traj.last().map_or(0.0, |l| l.0) - traj.first().map_or(0.0, |f| f.0);
-    crate::output::thor::draw_trajectory(&out.join("trajectory.png"), &traj)?;
+    crate::output::thor::draw_trajectory(
+        &out.join("trajectory.png"),
+        &traj,
+        &format!("THOR run {run}: encoder + IMU dead reckoning"),
+    )?;
     let end = traj.last().map_or(Pose2::IDENTITY, |l| l.1);
     let metrics = serde_json::json!({
         "dataset": format!("thor/run{run}"),

@@ -8,10 +8,13 @@ use crate::domain::AssociationMode;
 use crate::domain::Precision;
 use crate::domain::config::Settings;
 use crate::domain::grid::{GlobalOptions, Preset};
-use crate::drivers::grid::{GridRunOptions, f32_pose, run_localizer, run_slam, sim_inputs};
+use crate::drivers::grid::{
+    GridRunOptions, f32_pose, run_localizer, run_slam_recorded, sim_inputs,
+};
 use crate::inputs::sim::lidar_world::{LidarRecording, SIM_GRID_CELLS, true_map};
 use crate::inputs::sim::simulate;
 use crate::metrics::grid::{ate_m, odometry_ate_m, yaw_rmse_deg};
+use crate::output::animation::{Animation, AnimationSettings, write_gif};
 use crate::output::grid_map::{write_outputs, write_tum};
 use anyhow::{Result, anyhow, bail};
 use microslam::geometry::Pose2;
@@ -34,6 +37,8 @@ pub struct SimOptions {
     pub precision: Precision,
     /// Skip the PNG pictures.
     pub no_plots: bool,
+    /// Animated GIF of grid SLAM building the lidar world's map.
+    pub animate: Option<PathBuf>,
     /// Particles of the grid filters in the lidar world (one of [`SIM_PARTICLES`]; 0
     /// skips the grid scenario).
     pub grid_particles: usize,
@@ -55,6 +60,7 @@ impl Default for SimOptions {
             config: None,
             precision: Precision::F64,
             no_plots: false,
+            animate: None,
             grid_particles: 200,
             grid_preset: None,
             grid_config: None,
@@ -98,7 +104,13 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
         ..preset
     };
     let out = args.out.join("grid");
-    let (slam, loc) = run_and_write(&rec, config, args.grid_particles, &out)?;
+    let (slam, loc) = run_and_write(
+        &rec,
+        config,
+        args.grid_particles,
+        &out,
+        args.animate.as_deref(),
+    )?;
     if args.global.enabled {
         super::global::sim_cli(&rec, config, args.grid_particles, &args.global, &out, quiet)?;
     }
@@ -128,12 +140,14 @@ pub const SIM_PARTICLES: [usize; 4] = [16, 32, 64, 200];
 
 /// Runs SLAM and the localizer with `particles` particles, writing
 /// `out/slam/` and `out/localize/` (map.pgm, map.yaml, map.png, trajectory.tum,
-/// groundtruth.tum, metrics.json). Returns the two metrics documents.
+/// groundtruth.tum, metrics.json), and `animate` (an animated GIF of SLAM) when given.
+/// Returns the two metrics documents.
 pub fn run_and_write(
     rec: &LidarRecording,
     config: GridPfConfig,
     particles: usize,
     out: &Path,
+    animate: Option<&Path>,
 ) -> Result<(serde_json::Value, serde_json::Value)> {
     let started = Instant::now();
     if !SIM_PARTICLES.contains(&particles) {
@@ -147,7 +161,9 @@ pub fn run_and_write(
         config,
         lidar: rec.lidar,
     };
-    let slam = run_slam::<SIM_GRID_CELLS>(&inputs, start, &options, &|_| {})?;
+    let animation = AnimationSettings::default();
+    let every = animate.map_or(0, |_| animation.snapshot_every(inputs.len()));
+    let slam = run_slam_recorded::<SIM_GRID_CELLS>(&inputs, start, &options, &|_| {}, every)?;
     let slam_wall = started.elapsed().as_secs_f64();
     let map = true_map(&rec.world.walls, &config);
     let view = map.view();
@@ -196,9 +212,24 @@ pub fn run_and_write(
             "range_weight_exponent": config.range_weight_exponent,
             "seed": config.filter.seed,
         });
-        write_outputs(&dir, run, &config, &metrics)?;
+        write_outputs(&dir, run, &config, &metrics, Some(&truth))?;
         write_tum(&dir.join("groundtruth.tum"), &truth)?;
         docs.push(metrics);
+    }
+    if let Some(path) = animate {
+        let title = format!("Grid SLAM: {}", rec.name);
+        write_gif(
+            path,
+            &Animation {
+                run: &slam,
+                inputs: &inputs,
+                lidar: &rec.lidar,
+                log_odds: &config.log_odds,
+                truth: Some(&truth),
+                title: &title,
+            },
+            &animation,
+        )?;
     }
     let loc_doc = docs.pop().unwrap_or_default();
     let slam_doc = docs.pop().unwrap_or_default();

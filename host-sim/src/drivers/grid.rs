@@ -57,6 +57,30 @@ pub struct GridRun {
     pub refused_odometry: usize,
     /// Ranges that were NaN or ±∞ in the processed scans (skipped beam by beam).
     pub non_finite_beams: usize,
+    /// The map as it grew ([`run_slam_recorded`]; empty otherwise): the first entry holds
+    /// the known cells of the starting map, each later one the cells changed since.
+    pub snapshots: Vec<MapChanges>,
+}
+
+/// Cells of the map that changed since the previous snapshot.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MapChanges {
+    /// Scans processed when the snapshot was taken (0: the starting map).
+    pub scans: usize,
+    /// `(cell index, new value)` of every changed cell.
+    pub cells: Vec<(u32, i8)>,
+}
+
+/// The cells of `now` that differ from `before` (which is brought up to date).
+fn changes(before: &mut [i8], now: &[i8], scans: usize) -> MapChanges {
+    let mut cells = Vec::new();
+    for (i, (b, n)) in before.iter_mut().zip(now).enumerate() {
+        if b != n {
+            *b = *n;
+            cells.push((i as u32, *n));
+        }
+    }
+    MapChanges { scans, cells }
 }
 
 impl GridRun {
@@ -69,6 +93,7 @@ impl GridRun {
             skipped_scans: 0,
             refused_odometry: 0,
             non_finite_beams: 0,
+            snapshots: Vec::new(),
         }
     }
 }
@@ -78,6 +103,7 @@ trait GridFilter {
     fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError>;
     fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError>;
     fn pose(&self) -> Pose2<f32>;
+    fn cells(&self) -> &[i8];
 }
 
 impl<const W: usize, const H: usize, const P: usize, const B: usize> GridFilter
@@ -92,6 +118,9 @@ impl<const W: usize, const H: usize, const P: usize, const B: usize> GridFilter
     fn pose(&self) -> Pose2<f32> {
         GridSlam::pose(self)
     }
+    fn cells(&self) -> &[i8] {
+        self.map().cells()
+    }
 }
 
 impl<const P: usize, const B: usize> GridFilter for GridLocalizer<'_, P, B> {
@@ -104,18 +133,27 @@ impl<const P: usize, const B: usize> GridFilter for GridLocalizer<'_, P, B> {
     fn pose(&self) -> Pose2<f32> {
         GridLocalizer::pose(self)
     }
+    fn cells(&self) -> &[i8] {
+        self.map().cells()
+    }
 }
 
 /// The drive loop, written once: predict with the odometry increment, observe the scan,
-/// record the pose.
+/// record the pose (and every `snapshot_every` scans the map's changes, when not 0).
 fn drive(
     filter: &mut impl GridFilter,
     inputs: &[GridInput<'_>],
     lidar: &LidarGeometry,
     run: &mut GridRun,
     progress: &dyn Fn(usize),
+    snapshot_every: usize,
 ) -> Result<()> {
     let mut previous: Option<Pose2<f32>> = None;
+    let mut shadow = Vec::new();
+    if snapshot_every > 0 {
+        shadow = vec![0; filter.cells().len()];
+        run.snapshots.push(changes(&mut shadow, filter.cells(), 0));
+    }
     for (i, input) in inputs.iter().enumerate() {
         let odom = input.odometry;
         if !odom.is_finite() {
@@ -133,6 +171,10 @@ fn drive(
                 run.skipped_scans += 1;
                 run.trajectory.push((input.stamp, filter.pose()));
             }
+        }
+        if snapshot_every > 0 && ((i + 1) % snapshot_every == 0 || i + 1 == inputs.len()) {
+            run.snapshots
+                .push(changes(&mut shadow, filter.cells(), i + 1));
         }
         progress(i);
     }
@@ -165,6 +207,18 @@ pub fn run_slam<const N: usize>(
     options: &GridRunOptions,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<GridRun> {
+    run_slam_recorded::<N>(inputs, start, options, progress, 0)
+}
+
+/// [`run_slam`] that also records the map every `snapshot_every` scans and after the last
+/// one ([`GridRun::snapshots`]; 0 records nothing) — what `--animate` draws.
+pub fn run_slam_recorded<const N: usize>(
+    inputs: &[GridInput<'_>],
+    start: Pose2<f32>,
+    options: &GridRunOptions,
+    progress: &(dyn Fn(usize) + Sync),
+    snapshot_every: usize,
+) -> Result<GridRun> {
     std::thread::scope(|scope| {
         let worker = std::thread::Builder::new()
             .stack_size(64 << 20)
@@ -176,7 +230,8 @@ pub fn run_slam<const N: usize>(
                     inputs,
                     start,
                     options,
-                    progress
+                    progress,
+                    snapshot_every
                 )
             })?;
         worker
@@ -190,6 +245,7 @@ fn slam_p<const N: usize, const P: usize>(
     start: Pose2<f32>,
     options: &GridRunOptions,
     progress: &dyn Fn(usize),
+    snapshot_every: usize,
 ) -> Result<GridRun> {
     let c = options.config;
     let mut grid = Box::new(OccupancyGrid::<N, N>::centred(c.resolution, c.log_odds));
@@ -198,7 +254,14 @@ fn slam_p<const N: usize, const P: usize>(
     {
         let mut slam = GridSlam::<N, N, P, MAX_BEAMS>::new(&mut grid, c, start)
             .map_err(|e| anyhow!("grid SLAM: {e}"))?;
-        drive(&mut slam, inputs, &options.lidar, &mut run, progress)?;
+        drive(
+            &mut slam,
+            inputs,
+            &options.lidar,
+            &mut run,
+            progress,
+            snapshot_every,
+        )?;
     }
     run.filter_time_s = t0.elapsed().as_secs_f64();
     run.cells = grid.cells().to_vec();
@@ -236,7 +299,7 @@ fn localize_p<const P: usize>(
     let t0 = Instant::now();
     let mut loc = GridLocalizer::<P, MAX_BEAMS>::new(*map, options.config, start)
         .map_err(|e| anyhow!("grid localizer: {e}"))?;
-    drive(&mut loc, inputs, &options.lidar, &mut run, progress)?;
+    drive(&mut loc, inputs, &options.lidar, &mut run, progress, 0)?;
     run.filter_time_s = t0.elapsed().as_secs_f64();
     Ok(run)
 }

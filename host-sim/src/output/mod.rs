@@ -1,7 +1,10 @@
 //! Layer 4: files written after a run: TUM trajectories, `metrics.json`, `landmarks.csv`,
 //! ROS `map_server` maps, PNG pictures.
 
+pub mod animation;
+pub mod figure;
 pub mod grid_map;
+pub mod grid_picture;
 mod plots;
 pub mod thor;
 mod tum;

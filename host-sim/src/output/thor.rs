@@ -1,59 +1,54 @@
 //! The picture of a THOR dead-reckoning run.
 
+use super::figure::{self, ESTIMATE, ESTIMATE_WIDTH, MapLayout, Mark};
 use anyhow::Result;
 use microslam::geometry::Pose2;
 use plotters::prelude::*;
 use std::path::Path;
 
-/// Picture size, pixels.
-const SIZE: u32 = 800;
+/// Size of the (square) plotting area, pixels.
+const PLOT_PX: u32 = 720;
 
-/// The THOR dead-reckoning trajectory as an 800 × 800 PNG with a 1 m grid.
-pub fn draw_trajectory(path: &Path, traj: &[(f64, Pose2<f64>)]) -> Result<()> {
-    let mut rgb = vec![0u8; (SIZE * SIZE * 3) as usize];
-    draw_on(BitMapBackend::with_buffer(&mut rgb, (SIZE, SIZE)), traj)?;
-    super::write_png(path, SIZE, SIZE, &rgb)
+/// The THOR dead-reckoning trajectory as a PNG: axes in metres, a legend, a scale bar,
+/// start and end markers; `title` above it.
+pub fn draw_trajectory(path: &Path, traj: &[(f64, Pose2<f64>)], title: &str) -> Result<()> {
+    figure::register_font()?;
+    let (w, h) = MapLayout::MAP.image_size(PLOT_PX, PLOT_PX);
+    let mut rgb = vec![0u8; (w * h * 3) as usize];
+    draw_on(BitMapBackend::with_buffer(&mut rgb, (w, h)), traj, title)?;
+    super::write_png(path, w, h, &rgb)
 }
 
-/// Draws the 1 m grid, each line once, then the trajectory, on any plotters backend.
-fn draw_on<DB: DrawingBackend>(backend: DB, traj: &[(f64, Pose2<f64>)]) -> Result<()> {
-    let plot_error = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e:?}");
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for (_, p) in traj {
-        x0 = x0.min(p.x);
-        x1 = x1.max(p.x);
-        y0 = y0.min(p.y);
-        y1 = y1.max(p.y);
-    }
-    if traj.is_empty() {
-        (x0, x1, y0, y1) = (0.0, 0.0, 0.0, 0.0);
-    }
+/// Draws the picture on any plotters backend.
+fn draw_on<DB: DrawingBackend>(backend: DB, traj: &[(f64, Pose2<f64>)], title: &str) -> Result<()> {
+    let e = figure::plot_error;
+    let points: Vec<(f64, f64)> = traj.iter().map(|(_, p)| (p.x, p.y)).collect();
+    let [x0, x1, y0, y1] = figure::bounds(&points).unwrap_or([-1.0, 1.0, -1.0, 1.0]);
     let pad = 0.05 * (x1 - x0).max(y1 - y0).max(1.0);
-    let (x0, x1, y0, y1) = (x0 - pad, x1 + pad, y0 - pad, y1 + pad);
+    let layout = MapLayout::MAP;
+    let (pw, ph) = layout.plot_size(backend.get_size().0, backend.get_size().1);
+    let (x, y) = figure::equal_aspect((x0 - pad, x1 + pad), (y0 - pad, y1 + pad), pw, ph);
     let root = backend.into_drawing_area();
-    root.fill(&WHITE).map_err(plot_error)?;
-    let mut chart = ChartBuilder::on(&root)
-        .margin(10)
-        .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(plot_error)?;
-    // No axes: the plotters build here has no font backend (a 1 m grid instead).
-    let grid_style = ShapeStyle::from(&RGBColor(220, 220, 220)).stroke_width(1);
-    for gx in x0.ceil() as i64..=x1.floor() as i64 {
-        let gx = gx as f64;
-        chart
-            .draw_series(LineSeries::new([(gx, y0), (gx, y1)], grid_style))
-            .map_err(plot_error)?;
-    }
-    for gy in y0.ceil() as i64..=y1.floor() as i64 {
-        let gy = gy as f64;
-        chart
-            .draw_series(LineSeries::new([(x0, gy), (x1, gy)], grid_style))
-            .map_err(plot_error)?;
-    }
-    chart
-        .draw_series(LineSeries::new(traj.iter().map(|(_, p)| (p.x, p.y)), &RED))
-        .map_err(plot_error)?;
-    root.present().map_err(plot_error)?;
+    root.fill(&WHITE).map_err(e)?;
+    let (mut chart, side) = figure::map_chart(&root, &layout, title, x, y)?;
+    figure::grid_lines(&mut chart)?;
+    figure::path(&chart, &points, ESTIMATE, ESTIMATE_WIDTH)?;
+    figure::start_end(&chart, &points)?;
+    figure::scale_bar(&chart)?;
+    let top = i32::try_from(layout.title + layout.margin).unwrap_or(0);
+    figure::legend(
+        &side,
+        (6, top),
+        &[
+            (
+                Mark::Line(ESTIMATE, ESTIMATE_WIDTH),
+                "dead reckoning (encoders + IMU)",
+            ),
+            (Mark::Start, "start"),
+            (Mark::End, "end"),
+        ],
+    )?;
+    root.present().map_err(e)?;
     Ok(())
 }
 
