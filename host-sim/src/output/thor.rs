@@ -55,63 +55,43 @@ fn draw_on<DB: DrawingBackend>(backend: DB, traj: &[(f64, Pose2<f64>)], title: &
 #[cfg(test)]
 mod tests {
     use super::*;
-    use plotters_backend::{
-        BackendColor, BackendCoord, BackendStyle, DrawingBackend, DrawingErrorKind,
-    };
-    use std::cell::Cell;
-
-    /// Counts what is drawn, draws nothing.
-    struct Counting<'a> {
-        paths: &'a Cell<usize>,
-        presents: &'a Cell<usize>,
-    }
-
-    impl DrawingBackend for Counting<'_> {
-        type ErrorType = std::io::Error;
-        fn get_size(&self) -> (u32, u32) {
-            (SIZE, SIZE)
-        }
-        fn ensure_prepared(&mut self) -> Result<(), DrawingErrorKind<std::io::Error>> {
-            Ok(())
-        }
-        fn present(&mut self) -> Result<(), DrawingErrorKind<std::io::Error>> {
-            self.presents.set(self.presents.get() + 1);
-            Ok(())
-        }
-        fn draw_pixel(
-            &mut self,
-            _: BackendCoord,
-            _: BackendColor,
-        ) -> Result<(), DrawingErrorKind<std::io::Error>> {
-            Ok(())
-        }
-        fn draw_path<S: BackendStyle, I: IntoIterator<Item = BackendCoord>>(
-            &mut self,
-            _: I,
-            _: &S,
-        ) -> Result<(), DrawingErrorKind<std::io::Error>> {
-            self.paths.set(self.paths.get() + 1);
-            Ok(())
-        }
-    }
+    use crate::output::figure::check::Rgb;
+    use crate::output::figure::{END, START};
 
     #[test]
-    fn every_grid_line_and_the_trajectory_are_drawn_once() {
-        // 0 … 9 m in x, 0 … 4 m in y: padded by 0.45 m, grid lines at x = 0 … 9
-        // (10) and y = 0 … 4 (5), and one trajectory.
+    fn the_dead_reckoning_picture_is_labelled() {
+        // 0 … 9 m in x, 0 … 4 m in y.
         let traj: Vec<(f64, Pose2<f64>)> = (0..=90)
             .map(|i| {
                 let t = f64::from(i) / 10.0;
                 (t, Pose2::new(t, 4.0 * t / 9.0, 0.0))
             })
             .collect();
-        let (paths, presents) = (Cell::new(0), Cell::new(0));
-        let backend = Counting {
-            paths: &paths,
-            presents: &presents,
-        };
-        draw_on(backend, &traj).expect("drawing succeeds");
-        assert_eq!(paths.get(), 10 + 5 + 1);
-        assert!(presents.get() >= 1);
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let path = dir.path().join("trajectory.png");
+        draw_trajectory(&path, &traj, "THOR run 20").expect("drawn");
+        let img = Rgb::read(&path);
+        let layout = MapLayout::MAP;
+        assert_eq!((img.w, img.h), layout.image_size(PLOT_PX, PLOT_PX));
+        let (px0, py0) = (
+            layout.margin + layout.y_labels,
+            layout.margin + layout.title,
+        );
+        let (px1, py1) = (px0 + PLOT_PX, py0 + PLOT_PX);
+        let colour = |c: RGBColor| [c.0, c.1, c.2];
+        // The 9 m diagonal spans most of the 720-pixel plot, 2 pixels wide.
+        assert!(img.count(colour(ESTIMATE), (px0, px1), (py0, py1)) > 1000);
+        assert!(img.count(colour(START), (px0, px1), (py0, py1)) > 50);
+        assert!(img.count(colour(END), (px0, px1), (py0, py1)) > 50);
+        assert!(img.dark((px0, px1), (0, py0)) > 100, "title");
+        assert!(
+            img.dark((px0, px1), (py1 + 4, img.h)) > 300,
+            "x axis labels"
+        );
+        assert!(img.dark((0, px0 - 4), (py0, py1)) > 300, "y axis labels");
+        assert!(
+            img.dark((img.w - layout.legend, img.w), (0, img.h)) > 300,
+            "legend"
+        );
     }
 }
