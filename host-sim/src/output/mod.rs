@@ -3,6 +3,7 @@
 
 pub mod animation;
 pub mod figure;
+pub mod floor_texture;
 pub mod grid_map;
 pub mod grid_picture;
 mod plots;
