@@ -42,17 +42,13 @@ impl Picture {
         self.count(|p| p == c, (0, self.w), (0, self.h))
     }
 
-    /// Dark (text) pixels in the left `frac` of the width, the bottom `frac` of the
-    /// height, and the top 40 rows.
-    fn text_strips(&self, frac: f64) -> (usize, usize, usize) {
+    /// Dark (text) pixels left of the y axis (76 columns), below the x axis and its tick
+    /// marks (58 rows) and in the top 40 rows (the title).
+    fn text_strips(&self) -> (usize, usize, usize) {
         let dark = |p: &[u8]| p.iter().all(|c| *c < 100);
-        let (fw, fh) = (
-            (f64::from(self.w) * frac) as u32,
-            (f64::from(self.h) * frac) as u32,
-        );
         (
-            self.count(dark, (0, fw), (fh, self.h - fh)),
-            self.count(dark, (fw, self.w - fw), (self.h - fh, self.h)),
+            self.count(dark, (0, 76), (40, self.h - 66)),
+            self.count(dark, (84, self.w), (self.h - 58, self.h)),
             self.count(dark, (0, self.w), (0, 40)),
         )
     }
@@ -95,10 +91,11 @@ fn sim_pictures_are_labelled_and_the_animation_reads_back() {
         let p = Picture::read(&dir.path().join(name));
         assert!(p.colour(ESTIMATE) > 200, "{name}: the estimate is drawn");
         assert!(p.colour(TRUTH) > 200, "{name}: the truth is drawn");
-        let (left, bottom, top) = p.text_strips(0.07);
-        assert!(left > 200, "{name}: y axis labels ({left} dark pixels)");
-        assert!(bottom > 200, "{name}: x axis labels ({bottom} dark pixels)");
-        assert!(top > 200, "{name}: title ({top} dark pixels)");
+        // Measured: about 200 dark pixels in each strip; none without text.
+        let (left, bottom, top) = p.text_strips();
+        assert!(left > 120, "{name}: y axis labels ({left} dark pixels)");
+        assert!(bottom > 120, "{name}: x axis labels ({bottom} dark pixels)");
+        assert!(top > 120, "{name}: title ({top} dark pixels)");
     }
     let scans = serde_json::from_str::<serde_json::Value>(
         &std::fs::read_to_string(dir.path().join("grid/slam/metrics.json")).expect("metrics"),

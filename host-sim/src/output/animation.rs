@@ -425,11 +425,13 @@ mod tests {
         for i in 0..255usize {
             let (r, g, b) = (p[3 * i], p[3 * i + 1], p[3 * i + 2]);
             let j = usize::from(index_of(r, g, b));
-            assert_eq!(
-                (p[3 * j], p[3 * j + 1], p[3 * j + 2]),
-                (r, g, b),
-                "index {i} maps to {j}"
-            );
+            // Exact, except the cube's six greys, which go to the nearest of the 39 greys.
+            for (a, b) in [r, g, b].into_iter().zip(&p[3 * j..3 * j + 3]) {
+                assert!(a.abs_diff(*b) <= 3, "index {i} maps to {j}");
+            }
+            if r != g || g != b {
+                assert_eq!(i, j, "colour {i} maps to itself");
+            }
         }
         assert_eq!(index_of(255, 255, 255), 254, "white is the last grey");
     }

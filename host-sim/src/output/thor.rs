@@ -83,14 +83,14 @@ mod tests {
         assert!(img.count(colour(ESTIMATE), (px0, px1), (py0, py1)) > 1000);
         assert!(img.count(colour(START), (px0, px1), (py0, py1)) > 50);
         assert!(img.count(colour(END), (px0, px1), (py0, py1)) > 50);
-        assert!(img.dark((px0, px1), (0, py0)) > 100, "title");
+        assert!(img.dark((px0, px1), (0, py0)) > 150, "title");
         assert!(
-            img.dark((px0, px1), (py1 + 4, img.h)) > 300,
+            img.dark((px0, px1), (py1 + 8, img.h)) > 120,
             "x axis labels"
         );
-        assert!(img.dark((0, px0 - 4), (py0, py1)) > 300, "y axis labels");
+        assert!(img.dark((0, px0 - 8), (py0, py1)) > 120, "y axis labels");
         assert!(
-            img.dark((img.w - layout.legend, img.w), (0, img.h)) > 300,
+            img.dark((img.w - layout.legend, img.w), (0, img.h)) > 400,
             "legend"
         );
     }
