@@ -302,7 +302,7 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
         .as_ref()
         .map_or(0, |_| animation.snapshot_every(inputs.len()));
     let progress = |i: usize| {
-        if i % 64 == 0 {
+        if i.is_multiple_of(64) {
             pb.set_position(i as u64);
         }
     };

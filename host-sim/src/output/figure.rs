@@ -191,7 +191,7 @@ pub fn path<DB: DrawingBackend>(
         .flat_map(|dy| (-reach..=reach).map(move |dx| (dx, dy)))
         .filter(|(dx, dy)| {
             // Centre of the brush between pixels for even widths.
-            let c = if width % 2 == 0 { 0.5 } else { 0.0 };
+            let c = if width.is_multiple_of(2) { 0.5 } else { 0.0 };
             let (x, y) = (f64::from(*dx) - c, f64::from(*dy) - c);
             x * x + y * y <= r * r
         })

@@ -161,7 +161,10 @@ pub fn points(path: &[(f64, Pose2<f32>)]) -> Vec<(f64, f64)> {
         .step_by(step)
         .map(|(_, p)| (f64::from(p.x), f64::from(p.y)))
         .collect();
-    if let Some((_, last)) = path.last().filter(|_| (path.len() - 1) % step != 0) {
+    if let Some((_, last)) = path
+        .last()
+        .filter(|_| !(path.len() - 1).is_multiple_of(step))
+    {
         p.push((f64::from(last.x), f64::from(last.y)));
     }
     p
@@ -232,8 +235,11 @@ mod tests {
         [c.0, c.1, c.2]
     }
 
-    /// A 120 × 80-cell room (5 cm cells) with walls, free inside, and one lap around it.
-    fn room() -> (Vec<i8>, GridGeometry, Vec<(f64, Pose2<f32>)>) {
+    /// Stamped poses.
+    type Path = Vec<(f64, Pose2<f32>)>;
+
+    /// A 120 × 80-cell room (5 cm cells) with walls, free inside, and a path around it.
+    fn room() -> (Vec<i8>, GridGeometry, Path) {
         let g = GridGeometry {
             width: 160,
             height: 120,
