@@ -289,6 +289,9 @@ pub struct ReplayArgs {
     /// Skip the PNG pictures (faster).
     #[arg(long)]
     pub no_plots: bool,
+    /// Write an animated GIF of the grid map being built (grid runs; docs/guide.md).
+    #[arg(long, value_name = "FILE.gif")]
+    pub animate: Option<PathBuf>,
     /// Estimator: `ekf-slam` (landmark datasets) or `grid-slam` (lidar datasets; the
     /// default for `carmen:` and `thor:`).
     #[arg(long, value_enum)]
@@ -372,6 +375,9 @@ pub struct SimArgs {
     /// Skip the PNG pictures.
     #[arg(long)]
     pub no_plots: bool,
+    /// Write an animated GIF of grid SLAM building the lidar world's map.
+    #[arg(long, value_name = "FILE.gif")]
+    pub animate: Option<PathBuf>,
     /// Particles of the grid filters in the lidar world: 8, 16, 32, 64, 100, 128, 200 or
     /// 400; 0 skips the grid scenario.
     #[arg(long, default_value_t = 200, value_parser = particle_count_or_none)]
@@ -526,6 +532,7 @@ impl From<&ReplayArgs> for ReplayOptions {
             out: a.out.clone(),
             precision: a.precision,
             no_plots: a.no_plots,
+            animate: a.animate.clone(),
             filter: a.filter,
             grid: (&a.grid).into(),
             run: a.run,
@@ -561,6 +568,7 @@ impl From<&SimArgs> for SimOptions {
             config: a.config.clone(),
             precision: a.precision,
             no_plots: a.no_plots,
+            animate: a.animate.clone(),
             grid_particles: a.grid_particles,
             grid_preset: a.grid_preset,
             grid_config: a.grid_config.clone(),

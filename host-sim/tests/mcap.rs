@@ -78,6 +78,7 @@ fn an_intel_grid_slam_recording_reads_back() {
         &options,
         &|_| {},
         Some(&mut rec),
+        0,
     )
     .unwrap();
     file.finish().unwrap();

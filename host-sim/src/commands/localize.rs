@@ -103,7 +103,7 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
         &run,
         &args.grid,
     )?;
-    write_outputs(&args.out, &run, &options.config, &metrics)?;
+    write_outputs(&args.out, &run, &options.config, &metrics, None)?;
     report(quiet, &name, &metrics, &args.out);
     super::close_mcap(mcap, quiet)
 }

@@ -15,6 +15,7 @@ use crate::inputs::readers::carmen::{
 use crate::inputs::readers::rosbag::{self, BagOptions};
 use crate::inputs::readers::{DatasetSpec, thor};
 use crate::metrics::relations::RelationError;
+use crate::output::animation::{Animation, AnimationSettings, write_gif};
 use crate::output::grid_map::write_outputs;
 use crate::output::write_tum;
 use anyhow::{Result, bail};
@@ -39,6 +40,8 @@ pub struct ReplayOptions {
     pub precision: Precision,
     /// Skip the PNG pictures (faster).
     pub no_plots: bool,
+    /// Animated GIF of the grid map being built (grid runs).
+    pub animate: Option<PathBuf>,
     /// Estimator (default: grid SLAM for `carmen:` and `thor:`, else the EKF).
     pub filter: Option<FilterKind>,
     /// Grid filter options.
@@ -61,7 +64,18 @@ pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
         args.dataset,
         DatasetSpec::Carmen(_) | DatasetSpec::Thor(_) | DatasetSpec::Rosbag(_)
     );
-    if args.filter == Some(FilterKind::GridSlam) || (args.filter.is_none() && lidar) {
+    let grid = args.filter == Some(FilterKind::GridSlam) || (args.filter.is_none() && lidar);
+    let lidar_log = matches!(
+        args.dataset,
+        DatasetSpec::Carmen(_) | DatasetSpec::Rosbag(_)
+    );
+    if args.animate.is_some() && !(grid && lidar_log) {
+        bail!(
+            "--animate draws grid SLAM on a lidar log (carmen:<file> or rosbag:<file.mcap>), not a {} replay",
+            args.dataset.family()
+        );
+    }
+    if grid {
         return grid_replay(args, quiet);
     }
     let started = Instant::now();
@@ -317,21 +331,21 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
     };
     let pb = scan_progress_bar(scans.len(), quiet);
     let inputs = carmen_inputs(&scans);
+    let animation = AnimationSettings::default();
+    let every = args
+        .animate
+        .as_ref()
+        .map_or(0, |_| animation.snapshot_every(inputs.len()));
+    let progress = |i: usize| {
+        if i.is_multiple_of(64) {
+            pb.set_position(i as u64);
+        }
+    };
     let mut mcap = super::open_mcap(args.mcap.as_deref())?;
     let log_odds = options.config.log_odds;
     let run =
         super::recorded_grid_run(mcap.as_mut(), "", inputs.len(), log_odds, &[], true, |o| {
-            run_slam_observed::<GRID_CELLS>(
-                &inputs,
-                Pose2::IDENTITY,
-                &options,
-                &|i| {
-                    if i % 64 == 0 {
-                        pb.set_position(i as u64);
-                    }
-                },
-                o,
-            )
+            run_slam_observed::<GRID_CELLS>(&inputs, Pose2::IDENTITY, &options, &progress, o, every)
         })?;
     pb.finish_and_clear();
     let rel = super::relation_error_for(&path, args.grid.relations.as_deref(), &run)?;
@@ -345,7 +359,22 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
         &run,
         &args.grid,
     )?;
-    write_outputs(&args.out, &run, &options.config, &metrics)?;
+    write_outputs(&args.out, &run, &options.config, &metrics, None)?;
+    if let Some(gif) = &args.animate {
+        let title = format!("Grid SLAM: {name}");
+        write_gif(
+            gif,
+            &Animation {
+                run: &run,
+                inputs: &inputs,
+                lidar: &options.lidar,
+                log_odds: &options.config.log_odds,
+                truth: None,
+                title: &title,
+            },
+            &animation,
+        )?;
+    }
     report(quiet, &name, &metrics, &args.out);
     super::close_mcap(mcap, quiet)
 }
@@ -396,7 +425,11 @@ fn thor_replay(dir: &str, run: u32, out: &Path, quiet: bool) -> Result<()> {
         .map(|w| (w[1].1.x - w[0].1.x).hypot(w[1].1.y - w[0].1.y))
         .sum();
     let duration = traj.last().map_or(0.0, |l| l.0) - traj.first().map_or(0.0, |f| f.0);
-    crate::output::thor::draw_trajectory(&out.join("trajectory.png"), &traj)?;
+    crate::output::thor::draw_trajectory(
+        &out.join("trajectory.png"),
+        &traj,
+        &format!("THOR run {run}: encoder + IMU dead reckoning"),
+    )?;
     let end = traj.last().map_or(Pose2::IDENTITY, |l| l.1);
     let metrics = serde_json::json!({
         "dataset": format!("thor/run{run}"),

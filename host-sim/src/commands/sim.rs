@@ -14,6 +14,7 @@ use crate::drivers::grid::{
 use crate::inputs::sim::lidar_world::{LidarRecording, SIM_GRID_CELLS, true_map};
 use crate::inputs::sim::simulate;
 use crate::metrics::grid::{ate_m, odometry_ate_m, yaw_rmse_deg};
+use crate::output::animation::{Animation, AnimationSettings, write_gif};
 use crate::output::grid_map::write_outputs;
 use crate::output::write_tum;
 use anyhow::{Result, anyhow, bail};
@@ -37,6 +38,8 @@ pub struct SimOptions {
     pub precision: Precision,
     /// Skip the PNG pictures.
     pub no_plots: bool,
+    /// Animated GIF of grid SLAM building the lidar world's map.
+    pub animate: Option<PathBuf>,
     /// Particles of the grid filters in the lidar world (one of [`SIM_PARTICLES`]; 0
     /// skips the grid scenario).
     pub grid_particles: usize,
@@ -61,6 +64,7 @@ impl Default for SimOptions {
             config: None,
             precision: Precision::F64,
             no_plots: false,
+            animate: None,
             grid_particles: 200,
             grid_preset: None,
             grid_config: None,
@@ -107,7 +111,14 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
         ..preset
     };
     let out = args.out.join("grid");
-    let (slam, loc) = run_and_write(&rec, config, args.grid_particles, &out, mcap.as_mut())?;
+    let (slam, loc) = run_and_write(
+        &rec,
+        config,
+        args.grid_particles,
+        &out,
+        mcap.as_mut(),
+        args.animate.as_deref(),
+    )?;
     if args.global.enabled {
         super::global::sim_cli(&rec, config, args.grid_particles, &args.global, &out, quiet)?;
     }
@@ -137,14 +148,16 @@ pub const SIM_PARTICLES: [usize; 4] = [16, 32, 64, 200];
 
 /// Runs SLAM and the localizer with `particles` particles, writing
 /// `out/slam/` and `out/localize/` (map.pgm, map.yaml, map.png, trajectory.tum,
-/// groundtruth.tum, metrics.json), and recording both into `mcap` (under `/grid_slam` and
-/// `/grid_localize`) when given. Returns the two metrics documents.
+/// groundtruth.tum, metrics.json), recording both into `mcap` (under `/grid_slam` and
+/// `/grid_localize`) and drawing `animate` (an animated GIF of SLAM) when given. Returns
+/// the two metrics documents.
 pub fn run_and_write(
     rec: &LidarRecording,
     config: GridPfConfig,
     particles: usize,
     out: &Path,
     mut mcap: Option<&mut crate::output::mcap::McapFile>,
+    animate: Option<&Path>,
 ) -> Result<(serde_json::Value, serde_json::Value)> {
     let started = Instant::now();
     if !SIM_PARTICLES.contains(&particles) {
@@ -158,6 +171,8 @@ pub fn run_and_write(
         config,
         lidar: rec.lidar,
     };
+    let animation = AnimationSettings::default();
+    let every = animate.map_or(0, |_| animation.snapshot_every(inputs.len()));
     let truth_poses: Vec<Pose2<f64>> = rec.scans.iter().map(|s| s.truth).collect();
     let n = inputs.len();
     let lo = config.log_odds;
@@ -168,7 +183,7 @@ pub fn run_and_write(
         lo,
         &truth_poses,
         true,
-        |o| run_slam_observed::<SIM_GRID_CELLS>(&inputs, start, &options, &|_| {}, o),
+        |o| run_slam_observed::<SIM_GRID_CELLS>(&inputs, start, &options, &|_| {}, o, every),
     )?;
     let slam_wall = started.elapsed().as_secs_f64();
     let map = true_map(&rec.world.walls, &config);
@@ -220,12 +235,27 @@ pub fn run_and_write(
             "range_weight_exponent": config.range_weight_exponent,
             "seed": config.filter.seed,
         });
-        write_outputs(&dir, run, &config, &metrics)?;
+        write_outputs(&dir, run, &config, &metrics, Some(&truth))?;
         write_tum(
             &dir.join("groundtruth.tum"),
             truth.iter().map(|(t, p)| (*t, p.cast())),
         )?;
         docs.push(metrics);
+    }
+    if let Some(path) = animate {
+        let title = format!("Grid SLAM: {}", rec.name);
+        write_gif(
+            path,
+            &Animation {
+                run: &slam,
+                inputs: &inputs,
+                lidar: &rec.lidar,
+                log_odds: &config.log_odds,
+                truth: Some(&truth),
+                title: &title,
+            },
+            &animation,
+        )?;
     }
     let loc_doc = docs.pop().unwrap_or_default();
     let slam_doc = docs.pop().unwrap_or_default();

@@ -6,6 +6,7 @@ use super::detections::{SignField, camera_scenario, write_json};
 use crate::domain::recording::{TruePose, interpolate_pose};
 use crate::drivers::detections::{self, ClassUse, DetectorSettings};
 use crate::drivers::texture::{self, PointCounts, TextureError, TextureSettings};
+use crate::output::floor_texture::draw_floor_maps;
 use anyhow::{Context, Result};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -116,25 +117,42 @@ pub fn texture_cli(args: &TextureOptions, quiet: bool) -> Result<()> {
     let out = &args.out;
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let n = map.size as u32;
-    crate::output::write_png(&out.join("texture.png"), n, n, &map.to_rgb())?;
-    crate::output::write_png(&out.join("texture_truth.png"), n, n, &map.truth_rgb())?;
-    crate::output::write_png(&out.join("texture_ekf.png"), n, n, &ekf_map.to_rgb())?;
-    // Side by side: truth | true poses | EKF poses, 4-pixel white gaps.
-    let gap = 4u32;
-    let w = 3 * n + 2 * gap;
-    let parts = [map.truth_rgb(), map.to_rgb(), ekf_map.to_rgb()];
-    let mut side = vec![255u8; (w * n * 3) as usize];
-    for (k, part) in parts.iter().enumerate() {
-        let x0 = k as u32 * (n + gap);
-        for r in 0..n {
-            let src = (r * n * 3) as usize..((r + 1) * n * 3) as usize;
-            let dst = ((r * w + x0) * 3) as usize;
-            if let (Some(s), Some(d)) = (part.get(src), side.get_mut(dst..dst + (n * 3) as usize)) {
-                d.copy_from_slice(s);
-            }
-        }
+    let half = f64::from(n) * map.resolution_m / 2.0;
+    let note =
+        "Each cell: the mean colour of the floor points the camera saw in it; black: no point.";
+    let (truth, seen, ekf) = (map.truth_rgb(), map.to_rgb(), ekf_map.to_rgb());
+    let (from_truth, from_ekf) = (
+        "mapped from the true poses",
+        "mapped from the EKF-SLAM poses",
+    );
+    for (file, title, panels) in [
+        (
+            "texture.png",
+            "Floor texture map",
+            vec![(from_truth, seen.as_slice())],
+        ),
+        (
+            "texture_truth.png",
+            "Floor texture (truth)",
+            vec![("the true floor", truth.as_slice())],
+        ),
+        (
+            "texture_ekf.png",
+            "Floor texture map",
+            vec![(from_ekf, ekf.as_slice())],
+        ),
+        (
+            "texture_side_by_side.png",
+            "Floor texture: truth and maps",
+            vec![
+                ("the true floor", truth.as_slice()),
+                (from_truth, seen.as_slice()),
+                (from_ekf, ekf.as_slice()),
+            ],
+        ),
+    ] {
+        draw_floor_maps(&out.join(file), title, &panels, n, half, note)?;
     }
-    crate::output::write_png(&out.join("texture_side_by_side.png"), w, n, &side)?;
     write_json(&out.join("texture.json"), &report)?;
     if !quiet {
         println!(

@@ -60,6 +60,30 @@ pub struct GridRun {
     pub refused_odometry: usize,
     /// Ranges that were NaN or ±∞ in the processed scans (skipped beam by beam).
     pub non_finite_beams: usize,
+    /// The map as it grew ([`run_slam_observed`] with `snapshot_every` > 0; empty otherwise): the first entry holds
+    /// the known cells of the starting map, each later one the cells changed since.
+    pub snapshots: Vec<MapChanges>,
+}
+
+/// Cells of the map that changed since the previous snapshot.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MapChanges {
+    /// Scans processed when the snapshot was taken (0: the starting map).
+    pub scans: usize,
+    /// `(cell index, new value)` of every changed cell.
+    pub cells: Vec<(u32, i8)>,
+}
+
+/// The cells of `now` that differ from `before` (which is brought up to date).
+fn changes(before: &mut [i8], now: &[i8], scans: usize) -> MapChanges {
+    let mut cells = Vec::new();
+    for (i, (b, n)) in before.iter_mut().zip(now).enumerate() {
+        if b != n {
+            *b = *n;
+            cells.push((i as u32, *n));
+        }
+    }
+    MapChanges { scans, cells }
 }
 
 impl GridRun {
@@ -73,6 +97,7 @@ impl GridRun {
             skipped_scans: 0,
             refused_odometry: 0,
             non_finite_beams: 0,
+            snapshots: Vec::new(),
         }
     }
 }
@@ -116,6 +141,9 @@ trait GridFilter {
     fn particles(&self) -> &[Pose2<f32>];
     fn covariance(&self) -> [f32; 6];
     fn view(&self) -> GridView<'_>;
+    fn cells(&self) -> &[i8] {
+        self.view().cells()
+    }
 }
 
 impl<const W: usize, const H: usize, const P: usize, const B: usize> GridFilter
@@ -163,7 +191,8 @@ impl<const P: usize, const B: usize> GridFilter for GridLocalizer<'_, P, B> {
 }
 
 /// The drive loop, written once: predict with the odometry increment, observe the scan,
-/// record the pose (and show the step to `observer`).
+/// record the pose, show the step to `observer`, and every `snapshot_every` scans (when not
+/// 0) record the map's changes.
 fn drive(
     filter: &mut impl GridFilter,
     inputs: &[GridInput<'_>],
@@ -171,8 +200,14 @@ fn drive(
     run: &mut GridRun,
     progress: &dyn Fn(usize),
     mut observer: Option<&mut dyn GridObserver>,
+    snapshot_every: usize,
 ) -> Result<()> {
     let mut previous: Option<Pose2<f32>> = None;
+    let mut shadow = Vec::new();
+    if snapshot_every > 0 {
+        shadow = vec![0; filter.cells().len()];
+        run.snapshots.push(changes(&mut shadow, filter.cells(), 0));
+    }
     for (i, input) in inputs.iter().enumerate() {
         let odom = input.odometry;
         if !odom.is_finite() {
@@ -206,6 +241,10 @@ fn drive(
             })?;
             run.observer_time_s += t0.elapsed().as_secs_f64();
         }
+        if snapshot_every > 0 && ((i + 1) % snapshot_every == 0 || i + 1 == inputs.len()) {
+            run.snapshots
+                .push(changes(&mut shadow, filter.cells(), i + 1));
+        }
         progress(i);
     }
     Ok(())
@@ -237,16 +276,19 @@ pub fn run_slam<const N: usize>(
     options: &GridRunOptions,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<GridRun> {
-    run_slam_observed::<N>(inputs, start, options, progress, None)
+    run_slam_observed::<N>(inputs, start, options, progress, None, 0)
 }
 
-/// [`run_slam`] with every step shown to `observer`.
+/// [`run_slam`] with every step shown to `observer` and, when `snapshot_every` is not 0,
+/// the map recorded every `snapshot_every` scans and after the last one
+/// ([`GridRun::snapshots`]: what `--animate` draws).
 pub fn run_slam_observed<const N: usize>(
     inputs: &[GridInput<'_>],
     start: Pose2<f32>,
     options: &GridRunOptions,
     progress: &(dyn Fn(usize) + Sync),
     observer: Option<&mut dyn GridObserver>,
+    snapshot_every: usize,
 ) -> Result<GridRun> {
     std::thread::scope(|scope| {
         let worker = std::thread::Builder::new()
@@ -260,7 +302,8 @@ pub fn run_slam_observed<const N: usize>(
                     start,
                     options,
                     progress,
-                    observer
+                    observer,
+                    snapshot_every
                 )
             })?;
         worker
@@ -275,6 +318,7 @@ fn slam_p<const N: usize, const P: usize>(
     options: &GridRunOptions,
     progress: &dyn Fn(usize),
     observer: Option<&mut dyn GridObserver>,
+    snapshot_every: usize,
 ) -> Result<GridRun> {
     let c = options.config;
     let mut grid = Box::new(OccupancyGrid::<N, N>::centred(c.resolution, c.log_odds));
@@ -290,6 +334,7 @@ fn slam_p<const N: usize, const P: usize>(
             &mut run,
             progress,
             observer,
+            snapshot_every,
         )?;
     }
     run.filter_time_s = t0.elapsed().as_secs_f64() - run.observer_time_s;
@@ -349,6 +394,7 @@ fn localize_p<const P: usize>(
         &mut run,
         progress,
         observer,
+        0,
     )?;
     run.filter_time_s = t0.elapsed().as_secs_f64() - run.observer_time_s;
     Ok(run)

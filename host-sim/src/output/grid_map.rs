@@ -1,6 +1,7 @@
-//! Occupancy maps as files: PGM + YAML in the ROS `map_server` convention, a PNG with the
-//! trajectory, TUM trajectories — and reading a saved map back for localization.
+//! Occupancy maps as files: PGM + YAML in the ROS `map_server` convention, the `map.png`
+//! picture, TUM trajectories — and reading a saved map back for localization.
 
+use super::grid_picture::{CellBox, GridPicture, draw_grid_map, grey as grey_level, probability};
 use crate::drivers::grid::GridRun;
 use anyhow::{Context, Result};
 use microslam::geometry::Pose2;
@@ -8,42 +9,9 @@ use microslam::grid::{GridGeometry, LogOdds};
 use microslam::pf::GridPfConfig;
 use std::path::Path;
 
-/// Occupancy probability of a cell value.
-pub(crate) fn probability(value: i8, log_odds: &LogOdds) -> f64 {
-    let l = f64::from(value) * f64::from(log_odds.nats_per_unit());
-    1.0 / (1.0 + (-l).exp())
-}
-
-/// The bounding box `(x0, y0, x1, y1)` (exclusive ends) of the known cells plus a margin.
-pub(crate) fn known_box(
-    cells: &[i8],
-    g: &GridGeometry,
-    margin: usize,
-) -> (usize, usize, usize, usize) {
-    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
-    for (i, c) in cells.iter().enumerate() {
-        if *c != 0 {
-            let (x, y) = (i % g.width, i / g.width);
-            x0 = x0.min(x);
-            y0 = y0.min(y);
-            x1 = x1.max(x + 1);
-            y1 = y1.max(y + 1);
-        }
-    }
-    if x0 == usize::MAX {
-        return (0, 0, g.width, g.height);
-    }
-    (
-        x0.saturating_sub(margin),
-        y0.saturating_sub(margin),
-        (x1 + margin).min(g.width),
-        (y1 + margin).min(g.height),
-    )
-}
-
 /// Writes `map.pgm` (grey = 255·(1 − p), north up), `map.yaml` (ROS `map_server`; the
 /// thresholds are the grid's occupied/free log-odds as probabilities) and `map.png` (the
-/// same with the trajectory in red), cropped to the known area.
+/// map with axes, legend and the trajectory, [`draw_grid_map`]), cropped to the known area.
 pub fn write_map(
     out: &Path,
     cells: &[i8],
@@ -51,13 +19,29 @@ pub fn write_map(
     log_odds: &LogOdds,
     traj: &[(f64, Pose2<f32>)],
 ) -> Result<()> {
-    let (x0, y0, x1, y1) = known_box(cells, g, 10);
+    write_map_server(out, cells, g, log_odds)?;
+    draw_grid_map(
+        &out.join("map.png"),
+        &GridPicture {
+            cells,
+            geometry: g,
+            log_odds,
+            estimate: traj,
+            truth: None,
+            title: "Occupancy grid map",
+        },
+    )
+}
+
+/// Writes `map.pgm` and `map.yaml` (ROS `map_server`), cropped to the known area.
+fn write_map_server(out: &Path, cells: &[i8], g: &GridGeometry, log_odds: &LogOdds) -> Result<()> {
+    let CellBox { x0, y0, x1, y1 } = CellBox::known(cells, g, 10);
     let (w, h) = (x1 - x0, y1 - y0);
     let mut grey = Vec::with_capacity(w * h);
     for y in (y0..y1).rev() {
         for x in x0..x1 {
             let v = cells.get(y * g.width + x).copied().unwrap_or(0);
-            grey.push((255.0 * (1.0 - probability(v, log_odds))).round() as u8);
+            grey.push(grey_level(v, log_odds));
         }
     }
     let mut pgm = format!("P5\n{w} {h}\n255\n").into_bytes();
@@ -72,18 +56,7 @@ pub fn write_map(
         probability(log_odds.free_below, log_odds),
     );
     std::fs::write(out.join("map.yaml"), yaml)?;
-    // PNG: grey map, trajectory in red.
-    let mut rgb: Vec<u8> = grey.iter().flat_map(|v| [*v, *v, *v]).collect();
-    for (_, p) in traj {
-        let u = ((f64::from(p.x) - origin_x) / f64::from(g.resolution)).floor();
-        let v = ((f64::from(p.y) - origin_y) / f64::from(g.resolution)).floor();
-        if u >= 0.0 && v >= 0.0 && (u as usize) < w && (v as usize) < h {
-            let i = ((h - 1 - v as usize) * w + u as usize) * 3;
-            rgb[i..i + 3].copy_from_slice(&[220, 0, 0]);
-        }
-    }
-    let png = out.join("map.png");
-    super::write_png(&png, w as u32, h as u32, &rgb)
+    Ok(())
 }
 
 /// Writes the outputs of a run into `out`.
@@ -92,14 +65,31 @@ pub fn write_outputs(
     run: &GridRun,
     config: &GridPfConfig,
     metrics: &serde_json::Value,
+    truth: Option<&[(f64, Pose2<f32>)]>,
 ) -> Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    write_map(
-        out,
-        &run.cells,
-        &run.geometry,
-        &config.log_odds,
-        &run.trajectory,
+    write_map_server(out, &run.cells, &run.geometry, &config.log_odds)?;
+    let estimator = metrics["estimator"].as_str().unwrap_or("grid SLAM");
+    let mut letters = estimator.chars();
+    let title = format!(
+        "{}{}: {}",
+        letters
+            .next()
+            .map(|c| c.to_uppercase().to_string())
+            .unwrap_or_default(),
+        letters.as_str(),
+        metrics["dataset"].as_str().unwrap_or("run")
+    );
+    draw_grid_map(
+        &out.join("map.png"),
+        &GridPicture {
+            cells: &run.cells,
+            geometry: &run.geometry,
+            log_odds: &config.log_odds,
+            estimate: &run.trajectory,
+            truth,
+            title: &title,
+        },
     )?;
     super::write_tum(
         &out.join("trajectory.tum"),

@@ -1,7 +1,11 @@
 //! Layer 4: files written after a run: TUM trajectories, `metrics.json`, `landmarks.csv`,
 //! ROS `map_server` maps, PNG pictures, MCAP recordings and ROS 2 bags.
 
+pub mod animation;
+pub mod figure;
+pub mod floor_texture;
 pub mod grid_map;
+pub mod grid_picture;
 pub mod mcap;
 mod plots;
 pub mod rosbag;

@@ -1,8 +1,7 @@
-//! PNG pictures drawn with plotters' bitmap backend and encoded with the `png` crate.
-//!
-//! No text is drawn, so no font library is needed (CI machines have no fontconfig):
-//! grid lines are 1 m apart on the map and 60 s / 0.1 m apart on the error plot.
+//! PNG pictures of landmark runs drawn with plotters' bitmap backend and encoded with the
+//! `png` crate; labels in the embedded font ([`super::figure`]).
 
+use super::figure::{self, ELLIPSE, ESTIMATE, ESTIMATE_WIDTH, MapLayout, Mark, TRUTH, TRUTH_WIDTH};
 use crate::domain::recording::Recording;
 use crate::domain::recording::interpolate_pose;
 use crate::drivers::ekf::ReplayRun;
@@ -16,9 +15,8 @@ use std::path::Path;
 /// A point of the plot, metres.
 type Point = (f64, f64);
 
-const MAP_PX: u32 = 900;
 const ERR_W: u32 = 1200;
-const ERR_H: u32 = 450;
+const ERR_H: u32 = 500;
 /// χ²₂ quantile at 0.95: the 95 % ellipse is `√5.991 · σ`.
 const CHI2_2_95: f64 = 5.991_464_547_107_979;
 const MAX_PATH_POINTS: usize = 4000;
@@ -45,16 +43,21 @@ fn thin<T: Copy>(v: &[T]) -> Vec<T> {
     v.iter().step_by(step).copied().collect()
 }
 
-/// `map.png`: true path (blue), estimated path (red), true landmarks (black crosses),
-/// estimated landmarks (red dots) with their 95 % ellipses (orange), 1 m grid. The
-/// estimate is drawn through `alignment` (the SE(2) alignment onto ground truth, or the
-/// identity).
+/// Size of the plotting area of `map.png` (square), pixels.
+const MAP_PLOT_PX: u32 = 820;
+
+/// `map.png`: the landmark map with axes in metres, a legend, a scale bar, the true path
+/// (blue, wide, underneath) and the estimated path (vermillion, on top) with start and end
+/// markers, true landmarks (black crosses), estimated landmarks (vermillion dots) with
+/// their 95 % ellipses (purple). The estimate is drawn through `alignment` (the SE(2)
+/// alignment onto ground truth, or the identity).
 pub fn draw_map(
     path: &Path,
     recording: &Recording,
     run: &ReplayRun,
     alignment: &Pose2<f64>,
 ) -> Result<()> {
+    figure::register_font()?;
     let t = *alignment;
     let est: Vec<(f64, f64)> = thin(&run.trajectory)
         .iter()
@@ -94,67 +97,31 @@ pub fn draw_map(
         .chain(&truth)
         .chain(&true_lm)
         .chain(landmarks.iter().map(|(p, _)| p));
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for &(x, y) in all {
-        if x.is_finite() && y.is_finite() {
-            x0 = x0.min(x);
-            x1 = x1.max(x);
-            y0 = y0.min(y);
-            y1 = y1.max(y);
-        }
-    }
-    if x0 > x1 {
-        (x0, x1, y0, y1) = (-1.0, 1.0, -1.0, 1.0);
-    }
-    let half = ((x1 - x0).max(y1 - y0) / 2.0 + 0.5).max(1.0);
-    let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
-    let (x0, x1, y0, y1) = (cx - half, cx + half, cy - half, cy + half);
-
-    let mut buf = vec![0u8; (MAP_PX * MAP_PX * 3) as usize];
+    let [x0, x1, y0, y1] = figure::bounds(all).unwrap_or([-1.0, 1.0, -1.0, 1.0]);
+    let pad = 0.04 * (x1 - x0).max(y1 - y0).max(1.0);
+    let layout = MapLayout::MAP;
+    let (x, y) = figure::equal_aspect(
+        (x0 - pad, x1 + pad),
+        (y0 - pad, y1 + pad),
+        MAP_PLOT_PX,
+        MAP_PLOT_PX,
+    );
+    let (w, h) = layout.image_size(MAP_PLOT_PX, MAP_PLOT_PX);
+    let mut buf = vec![0u8; (w * h * 3) as usize];
     {
-        let root = BitMapBackend::with_buffer(&mut buf, (MAP_PX, MAP_PX)).into_drawing_area();
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(err)?;
-        let mut chart = ChartBuilder::on(&root)
-            .margin(10)
-            .build_cartesian_2d(x0..x1, y0..y1)
-            .map_err(err)?;
-        let grid = RGBColor(225, 225, 225);
-        let mut g = x0.ceil();
-        while g <= x1 {
-            chart
-                .draw_series(std::iter::once(PathElement::new(
-                    vec![(g, y0), (g, y1)],
-                    grid,
-                )))
-                .map_err(err)?;
-            g += 1.0;
-        }
-        let mut g = y0.ceil();
-        while g <= y1 {
-            chart
-                .draw_series(std::iter::once(PathElement::new(
-                    vec![(x0, g), (x1, g)],
-                    grid,
-                )))
-                .map_err(err)?;
-            g += 1.0;
-        }
-        chart
-            .draw_series(LineSeries::new(truth, BLUE.stroke_width(2)))
-            .map_err(err)?;
-        chart
-            .draw_series(LineSeries::new(est, RED.stroke_width(1)))
-            .map_err(err)?;
-        let orange = RGBColor(255, 140, 0);
-        for (p, e) in &landmarks {
+        let title = format!("Landmark EKF-SLAM: {}", recording.name);
+        let (mut chart, side) = figure::map_chart(&root, &layout, &title, x, y)?;
+        figure::grid_lines(&mut chart)?;
+        figure::path(&chart, &truth, TRUTH, TRUTH_WIDTH)?;
+        figure::path(&chart, &est, ESTIMATE, ESTIMATE_WIDTH)?;
+        for (_, e) in &landmarks {
             chart
                 .draw_series(std::iter::once(PathElement::new(
                     e.clone(),
-                    orange.stroke_width(2),
+                    ELLIPSE.stroke_width(2),
                 )))
-                .map_err(err)?;
-            chart
-                .draw_series(std::iter::once(Circle::new(*p, 3, RED.filled())))
                 .map_err(err)?;
         }
         chart
@@ -164,9 +131,35 @@ pub fn draw_map(
                     .map(|p| Cross::new(*p, 6, BLACK.stroke_width(2))),
             )
             .map_err(err)?;
+        chart
+            .draw_series(
+                landmarks
+                    .iter()
+                    .map(|(p, _)| Circle::new(*p, 4, ESTIMATE.filled())),
+            )
+            .map_err(err)?;
+        figure::start_end(&chart, if truth.is_empty() { &est } else { &truth })?;
+        figure::scale_bar(&chart)?;
+        let mut entries = Vec::new();
+        if !truth.is_empty() {
+            entries.push((Mark::Line(TRUTH, TRUTH_WIDTH), "true path"));
+        }
+        entries.push((Mark::Line(ESTIMATE, ESTIMATE_WIDTH), "estimated path"));
+        entries.push((Mark::Start, "start"));
+        entries.push((Mark::End, "end"));
+        if !true_lm.is_empty() {
+            entries.push((Mark::Cross(BLACK), "true landmark"));
+        }
+        entries.push((Mark::Dot(ESTIMATE), "estimated landmark"));
+        entries.push((Mark::Ellipse(ELLIPSE), "95 % ellipse"));
+        figure::legend(
+            &side,
+            (6, i32::try_from(layout.title + layout.margin).unwrap_or(0)),
+            &entries,
+        )?;
         root.present().map_err(err)?;
     }
-    write_png(path, MAP_PX, MAP_PX, &buf)
+    write_png(path, w, h, &buf)
 }
 
 /// Points of the 95 % ellipse of a 2-D Gaussian.
@@ -184,9 +177,9 @@ fn ellipse(center: &Vector2<f64>, cov: &Matrix2<f64>) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// `errors.png`: position error of the estimate against ground truth over time (red) and
-/// its 3σ bound `3·√(σx² + σy²)` from the filter's covariance (blue); grid every 60 s
-/// and 0.1 m. Errors are in the filter's frame (it starts at the true pose) when the
+/// `errors.png`: position error of the estimate against ground truth over time
+/// (vermillion) and its 3σ bound `3·√(σx² + σy²)` from the filter's covariance (blue), with
+/// axes in seconds and metres, a legend naming both and a title naming the recording. Errors are in the filter's frame (it starts at the true pose) when the
 /// recording gives the initial pose, otherwise through `alignment`.
 pub fn draw_errors(
     path: &Path,
@@ -214,6 +207,7 @@ pub fn draw_errors(
             3.0 * (s.covariance[0][0] + s.covariance[1][1]).max(0.0).sqrt(),
         ));
     }
+    figure::register_font()?;
     let tmax = error.last().map_or(1.0, |e| e.0.max(1.0));
     let ymax = error
         .iter()
@@ -227,35 +221,49 @@ pub fn draw_errors(
         let root = BitMapBackend::with_buffer(&mut buf, (ERR_W, ERR_H)).into_drawing_area();
         root.fill(&WHITE).map_err(err)?;
         let mut chart = ChartBuilder::on(&root)
-            .margin(10)
+            .margin(14)
+            .caption(
+                format!("Position error against ground truth: {}", recording.name),
+                (figure::FONT, 22),
+            )
+            .x_label_area_size(52)
+            .y_label_area_size(76)
             .build_cartesian_2d(0.0..tmax, 0.0..ymax)
             .map_err(err)?;
-        let grid = RGBColor(225, 225, 225);
-        let mut x = 0.0;
-        while x <= tmax {
-            chart
-                .draw_series(std::iter::once(PathElement::new(
-                    vec![(x, 0.0), (x, ymax)],
-                    grid,
-                )))
-                .map_err(err)?;
-            x += 60.0;
-        }
-        let mut y = 0.0;
-        while y <= ymax {
-            chart
-                .draw_series(std::iter::once(PathElement::new(
-                    vec![(0.0, y), (tmax, y)],
-                    grid,
-                )))
-                .map_err(err)?;
-            y += 0.1;
-        }
         chart
-            .draw_series(LineSeries::new(bound, BLUE.stroke_width(2)))
+            .configure_mesh()
+            .bold_line_style(figure::GRID_LINE)
+            .light_line_style(TRANSPARENT)
+            .x_desc("time since the first estimate (s)")
+            .y_desc("error (m)")
+            .x_label_formatter(&figure::tick)
+            .y_label_formatter(&figure::tick)
+            .label_style((figure::FONT, 15))
+            .axis_desc_style((figure::FONT, 17))
+            .x_labels(12)
+            .y_labels(8)
+            .draw()
             .map_err(err)?;
+        figure::path(&chart, &bound, TRUTH, 2)?;
+        figure::path(&chart, &error, ESTIMATE, 2)?;
+        // Empty series carry the legend entries.
         chart
-            .draw_series(LineSeries::new(error, RED.stroke_width(1)))
+            .draw_series(LineSeries::new(std::iter::empty(), TRUTH))
+            .map_err(err)?
+            .label("3σ bound: 3·√(σx² + σy²) of the filter's covariance")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], TRUTH.stroke_width(2)));
+        chart
+            .draw_series(LineSeries::new(std::iter::empty(), ESTIMATE))
+            .map_err(err)?
+            .label("position error |estimate − truth|")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], ESTIMATE.stroke_width(2)));
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font((figure::FONT, 16))
+            .background_style(WHITE.mix(0.9))
+            .border_style(RGBColor(150, 150, 150))
+            .draw()
             .map_err(err)?;
         root.present().map_err(err)?;
     }

@@ -1,122 +1,97 @@
 //! The picture of a THOR dead-reckoning run.
 
+use super::figure::{self, ESTIMATE, ESTIMATE_WIDTH, MapLayout, Mark};
 use anyhow::Result;
 use microslam::geometry::Pose2;
 use plotters::prelude::*;
 use std::path::Path;
 
-/// Picture size, pixels.
-const SIZE: u32 = 800;
+/// Size of the (square) plotting area, pixels.
+const PLOT_PX: u32 = 720;
 
-/// The THOR dead-reckoning trajectory as an 800 × 800 PNG with a 1 m grid.
-pub fn draw_trajectory(path: &Path, traj: &[(f64, Pose2<f64>)]) -> Result<()> {
-    let mut rgb = vec![0u8; (SIZE * SIZE * 3) as usize];
-    draw_on(BitMapBackend::with_buffer(&mut rgb, (SIZE, SIZE)), traj)?;
-    super::write_png(path, SIZE, SIZE, &rgb)
+/// The THOR dead-reckoning trajectory as a PNG: axes in metres, a legend, a scale bar,
+/// start and end markers; `title` above it.
+pub fn draw_trajectory(path: &Path, traj: &[(f64, Pose2<f64>)], title: &str) -> Result<()> {
+    figure::register_font()?;
+    let (w, h) = MapLayout::MAP.image_size(PLOT_PX, PLOT_PX);
+    let mut rgb = vec![0u8; (w * h * 3) as usize];
+    draw_on(BitMapBackend::with_buffer(&mut rgb, (w, h)), traj, title)?;
+    super::write_png(path, w, h, &rgb)
 }
 
-/// Draws the 1 m grid, each line once, then the trajectory, on any plotters backend.
-fn draw_on<DB: DrawingBackend>(backend: DB, traj: &[(f64, Pose2<f64>)]) -> Result<()> {
-    let plot_error = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e:?}");
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for (_, p) in traj {
-        x0 = x0.min(p.x);
-        x1 = x1.max(p.x);
-        y0 = y0.min(p.y);
-        y1 = y1.max(p.y);
-    }
-    if traj.is_empty() {
-        (x0, x1, y0, y1) = (0.0, 0.0, 0.0, 0.0);
-    }
+/// Draws the picture on any plotters backend.
+fn draw_on<DB: DrawingBackend>(backend: DB, traj: &[(f64, Pose2<f64>)], title: &str) -> Result<()> {
+    let e = figure::plot_error;
+    let points: Vec<(f64, f64)> = traj.iter().map(|(_, p)| (p.x, p.y)).collect();
+    let [x0, x1, y0, y1] = figure::bounds(&points).unwrap_or([-1.0, 1.0, -1.0, 1.0]);
     let pad = 0.05 * (x1 - x0).max(y1 - y0).max(1.0);
-    let (x0, x1, y0, y1) = (x0 - pad, x1 + pad, y0 - pad, y1 + pad);
+    let layout = MapLayout::MAP;
+    let (pw, ph) = layout.plot_size(backend.get_size().0, backend.get_size().1);
+    let (x, y) = figure::equal_aspect((x0 - pad, x1 + pad), (y0 - pad, y1 + pad), pw, ph);
     let root = backend.into_drawing_area();
-    root.fill(&WHITE).map_err(plot_error)?;
-    let mut chart = ChartBuilder::on(&root)
-        .margin(10)
-        .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(plot_error)?;
-    // No axes: the plotters build here has no font backend (a 1 m grid instead).
-    let grid_style = ShapeStyle::from(&RGBColor(220, 220, 220)).stroke_width(1);
-    for gx in x0.ceil() as i64..=x1.floor() as i64 {
-        let gx = gx as f64;
-        chart
-            .draw_series(LineSeries::new([(gx, y0), (gx, y1)], grid_style))
-            .map_err(plot_error)?;
-    }
-    for gy in y0.ceil() as i64..=y1.floor() as i64 {
-        let gy = gy as f64;
-        chart
-            .draw_series(LineSeries::new([(x0, gy), (x1, gy)], grid_style))
-            .map_err(plot_error)?;
-    }
-    chart
-        .draw_series(LineSeries::new(traj.iter().map(|(_, p)| (p.x, p.y)), &RED))
-        .map_err(plot_error)?;
-    root.present().map_err(plot_error)?;
+    root.fill(&WHITE).map_err(e)?;
+    let (mut chart, side) = figure::map_chart(&root, &layout, title, x, y)?;
+    figure::grid_lines(&mut chart)?;
+    figure::path(&chart, &points, ESTIMATE, ESTIMATE_WIDTH)?;
+    figure::start_end(&chart, &points)?;
+    figure::scale_bar(&chart)?;
+    let top = i32::try_from(layout.title + layout.margin).unwrap_or(0);
+    figure::legend(
+        &side,
+        (6, top),
+        &[
+            (
+                Mark::Line(ESTIMATE, ESTIMATE_WIDTH),
+                "dead reckoning (encoders + IMU)",
+            ),
+            (Mark::Start, "start"),
+            (Mark::End, "end"),
+        ],
+    )?;
+    root.present().map_err(e)?;
     Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use plotters_backend::{
-        BackendColor, BackendCoord, BackendStyle, DrawingBackend, DrawingErrorKind,
-    };
-    use std::cell::Cell;
-
-    /// Counts what is drawn, draws nothing.
-    struct Counting<'a> {
-        paths: &'a Cell<usize>,
-        presents: &'a Cell<usize>,
-    }
-
-    impl DrawingBackend for Counting<'_> {
-        type ErrorType = std::io::Error;
-        fn get_size(&self) -> (u32, u32) {
-            (SIZE, SIZE)
-        }
-        fn ensure_prepared(&mut self) -> Result<(), DrawingErrorKind<std::io::Error>> {
-            Ok(())
-        }
-        fn present(&mut self) -> Result<(), DrawingErrorKind<std::io::Error>> {
-            self.presents.set(self.presents.get() + 1);
-            Ok(())
-        }
-        fn draw_pixel(
-            &mut self,
-            _: BackendCoord,
-            _: BackendColor,
-        ) -> Result<(), DrawingErrorKind<std::io::Error>> {
-            Ok(())
-        }
-        fn draw_path<S: BackendStyle, I: IntoIterator<Item = BackendCoord>>(
-            &mut self,
-            _: I,
-            _: &S,
-        ) -> Result<(), DrawingErrorKind<std::io::Error>> {
-            self.paths.set(self.paths.get() + 1);
-            Ok(())
-        }
-    }
+    use crate::output::figure::check::Rgb;
+    use crate::output::figure::{END, START};
 
     #[test]
-    fn every_grid_line_and_the_trajectory_are_drawn_once() {
-        // 0 … 9 m in x, 0 … 4 m in y: padded by 0.45 m, grid lines at x = 0 … 9
-        // (10) and y = 0 … 4 (5), and one trajectory.
+    fn the_dead_reckoning_picture_is_labelled() {
+        // 0 … 9 m in x, 0 … 4 m in y.
         let traj: Vec<(f64, Pose2<f64>)> = (0..=90)
             .map(|i| {
                 let t = f64::from(i) / 10.0;
                 (t, Pose2::new(t, 4.0 * t / 9.0, 0.0))
             })
             .collect();
-        let (paths, presents) = (Cell::new(0), Cell::new(0));
-        let backend = Counting {
-            paths: &paths,
-            presents: &presents,
-        };
-        draw_on(backend, &traj).expect("drawing succeeds");
-        assert_eq!(paths.get(), 10 + 5 + 1);
-        assert!(presents.get() >= 1);
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let path = dir.path().join("trajectory.png");
+        draw_trajectory(&path, &traj, "THOR run 20").expect("drawn");
+        let img = Rgb::read(&path);
+        let layout = MapLayout::MAP;
+        assert_eq!((img.w, img.h), layout.image_size(PLOT_PX, PLOT_PX));
+        let (px0, py0) = (
+            layout.margin + layout.y_labels,
+            layout.margin + layout.title,
+        );
+        let (px1, py1) = (px0 + PLOT_PX, py0 + PLOT_PX);
+        let colour = |c: RGBColor| [c.0, c.1, c.2];
+        // The 9 m diagonal spans most of the 720-pixel plot, 2 pixels wide.
+        assert!(img.count(colour(ESTIMATE), (px0, px1), (py0, py1)) > 1000);
+        assert!(img.count(colour(START), (px0, px1), (py0, py1)) > 50);
+        assert!(img.count(colour(END), (px0, px1), (py0, py1)) > 50);
+        assert!(img.dark((px0, px1), (0, py0)) > 150, "title");
+        assert!(
+            img.dark((px0, px1), (py1 + 8, img.h)) > 120,
+            "x axis labels"
+        );
+        assert!(img.dark((0, px0 - 8), (py0, py1)) > 120, "y axis labels");
+        assert!(
+            img.dark((img.w - layout.legend, img.w), (0, img.h)) > 400,
+            "legend"
+        );
     }
 }

@@ -371,13 +371,14 @@ impl<'f> RunRecorder<'f> {
         log_odds: &LogOdds,
     ) -> Result<()> {
         let t = stamp;
-        let (x0, y0, x1, y1) = crate::output::grid_map::known_box(cells, g, 2);
+        let crate::output::grid_picture::CellBox { x0, y0, x1, y1 } =
+            crate::output::grid_picture::CellBox::known(cells, g, 2);
         let (w, h) = (x1 - x0, y1 - y0);
         let mut data = Vec::with_capacity(4 * w * h);
         for y in y0..y1 {
             for x in x0..x1 {
                 let v = cells.get(y * g.width + x).copied().unwrap_or(0);
-                let grey = (255.0 * (1.0 - crate::output::grid_map::probability(v, log_odds)))
+                let grey = (255.0 * (1.0 - crate::output::grid_picture::probability(v, log_odds)))
                     .round() as u8;
                 data.extend_from_slice(&[grey, grey, grey, if v == 0 { 0 } else { 255 }]);
             }
