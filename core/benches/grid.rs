@@ -6,7 +6,7 @@
 
 use core::hint::black_box;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use microslam::geometry::Pose2;
+use microslam::geometry::{Pose2, ray_to_segments};
 use microslam::grid::{OccupancyGrid, occupancy_bytes};
 use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam};
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
@@ -23,22 +23,10 @@ const WALLS: [[f32; 4]; 9] = [
     [1.0, 2.5, 0.0, 3.2],
 ];
 
+/// Range from `(x, y)` along `a` to the nearest of [`WALLS`] (81.9 m, the SICK's "no
+/// return", when none).
 fn cast(x: f32, y: f32, a: f32) -> f32 {
-    let (dx, dy) = (a.cos(), a.sin());
-    let mut best = 81.9f32;
-    for [x1, y1, x2, y2] in WALLS {
-        let (ex, ey) = (x2 - x1, y2 - y1);
-        let den = dx * ey - dy * ex;
-        if den.abs() < 1e-9 {
-            continue;
-        }
-        let t = ((x1 - x) * ey - (y1 - y) * ex) / den;
-        let u = ((x1 - x) * dy - (y1 - y) * dx) / den;
-        if t > 0.0 && (0.0..=1.0).contains(&u) {
-            best = best.min(t);
-        }
-    }
-    best
+    ray_to_segments((x, y), (a.cos(), a.sin()), WALLS).unwrap_or(81.9)
 }
 
 fn scan_at(pose: &Pose2<f32>, beams: usize) -> (Vec<f32>, LidarGeometry) {

@@ -51,6 +51,44 @@ pub fn wrap_near<T: Real>(angle: T) -> T {
     }
 }
 
+/// Distance from `origin` along the unit direction `(cos θ, sin θ)` to the nearest of
+/// `walls`, each a segment `[x1, y1, x2, y2]`; `None` when the ray hits none.
+///
+/// The ray caster of simulated worlds (the simulator, tests, benchmarks and the cost
+/// measurements of the firmware): a sensor model, not used by the estimators. A wall
+/// parallel to the ray is never hit; a ray starting on a wall sees the next one.
+///
+/// ```
+/// use microslam::geometry::ray_to_segments;
+/// // A wall at x = 2 from y = −1 to 1, and one behind the origin.
+/// let walls = [[2.0, -1.0, 2.0, 1.0], [-1.0, -1.0, -1.0, 1.0]];
+/// assert_eq!(ray_to_segments((0.0_f64, 0.5), (1.0, 0.0), walls), Some(2.0));
+/// assert_eq!(ray_to_segments((0.0_f64, 0.0), (0.0, 1.0), walls), None);
+/// ```
+pub fn ray_to_segments<T: Real>(
+    origin: (T, T),
+    direction: (T, T),
+    walls: impl IntoIterator<Item = [T; 4]>,
+) -> Option<T> {
+    let (x, y) = origin;
+    let (dx, dy) = direction;
+    let mut nearest: Option<T> = None;
+    for [x1, y1, x2, y2] in walls {
+        let (ex, ey) = (x2 - x1, y2 - y1);
+        let den = dx * ey - dy * ex;
+        if den.abs() < T::lit(1e-12) {
+            continue;
+        }
+        let (wx, wy) = (x1 - x, y1 - y);
+        let t = (wx * ey - wy * ex) / den;
+        let u = (wx * dy - wy * dx) / den;
+        if t > T::ZERO && u >= T::ZERO && u <= T::lit(1.0) && nearest.is_none_or(|n| t < n) {
+            nearest = Some(t);
+        }
+    }
+    nearest
+}
+
 /// A pose in the plane: position `(x, y)` and heading `theta` (radians, CCW positive).
 ///
 /// Read `a.compose(&b)` as "`b` expressed in frame `a`, taken to the frame `a` lives in":
@@ -96,6 +134,17 @@ impl<T: Real> Pose2<T> {
     #[inline]
     pub fn wrapped(&self) -> Self {
         Self::new(self.x, self.y, wrap_angle(self.theta))
+    }
+
+    /// The pose in another scalar type, through `f64` (exact from `f32` to `f64`; `f64` to
+    /// `f32` rounds to nearest).
+    #[inline]
+    pub fn cast<U: Real>(&self) -> Pose2<U> {
+        Pose2::new(
+            U::lit(self.x.to_f64()),
+            U::lit(self.y.to_f64()),
+            U::lit(self.theta.to_f64()),
+        )
     }
 
     /// `true` when all three components are finite.

@@ -69,6 +69,7 @@ pub mod grid;
 mod log;
 pub mod motion;
 pub mod pf;
+pub mod profile;
 pub mod scalar;
 pub mod sensors;
 #[cfg(feature = "wire")]

@@ -53,3 +53,22 @@ pub fn thousand_nops() {
     // SAFETY: only `nop`s.
     unsafe { core::arch::asm!(".rept 1000", "nop", ".endr", options(nomem, nostack)) };
 }
+
+/// The walls of the cost measurements' world (`[x1, y1, x2, y2]`, metres): the room
+/// `[-3, 3]²` and a pillar `[1, 1.6] × [-0.5, 0.5]`.
+pub const ROOM: [[f32; 4]; 8] = [
+    [-3.0, -3.0, 3.0, -3.0],
+    [3.0, -3.0, 3.0, 3.0],
+    [3.0, 3.0, -3.0, 3.0],
+    [-3.0, 3.0, -3.0, -3.0],
+    [1.0, -0.5, 1.6, -0.5],
+    [1.6, -0.5, 1.6, 0.5],
+    [1.6, 0.5, 1.0, 0.5],
+    [1.0, 0.5, 1.0, -0.5],
+];
+
+/// Range from `(x, y)` along `angle` to the nearest wall of [`ROOM`] (∞ when none).
+pub fn room_range(x: f32, y: f32, angle: f32) -> f32 {
+    let direction = (libm::cosf(angle), libm::sinf(angle));
+    microslam::geometry::ray_to_segments((x, y), direction, ROOM).unwrap_or(f32::INFINITY)
+}

@@ -50,7 +50,7 @@ mod grid {
     static GRID: ConstStaticCell<Grid> = ConstStaticCell::new(Grid::zeroed());
 
     /// The grid estimator (particles, scan points; ~2.5 KB), borrowing [`GRID`].
-    static GRID_SLAM: StaticCell<GridEstimator> = StaticCell::new();
+    static GRID_SLAM: StaticCell<GridEstimator<'static>> = StaticCell::new();
 
     /// The session with the EKF and the grid SLAM; localizer requests are refused (no map).
     pub fn session(ekf: &'static mut Ekf) -> FirmwareSession {
@@ -84,7 +84,7 @@ mod grid {
     use static_cell::StaticCell;
 
     /// The localizer (particles, scan points), borrowing the map image in flash.
-    static LOCALIZER: StaticCell<Localizer> = StaticCell::new();
+    static LOCALIZER: StaticCell<Localizer<'static>> = StaticCell::new();
 
     /// The session with the EKF and the localizer, or with the reason the map was refused.
     pub fn session(ekf: &'static mut Ekf) -> FirmwareSession {

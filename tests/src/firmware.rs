@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use microslam::geometry::ray_to_segments;
 use microslam::wire::{
     Command as WireCommand, EstimatorKind, Odometry, SCAN_CHUNK_BEAMS, ScanChunk, ToDevice,
 };
@@ -153,20 +154,8 @@ const ROOM: [((f32, f32), (f32, f32)); 9] = [
 
 /// Range from `(x, y)` along angle `a` to the nearest wall of [`ROOM`], metres.
 fn cast(x: f32, y: f32, a: f32) -> Option<f32> {
-    let (dx, dy) = (a.cos(), a.sin());
-    ROOM.iter()
-        .filter_map(|&((x1, y1), (x2, y2))| {
-            let (ex, ey) = (x2 - x1, y2 - y1);
-            let den = dx * ey - dy * ex;
-            if den.abs() < 1e-9 {
-                return None;
-            }
-            let (wx, wy) = (x1 - x, y1 - y);
-            let t = (wx * ey - wy * ex) / den;
-            let u = (wx * dy - wy * dx) / den;
-            (t > 0.0 && (0.0..=1.0).contains(&u)).then_some(t)
-        })
-        .min_by(f32::total_cmp)
+    let walls = ROOM.iter().map(|&((x1, y1), (x2, y2))| [x1, y1, x2, y2]);
+    ray_to_segments((x, y), (a.cos(), a.sin()), walls)
 }
 
 /// Beams of the grid drive's lidar: 90 over the full circle.

@@ -397,7 +397,7 @@ pub fn npz_reader(data: &[u8]) {
     let _ = host_sim::inputs::readers::thor::dead_reckoning(dir.path(), 20);
 }
 
-/// Fuzzes the saved-map reader of `host-sim localize`: the input up to the first `0xFF`
+/// Fuzzes the map reader (`microslam::grid::ros_map`, used by `host-sim localize` and the firmware's build script): the input up to the first `0xFF`
 /// is written as `map.yaml`, the rest as the PGM it names (`image: map.pgm` is put first
 /// so that most inputs reach the PGM parser). No panic; an error names `map.yaml` or
 /// `map.pgm`; a map read has `width · height` cells.
@@ -411,8 +411,8 @@ pub fn map_reader(data: &[u8]) {
     std::fs::write(dir.path().join("map.pgm"), pgm.get(1..).unwrap_or(&[]))
         .expect("write fuzz file");
     let log_odds = microslam::grid::LogOdds::SEED;
-    match host_sim::output::grid_map::read_map(&dir.path().join("map.yaml"), &log_odds) {
-        Ok((cells, geometry)) => {
+    match microslam::grid::ros_map::RosMap::read(&dir.path().join("map.yaml"), &log_odds) {
+        Ok(microslam::grid::ros_map::RosMap { cells, geometry }) => {
             assert_eq!(cells.len(), geometry.width * geometry.height);
             assert!(geometry.resolution.is_finite() && geometry.resolution > 0.0);
         }

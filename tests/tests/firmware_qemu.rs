@@ -8,8 +8,8 @@ use std::time::Duration;
 
 use microslam::wire::{EstimatorKind, StepResult, ToDevice, ToHost};
 use microslam_replay_tests::firmware::{
-    encode_all, firmware_elf, host_replies, lidar_world_messages, run_in_qemu, synthetic_drive,
-    synthetic_lidar_drive, with_line_noise,
+    QemuRun, encode_all, firmware_elf, host_replies, lidar_world_messages, run_in_qemu,
+    synthetic_drive, synthetic_lidar_drive, with_line_noise,
 };
 
 /// Bits of every f32, so that equality means bit for bit (and NaN = NaN).
@@ -23,6 +23,37 @@ fn bits(reply: &ToHost) -> Vec<u8> {
     }
     let mut buf = [0u8; 256];
     postcard::to_slice(&r, &mut buf).expect("fits").to_vec()
+}
+
+/// `path`, after checking that it was built.
+fn built(path: std::path::PathBuf) -> std::path::PathBuf {
+    assert!(
+        path.exists(),
+        "{} missing: run .ci/firmware.sh",
+        path.display()
+    );
+    path
+}
+
+/// Runs `bytes` through the firmware `elf` under QEMU and checks that it answers every
+/// frame, with frames that all decode and replies equal to `expected` bit for bit.
+fn run_equal_to_host(
+    elf: &std::path::Path,
+    bytes: Vec<u8>,
+    expected: &[ToHost],
+    timeout: Duration,
+) -> QemuRun {
+    let run = run_in_qemu(elf, bytes, expected.len(), timeout);
+    assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
+    assert_eq!(run.replies.len(), expected.len(), "every message answered");
+    for (i, (got, want)) in run.replies.iter().zip(expected).enumerate() {
+        assert_eq!(
+            bits(got),
+            bits(want),
+            "reply {i} differs:\n{got:?}\n{want:?}"
+        );
+    }
+    run
 }
 
 #[test]
@@ -41,18 +72,8 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_a_synthetic_drive() {
         "the drive maps every landmark (twice: reset)"
     );
 
-    let elf = firmware_elf();
-    assert!(
-        elf.exists(),
-        "{} missing: run .ci/firmware.sh",
-        elf.display()
-    );
-    let run = run_in_qemu(
-        &elf,
-        bytes.clone(),
-        expected.len(),
-        Duration::from_secs(240),
-    );
+    let elf = built(firmware_elf());
+    let run = run_equal_to_host(&elf, bytes.clone(), &expected, Duration::from_secs(240));
     println!(
         "{} frames ({} bytes, {} noise bursts) → {} replies in {:.2} s",
         messages.len(),
@@ -61,15 +82,6 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_a_synthetic_drive() {
         run.replies.len(),
         run.elapsed.as_secs_f64()
     );
-    assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
-    assert_eq!(run.replies.len(), expected.len(), "every message answered");
-    for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
-        assert_eq!(
-            bits(got),
-            bits(want),
-            "reply {i} differs:\n{got:?}\n{want:?}"
-        );
-    }
     // The last reply answers the status request: device counters and its stack peak.
     let Some(ToHost::Status {
         seq,
@@ -106,18 +118,8 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_mrclam_dataset6() {
         "no reply to a corrupted frame"
     );
 
-    let elf = firmware_elf();
-    assert!(
-        elf.exists(),
-        "{} missing: run .ci/firmware.sh",
-        elf.display()
-    );
-    let run = run_in_qemu(
-        &elf,
-        bytes.clone(),
-        expected.len(),
-        Duration::from_secs(900),
-    );
+    let elf = built(firmware_elf());
+    let run = run_equal_to_host(&elf, bytes.clone(), &expected, Duration::from_secs(900));
     println!(
         "mrclam dataset6 robot1: {} events → {} frames ({} bytes) → {} replies in {:.1} s",
         recording.events.len(),
@@ -126,8 +128,6 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_mrclam_dataset6() {
         run.replies.len(),
         run.elapsed.as_secs_f64()
     );
-    assert_eq!(run.bad_frames, 0);
-    assert_eq!(run.replies.len(), expected.len(), "every message answered");
     let comparison = host_sim::drivers::hil::compare(messages.len(), &run, &expected);
     assert_eq!(
         comparison.identical,
@@ -183,18 +183,8 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_a_lidar_drive() {
     };
     assert!(status.resamples > 0, "the particles were resampled");
 
-    let elf = firmware_elf();
-    assert!(
-        elf.exists(),
-        "{} missing: run .ci/firmware.sh",
-        elf.display()
-    );
-    let run = run_in_qemu(
-        &elf,
-        bytes.clone(),
-        expected.len(),
-        Duration::from_secs(600),
-    );
+    let elf = built(firmware_elf());
+    let run = run_equal_to_host(&elf, bytes.clone(), &expected, Duration::from_secs(600));
     println!(
         "grid: {} frames ({} scans, {} bytes) → {} replies in {:.2} s",
         messages.len(),
@@ -203,15 +193,6 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_a_lidar_drive() {
         run.replies.len(),
         run.elapsed.as_secs_f64()
     );
-    assert_eq!(run.bad_frames, 0);
-    assert_eq!(run.replies.len(), expected.len(), "every message answered");
-    for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
-        assert_eq!(
-            bits(got),
-            bits(want),
-            "reply {i} differs:\n{got:?}\n{want:?}"
-        );
-    }
     let Some(ToHost::Status {
         status,
         stack_peak_bytes,
@@ -244,18 +225,8 @@ fn firmware_in_qemu_equals_host_bit_for_bit_in_the_lidar_world() {
         .count();
     assert_eq!(applied_scans, truth.len(), "every sweep observed");
 
-    let elf = firmware_elf();
-    assert!(
-        elf.exists(),
-        "{} missing: run .ci/firmware.sh",
-        elf.display()
-    );
-    let run = run_in_qemu(
-        &elf,
-        bytes.clone(),
-        expected.len(),
-        Duration::from_secs(900),
-    );
+    let elf = built(firmware_elf());
+    let run = run_equal_to_host(&elf, bytes.clone(), &expected, Duration::from_secs(900));
     println!(
         "lidar world: {} frames ({} sweeps, {} bytes) → {} replies in {:.1} s",
         messages.len(),
@@ -264,15 +235,6 @@ fn firmware_in_qemu_equals_host_bit_for_bit_in_the_lidar_world() {
         run.replies.len(),
         run.elapsed.as_secs_f64()
     );
-    assert_eq!(run.bad_frames, 0);
-    assert_eq!(run.replies.len(), expected.len(), "every message answered");
-    for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
-        assert_eq!(
-            bits(got),
-            bits(want),
-            "reply {i} differs:\n{got:?}\n{want:?}"
-        );
-    }
     // How far the last sweep's estimate is from the truth (reported, not a bound).
     let last_scan = run.replies.iter().zip(&messages).rfind(|(r, m)| {
         matches!(m, ToDevice::Scan(_))
@@ -354,18 +316,8 @@ fn localizer_firmware_in_qemu_equals_host_bit_for_bit_on_intel() {
         host_localizer_replies, localizer_messages, map_image_of,
     };
     use microslam_replay_tests::firmware::{localizer_elf, localizer_map};
-    let elf = localizer_elf();
-    let map = localizer_map();
-    assert!(
-        elf.exists(),
-        "{} missing: run .ci/firmware.sh",
-        elf.display()
-    );
-    assert!(
-        map.exists(),
-        "{} missing: run .ci/firmware.sh",
-        map.display()
-    );
+    let elf = built(localizer_elf());
+    let map = built(localizer_map());
     let log_path = host_sim::inputs::readers::carmen::resolve_log("intel/intel-raw-part.clf")
         .expect("Intel log");
     let log = host_sim::inputs::readers::carmen::read_log(&log_path).expect("Intel log reads");
@@ -386,7 +338,7 @@ fn localizer_firmware_in_qemu_equals_host_bit_for_bit_on_intel() {
         .count();
     assert_eq!(applied, scans.len(), "every scan reaches the localizer");
 
-    let run = run_in_qemu(&elf, bytes, expected.len(), Duration::from_secs(600));
+    let run = run_equal_to_host(&elf, bytes, &expected, Duration::from_secs(600));
     println!(
         "localizer: {} scans, {} frames → {} replies in {:.2} s",
         scans.len(),
@@ -394,15 +346,6 @@ fn localizer_firmware_in_qemu_equals_host_bit_for_bit_on_intel() {
         run.replies.len(),
         run.elapsed.as_secs_f64()
     );
-    assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
-    assert_eq!(run.replies.len(), expected.len(), "every message answered");
-    for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
-        assert_eq!(
-            bits(got),
-            bits(want),
-            "reply {i} differs:\n{got:?}\n{want:?}"
-        );
-    }
     let Some(ToHost::Status {
         stack_peak_bytes, ..
     }) = run.replies.last()
@@ -447,12 +390,7 @@ fn localizer_requests_are_refused_without_a_valid_map() {
         estimator: EstimatorKind::Ekf,
     };
 
-    let plain = firmware_elf();
-    assert!(
-        plain.exists(),
-        "{} missing: run .ci/firmware.sh",
-        plain.display()
-    );
+    let plain = built(firmware_elf());
     let run = run_in_qemu(&plain, encode_all(&ask), 3, Duration::from_secs(60));
     assert_eq!(run.replies.len(), 3, "{:?}", run.replies);
     assert_eq!(bits(&run.replies[0]), bits(&refused(Refusal::NoMap)));

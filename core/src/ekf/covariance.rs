@@ -95,7 +95,9 @@ pub(crate) fn mwgs<T: Real, const R: usize, const C: usize>(
         let vi = w[i];
         let mut di = T::ZERO;
         for (&v, &q) in vi.iter().zip(weights) {
-            di += v * v * q;
+            // `(v q) v`, not `v² q`: a tiny `v` under a huge weight (a Jacobian entry of
+            // 1e-25 times a turn-rate variance of 1e31) squares to zero in f32.
+            di += v * q * v;
         }
         d[i] = di;
         if di > T::ZERO {
@@ -128,7 +130,7 @@ pub(crate) fn ldl<T: Real, const R: usize>(a: &SMatrix<T, R, R>) -> Option<([[T;
         l[j][j] = T::ONE;
         let mut dj = a[(j, j)];
         for c in 0..j {
-            dj -= l[j][c] * l[j][c] * d[c];
+            dj -= l[j][c] * d[c] * l[j][c];
         }
         if dj < T::ZERO || !dj.finite() {
             return None;
@@ -137,7 +139,7 @@ pub(crate) fn ldl<T: Real, const R: usize>(a: &SMatrix<T, R, R>) -> Option<([[T;
         for i in j + 1..R {
             let mut aij = (a[(i, j)] + a[(j, i)]) * T::lit(0.5);
             for c in 0..j {
-                aij -= l[i][c] * l[j][c] * d[c];
+                aij -= l[i][c] * d[c] * l[j][c];
             }
             if dj > T::ZERO {
                 l[i][j] = aij / dj;

@@ -1,8 +1,8 @@
 //! Reading a ROS `map_server` map (`map.yaml` next to a binary PGM) into log-odds cells
 //! (feature `std`): the one reader of the host tools and of the firmware's build script.
 //!
-//! Grey levels become occupancy probabilities `p = 1 − grey/255` (black occupied, white
-//! free, ROS' 205 unknown-grey a weak free), then log-odds in the [`LogOdds`] unit,
+//! Grey levels become occupancy probabilities `p = 1 − grey/maxval` (black occupied,
+//! white free, ROS' 205 unknown-grey a weak free), then log-odds in the [`LogOdds`] unit,
 //! rounded and clamped to its limits. Rows are flipped: the PGM's first row is the top
 //! of the map, the grid's row 0 its bottom.
 
@@ -92,13 +92,16 @@ impl RosMap {
         let (origin_x, origin_y) = origin.ok_or_else(|| missing("origin"))?;
         let pgm_path = yaml.parent().unwrap_or(Path::new(".")).join(image);
         let bytes = std::fs::read(&pgm_path).map_err(|e| error(&pgm_path, e.to_string()))?;
-        let (width, height, pixels) = parse_pgm(&bytes).map_err(|m| error(&pgm_path, m))?;
+        let pgm = parse_pgm(&bytes).map_err(|m| error(&pgm_path, m))?;
+        let (width, height) = (pgm.width, pgm.height);
         let unit = f64::from(log_odds.nats_per_unit());
+        let maxval = f64::from(pgm.maxval);
         let mut cells = Vec::with_capacity(width * height);
-        for row in pixels.chunks_exact(width).rev() {
+        for row in pgm.pixels.chunks_exact(width).rev() {
             for &grey in row {
-                let grey = if negate { 255 - grey } else { grey };
-                let p = (1.0 - f64::from(grey) / 255.0).clamp(1e-6, 1.0 - 1e-6);
+                let white = (f64::from(grey) / maxval).min(1.0);
+                let white = if negate { 1.0 - white } else { white };
+                let p = (1.0 - white).clamp(1e-6, 1.0 - 1e-6);
                 let l = (p / (1.0 - p)).ln() / unit;
                 cells.push(
                     l.round()
@@ -124,12 +127,32 @@ impl RosMap {
     }
 }
 
-/// Width, height and the `width × height` pixels of a binary 8-bit PGM (`P5`).
-fn parse_pgm(bytes: &[u8]) -> Result<(usize, usize, &[u8]), String> {
-    let mut fields: Vec<&[u8]> = Vec::new();
+/// Largest map [`RosMap::read`] accepts, cells (a 16 384 × 16 384 grid: 256 MB of `i8`).
+pub const MAX_MAP_CELLS: usize = 1 << 28;
+
+/// A binary 8-bit PGM image.
+#[derive(Debug, PartialEq)]
+pub struct Pgm<'a> {
+    /// Columns.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// The grey level of white (1 ..= 255).
+    pub maxval: u8,
+    /// `width · height` grey levels, row by row from the top.
+    pub pixels: &'a [u8],
+}
+
+/// Parses a binary PGM (`P5`, 8-bit): the header (magic, width, height, maxval, with
+/// `#` comments) and exactly `width · height` pixel bytes after it. Refused: another
+/// magic, a missing or non-numeric field, a size of zero or above [`MAX_MAP_CELLS`],
+/// `maxval` outside 1 ..= 255 (16-bit PGMs are not read), too few pixel bytes.
+pub fn parse_pgm(bytes: &[u8]) -> Result<Pgm<'_>, String> {
+    let mut fields: Vec<&[u8]> = Vec::with_capacity(4);
     let mut i = 0;
-    while fields.len() < 4 && i < bytes.len() {
+    while fields.len() < 4 {
         match bytes.get(i) {
+            None => break,
             Some(b) if b.is_ascii_whitespace() => i += 1,
             Some(b'#') => {
                 while bytes.get(i).is_some_and(|&b| b != b'\n') {
@@ -137,40 +160,64 @@ fn parse_pgm(bytes: &[u8]) -> Result<(usize, usize, &[u8]), String> {
                 }
             }
             Some(_) => {
-                let s = i;
+                let start = i;
                 while bytes.get(i).is_some_and(|b| !b.is_ascii_whitespace()) {
                     i += 1;
                 }
-                fields.push(bytes.get(s..i).unwrap_or(&[]));
+                fields.push(bytes.get(start..i).unwrap_or_default());
             }
-            None => break,
         }
     }
-    // Exactly one whitespace byte separates the header from the pixels.
-    i += 1;
-    let [magic, w, h, max] = fields[..] else {
-        return Err("PGM header is incomplete".into());
+    let [magic, width, height, maxval] = fields[..] else {
+        return Err(if fields.first() == Some(&b"P5".as_slice()) {
+            "PGM header ends early: needs width, height and maxval".into()
+        } else {
+            "not a binary PGM (no P5 magic)".into()
+        });
     };
     if magic != b"P5" {
-        return Err("not a binary PGM (P5)".into());
+        return Err("not a binary PGM (no P5 magic)".into());
     }
-    let number = |f: &[u8], what: &str| -> Result<usize, String> {
-        std::str::from_utf8(f)
+    let number = |field: &[u8], what: &str| -> Result<usize, String> {
+        std::str::from_utf8(field)
             .ok()
-            .and_then(|s| s.parse().ok())
-            .filter(|&n| n > 0)
-            .ok_or_else(|| format!("PGM {what} is not a positive number"))
+            .and_then(|s| s.parse::<usize>().ok())
+            .ok_or_else(|| {
+                format!(
+                    "PGM {what} `{}` is not a whole number",
+                    String::from_utf8_lossy(field)
+                )
+            })
     };
-    let (w, h) = (number(w, "width")?, number(h, "height")?);
-    if number(max, "maximum grey")? > 255 {
-        return Err("16-bit PGM is not supported".into());
-    }
-    let n = w.checked_mul(h).ok_or("PGM size overflows")?;
-    let pixels = i
-        .checked_add(n)
-        .and_then(|end| bytes.get(i..end))
-        .ok_or_else(|| format!("PGM is truncated: {n} pixels expected"))?;
-    Ok((w, h, pixels))
+    let (width, height) = (number(width, "width")?, number(height, "height")?);
+    let maxval = number(maxval, "maxval")?;
+    let cells = width
+        .checked_mul(height)
+        .filter(|&n| n > 0 && n <= MAX_MAP_CELLS)
+        .ok_or_else(|| {
+            format!("PGM size {width} × {height} is empty or larger than {MAX_MAP_CELLS} cells")
+        })?;
+    let maxval = u8::try_from(maxval)
+        .ok()
+        .filter(|&m| m > 0)
+        .ok_or_else(|| format!("PGM maxval {maxval} is not in 1 ..= 255 (8-bit PGMs only)"))?;
+    // One whitespace byte separates the header from the pixels.
+    let start = i + 1;
+    let pixels = bytes
+        .get(start..)
+        .and_then(|rest| rest.get(..cells))
+        .ok_or_else(|| {
+            format!(
+                "PGM is truncated: {} pixel bytes for {width} × {height}",
+                bytes.len().saturating_sub(start)
+            )
+        })?;
+    Ok(Pgm {
+        width,
+        height,
+        maxval,
+        pixels,
+    })
 }
 
 #[cfg(test)]
@@ -228,5 +275,49 @@ mod tests {
         let e = RosMap::read(&p, &LogOdds::SEED).unwrap_err().to_string();
         assert!(e.contains("`resolution` is missing"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// `m.yaml` + `m.pgm` in a fresh temporary folder named after `tag`.
+    fn files(tag: &str, yaml: &str, pgm: &[u8]) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("ros_map_{tag}_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        write(&dir, yaml, pgm)
+    }
+
+    const YAML: &str = "image: m.pgm\nresolution: 0.05\norigin: [-1.0, -2.0, 0.0]\n";
+
+    #[test]
+    fn maxval_is_white() {
+        // maxval 100: grey 100 is white (free), 0 black (occupied), 50 unknown.
+        let mut pgm = b"P5\n3 1\n100\n".to_vec();
+        pgm.extend_from_slice(&[100, 0, 50]);
+        let map = RosMap::read(&files("maxval", YAML, &pgm), &LogOdds::SEED).unwrap();
+        assert_eq!((map.geometry.width, map.geometry.height), (3, 1));
+        assert_eq!((map.geometry.origin_x, map.geometry.origin_y), (-1.0, -2.0));
+        assert_eq!(map.cells, [LogOdds::SEED.min, LogOdds::SEED.max, 0]);
+        // Negated: 100 is black.
+        let yaml = format!("{YAML}negate: 1\n");
+        let map = RosMap::read(&files("negate", &yaml, &pgm), &LogOdds::SEED).unwrap();
+        assert_eq!(map.cells, [LogOdds::SEED.max, LogOdds::SEED.min, 0]);
+    }
+
+    #[test]
+    fn bad_headers_are_refused_with_the_file_name() {
+        let cases: [(&[u8], &str); 8] = [
+            (b"P2\n1 1\n255\n\0", "no P5"),
+            (b"", "no P5"),
+            (b"P5\n1 1\n", "ends early"),
+            (b"P5\n18446744073709551615 2\n255\n", "larger than"),
+            (b"P5\n0 5\n255\n", "empty"),
+            (b"P5\n2 2\n65535\n\0\0\0\0\0\0\0\0", "maxval 65535"),
+            (b"P5\n2 2\n0\n\0\0\0\0", "maxval 0"),
+            (b"P5\n4 4\n255\n\0\0\0", "truncated"),
+        ];
+        for (n, (bytes, why)) in cases.into_iter().enumerate() {
+            let yaml = files(&format!("header{n}"), YAML, bytes);
+            let error = RosMap::read(&yaml, &LogOdds::SEED).unwrap_err().to_string();
+            assert!(error.contains("m.pgm"), "{why}: {error}");
+            assert!(error.contains(why), "{why}: {error}");
+        }
     }
 }

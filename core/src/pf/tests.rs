@@ -3,7 +3,7 @@
 //! robustness to bad input.
 
 use super::*;
-use crate::geometry::Pose2;
+use crate::geometry::{Pose2, ray_to_segments};
 use crate::grid::{GridGeometry, GridView, OccupancyGrid};
 use crate::sensors::lidar::{LidarGeometry, LidarScan};
 use rand::{Rng, SeedableRng};
@@ -37,21 +37,7 @@ pub(super) const LIDAR: LidarGeometry = LidarGeometry {
 
 /// Distance along a ray to the nearest wall (∞ when none).
 fn cast(x: f32, y: f32, a: f32) -> f32 {
-    let (dx, dy) = (a.cos(), a.sin());
-    let mut best = f32::INFINITY;
-    for [x1, y1, x2, y2] in WALLS {
-        let (ex, ey) = (x2 - x1, y2 - y1);
-        let den = dx * ey - dy * ex;
-        if den.abs() < 1e-9 {
-            continue;
-        }
-        let t = ((x1 - x) * ey - (y1 - y) * ex) / den;
-        let u = ((x1 - x) * dy - (y1 - y) * dx) / den;
-        if t > 0.0 && (0.0..=1.0).contains(&u) {
-            best = best.min(t);
-        }
-    }
-    best
+    ray_to_segments((x, y), (a.cos(), a.sin()), WALLS).unwrap_or(f32::INFINITY)
 }
 
 pub(super) struct Sim {

@@ -12,7 +12,7 @@ use core::fmt::Write;
 
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use firmware_example::board::{self, Serial};
-use firmware_example::cost::{Ticks, thousand_nops};
+use firmware_example::cost::{Ticks, room_range, thousand_nops};
 use microslam::geometry::Pose2;
 use microslam::grid::GridView;
 use microslam::grid::{OccupancyGrid, occupancy_bytes};
@@ -39,39 +39,10 @@ const LIDAR: LidarGeometry = LidarGeometry {
     mount: Pose2::new(0.0, 0.0, 0.0),
 };
 
-/// Distance along a ray to the walls of the room `[-3, 3]²` or to the pillar
-/// `[1, 1.6] × [-0.5, 0.5]` (slab method).
-fn ray(x: f32, y: f32, c: f32, s: f32) -> f32 {
-    let slab = |lo: f32, hi: f32, p: f32, d: f32| -> (f32, f32) {
-        if d.abs() < 1e-9 {
-            if p >= lo && p <= hi {
-                (f32::NEG_INFINITY, f32::INFINITY)
-            } else {
-                (f32::INFINITY, f32::NEG_INFINITY)
-            }
-        } else {
-            let (a, b) = ((lo - p) / d, (hi - p) / d);
-            if a < b { (a, b) } else { (b, a) }
-        }
-    };
-    // Inside the room: the exit distance of the room box.
-    let (_, tx) = slab(-3.0, 3.0, x, c);
-    let (_, ty) = slab(-3.0, 3.0, y, s);
-    let mut t = tx.min(ty);
-    // The pillar: the entry distance when the ray hits it.
-    let (ax, bx) = slab(1.0, 1.6, x, c);
-    let (ay, by) = slab(-0.5, 0.5, y, s);
-    let (enter, exit) = (ax.max(ay), bx.min(by));
-    if enter <= exit && enter > 0.0 {
-        t = t.min(enter);
-    }
-    t
-}
-
 fn scan_at(pose: &Pose2<f32>, ranges: &mut [f32; BEAMS]) {
     for (i, r) in ranges.iter_mut().enumerate() {
         let a = pose.theta + LIDAR.beam_angle(i);
-        *r = ray(pose.x, pose.y, libm::cosf(a), libm::sinf(a));
+        *r = room_range(pose.x, pose.y, a);
     }
 }
 

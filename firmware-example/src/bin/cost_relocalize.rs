@@ -18,6 +18,7 @@ use cortex_m::peripheral::SYST;
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use firmware_example::board::{self, Serial};
+use firmware_example::cost::room_range;
 use microslam::geometry::Pose2;
 use microslam::grid::{GridGeometry, GridView, MaxPoolLayers};
 use microslam::pf::{GridLocalizer, GridPfConfig, RelocalizationConfig};
@@ -103,32 +104,6 @@ fn instructions(f: impl FnOnce()) -> u64 {
     ticks * 40 / 64
 }
 
-/// Distance along a ray to the room's walls or the pillar (as `cost_grid`).
-fn ray(x: f32, y: f32, c: f32, s: f32) -> f32 {
-    let slab = |lo: f32, hi: f32, p: f32, d: f32| -> (f32, f32) {
-        if d.abs() < 1e-9 {
-            if p >= lo && p <= hi {
-                (f32::NEG_INFINITY, f32::INFINITY)
-            } else {
-                (f32::INFINITY, f32::NEG_INFINITY)
-            }
-        } else {
-            let (a, b) = ((lo - p) / d, (hi - p) / d);
-            if a < b { (a, b) } else { (b, a) }
-        }
-    };
-    let (_, tx) = slab(-3.0, 3.0, x, c);
-    let (_, ty) = slab(-3.0, 3.0, y, s);
-    let mut t = tx.min(ty);
-    let (ax, bx) = slab(1.0, 1.6, x, c);
-    let (ay, by) = slab(-0.5, 0.5, y, s);
-    let (enter, exit) = (ax.max(ay), bx.min(by));
-    if enter <= exit && enter > 0.0 {
-        t = t.min(enter);
-    }
-    t
-}
-
 fn run(out: &mut Serial) -> core::fmt::Result {
     // The wrap counting checked on a known count: 30 000 × 1000 nops (3 wraps).
     let nops = instructions(|| {
@@ -153,7 +128,7 @@ fn run(out: &mut Serial) -> core::fmt::Result {
     let mut ranges = [0.0f32; BEAMS];
     for (i, r) in ranges.iter_mut().enumerate() {
         let a = truth.theta + LIDAR.beam_angle(i);
-        *r = ray(truth.x, truth.y, libm::cosf(a), libm::sinf(a));
+        *r = room_range(truth.x, truth.y, a);
     }
     let Ok(mut loc) = GridLocalizer::<PARTICLES, BEAMS>::without_pose(
         map,

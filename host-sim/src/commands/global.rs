@@ -11,10 +11,10 @@ use crate::inputs::readers::DatasetSpec;
 use crate::inputs::readers::carmen::{front_scans, read_log, resolve_log};
 use crate::inputs::sim::lidar_world::LidarRecording;
 use crate::metrics::global::metrics;
-use crate::output::grid_map::read_map;
 use anyhow::{Result, anyhow, bail};
 use microslam::geometry::Pose2;
 use microslam::grid::GridView;
+use microslam::grid::ros_map::RosMap;
 use microslam::pf::GridPfConfig;
 use std::path::Path;
 use std::time::Instant;
@@ -38,7 +38,7 @@ pub fn localize_cli(
     let path = resolve_log(file)?;
     let log = read_log(&path)?;
     let options = options_from(config, grid, &log)?;
-    let (cells, geometry) = read_map(map, &options.config.log_odds)?;
+    let RosMap { cells, geometry } = RosMap::read(map, &options.config.log_odds)?;
     if (geometry.resolution - options.config.resolution).abs() > 1e-6 {
         bail!(
             "{}: map resolution {} differs from the configured {}",
@@ -138,7 +138,7 @@ pub fn sim_cli(
 ) -> Result<()> {
     let started = Instant::now();
     let map_path = grid_out.join("slam").join("map.yaml");
-    let (cells, geometry) = read_map(&map_path, &config.log_odds)?;
+    let RosMap { cells, geometry } = RosMap::read(&map_path, &config.log_odds)?;
     let view = GridView::new(&cells, geometry, config.log_odds.occupied_above)
         .map_err(|e| anyhow!("{}: {e}", map_path.display()))?;
     let frames: Vec<GridInput<'_>> = sim_inputs(rec);

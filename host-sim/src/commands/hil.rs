@@ -6,6 +6,7 @@ use crate::drivers::hil::{
     compare, encode_all_corrupted, host_replies, messages_for, run_qemu, run_serial,
 };
 use crate::inputs::readers::DatasetSpec;
+use crate::output::tum_text;
 use anyhow::{Context, Result, bail};
 use microslam::geometry::Pose2;
 use microslam::wire::{EkfSettings, ToHost};
@@ -14,16 +15,13 @@ use std::time::Duration;
 
 /// The device's trajectory in TUM format (`t x y z qx qy qz qw`).
 pub fn tum(replies: &[ToHost]) -> String {
-    let mut out = String::new();
-    for r in replies {
-        if let ToHost::Estimate(e) = r {
+    tum_text(replies.iter().filter_map(|r| match r {
+        ToHost::Estimate(e) => {
             let [x, y, th] = e.pose.map(f64::from);
-            let (s, c) = (th / 2.0).sin_cos();
-            let t = e.stamp_us as f64 * 1e-6;
-            out.push_str(&format!("{t:.6} {x} {y} 0 0 0 {s} {c}\n"));
+            Some((e.stamp_us as f64 * 1e-6, Pose2::new(x, y, th)))
         }
-    }
-    out
+        _ => None,
+    }))
 }
 
 /// ATE (SE(2) alignment) of the estimates in `replies` against `truth`, and over how many

@@ -21,10 +21,10 @@ use serde::Serialize;
 
 use crate::drivers::hil::{compare, encode_all, run_qemu};
 use crate::drivers::hil_localizer::{
-    FIRMWARE_LOCALIZER_PARTICLES, host_localizer_replies, localizer_messages, map_image_of,
-    map_image_with_levels,
+    host_localizer_replies, localizer_messages, map_image_of, map_image_with_levels,
 };
 use crate::inputs::readers::carmen::{LaserMessage, front_scans, read_log, resolve_log};
+use crate::output::tum_text;
 
 /// `host-sim export-map`.
 pub fn export_cli(map: &Path, out: &Path, levels: u8, quiet: bool) -> Result<()> {
@@ -158,7 +158,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
         replies_expected: comparison.expected,
         replies_received: comparison.received,
         scans: scans.len(),
-        particles: FIRMWARE_LOCALIZER_PARTICLES,
+        particles: microslam::profile::LOCALIZER_PARTICLES,
         stack_peak_bytes: comparison.stack_peak_bytes,
         seconds: comparison.seconds,
         relation_error,
@@ -172,12 +172,10 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
         .with_context(|| format!("creating {}", args.out.display()))?;
     let json = args.out.join("hil.json");
     std::fs::write(&json, serde_json::to_string_pretty(&report)?)?;
-    let mut tum = String::new();
-    for (t, [x, y, th]) in trajectory(&run.replies, &scans, &last_chunks) {
-        let (s, c) = (th / 2.0).sin_cos();
-        tum.push_str(&format!("{t:.6} {x} {y} 0 0 0 {s} {c}\n"));
-    }
-    std::fs::write(args.out.join("firmware.tum"), tum)?;
+    let poses = trajectory(&run.replies, &scans, &last_chunks)
+        .into_iter()
+        .map(|(t, [x, y, th])| (t, Pose2::new(x, y, th)));
+    std::fs::write(args.out.join("firmware.tum"), tum_text(poses))?;
     if !quiet {
         println!(
             "{} of {} replies identical to the host bit for bit; relation error {}; {:.1} s; report in {}",

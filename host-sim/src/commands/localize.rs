@@ -6,10 +6,11 @@ use crate::domain::grid::{GlobalOptions, GridOptions};
 use crate::drivers::grid::{carmen_inputs, run_localizer};
 use crate::inputs::readers::DatasetSpec;
 use crate::inputs::readers::carmen::{front_scans, read_log, resolve_log};
-use crate::output::grid_map::{read_map, write_outputs};
+use crate::output::grid_map::write_outputs;
 use anyhow::{Result, bail};
 use microslam::geometry::Pose2;
 use microslam::grid::GridView;
+use microslam::grid::ros_map::RosMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -50,7 +51,7 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
     let path = resolve_log(file)?;
     let log = read_log(&path)?;
     let options = options_from(args.config.as_deref(), &args.grid, &log)?;
-    let (cells, geometry) = read_map(&args.map, &options.config.log_odds)?;
+    let RosMap { cells, geometry } = RosMap::read(&args.map, &options.config.log_odds)?;
     if (geometry.resolution - options.config.resolution).abs() > 1e-6 {
         bail!(
             "map resolution {} differs from the configured {}",

@@ -14,7 +14,8 @@ use crate::inputs::readers::carmen::{
 };
 use crate::inputs::readers::{DatasetSpec, thor};
 use crate::metrics::relations::RelationError;
-use crate::output::grid_map::{write_outputs, write_tum};
+use crate::output::grid_map::write_outputs;
+use crate::output::write_tum;
 use anyhow::{Result, bail};
 use microslam::geometry::Pose2;
 use std::path::{Path, PathBuf};
@@ -320,11 +321,7 @@ fn thor_replay(dir: &str, run: u32, out: &Path, quiet: bool) -> Result<()> {
     };
     let traj = thor::dead_reckoning(&path, run)?;
     std::fs::create_dir_all(out)?;
-    let as_f32: Vec<(f64, Pose2<f32>)> = traj
-        .iter()
-        .map(|(t, p)| (*t, Pose2::new(p.x as f32, p.y as f32, p.theta as f32)))
-        .collect();
-    write_tum(&out.join("trajectory.tum"), &as_f32)?;
+    write_tum(&out.join("trajectory.tum"), traj.iter().copied())?;
     let length: f64 = traj
         .windows(2)
         .map(|w| (w[1].1.x - w[0].1.x).hypot(w[1].1.y - w[0].1.y))

@@ -12,7 +12,8 @@ use crate::drivers::grid::{GridRunOptions, f32_pose, run_localizer, run_slam, si
 use crate::inputs::sim::lidar_world::{LidarRecording, SIM_GRID_CELLS, true_map};
 use crate::inputs::sim::simulate;
 use crate::metrics::grid::{ate_m, odometry_ate_m, yaw_rmse_deg};
-use crate::output::grid_map::{write_outputs, write_tum};
+use crate::output::grid_map::write_outputs;
+use crate::output::write_tum;
 use anyhow::{Result, anyhow, bail};
 use microslam::geometry::Pose2;
 use microslam::pf::GridPfConfig;
@@ -197,7 +198,10 @@ pub fn run_and_write(
             "seed": config.filter.seed,
         });
         write_outputs(&dir, run, &config, &metrics)?;
-        write_tum(&dir.join("groundtruth.tum"), &truth)?;
+        write_tum(
+            &dir.join("groundtruth.tum"),
+            truth.iter().map(|(t, p)| (*t, p.cast())),
+        )?;
         docs.push(metrics);
     }
     let loc_doc = docs.pop().unwrap_or_default();

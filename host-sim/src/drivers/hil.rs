@@ -16,33 +16,15 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
-use microslam::ekf::{EkfConfig, EkfSlam, factor_len, state_dim};
 use microslam::geometry::Pose2;
-use microslam::grid::{OccupancyGrid, occupancy_bytes};
-use microslam::pf::{GridPfConfig, GridSlam};
+use microslam::profile;
 use microslam::wire::{
-    Command as WireCommand, EkfSettings, EventsToWire, FrameDecoder, GridSetup, MAX_FRAME_LEN,
-    Session, ToDevice, ToHost, encode_frame,
+    Command as WireCommand, EkfSettings, EventsToWire, FrameDecoder, MAX_FRAME_LEN, Session,
+    ToDevice, ToHost, encode_frame,
 };
 use serde::Serialize;
 
 use crate::domain::recording::Recording;
-
-/// Landmarks of the firmware's EKF (`firmware_example::config::EKF_LANDMARKS`).
-pub const FIRMWARE_LANDMARKS: usize = 64;
-
-/// Bytes of the firmware grid's occupied-cell bitmap (`firmware_example::config::GRID_BITMAP`).
-pub const FIRMWARE_GRID_BITMAP: usize = occupancy_bytes(256, 256);
-
-/// The firmware's grid (`firmware_example::config::Grid`): 256 × 256 cells with the bitmap.
-pub type FirmwareGrid = OccupancyGrid<256, 256, FIRMWARE_GRID_BITMAP>;
-
-/// The firmware's grid estimator (`firmware_example::config::GridEstimator`): 256 × 256
-/// cells, 32 particles, 90 beams, [`GridPfConfig::MICROCONTROLLER`].
-pub type FirmwareGridSlam<'g> = GridSlam<'g, 256, 256, 32, 90, FIRMWARE_GRID_BITMAP>;
-
-/// The firmware's lidar and wheels (`firmware_example::config::GRID_SETUP`).
-pub const FIRMWARE_GRID_SETUP: GridSetup = GridSetup::EXAMPLE;
 
 /// The messages for a recording: EKF settings when given, reset to its initial pose, its
 /// events, a status request.
@@ -126,23 +108,20 @@ pub fn encode_all_corrupted(messages: &[ToDevice], rate: f64, seed: u64) -> (Vec
 }
 
 /// The replies of the host reference: the firmware's [`Session`], with the firmware's EKF
-/// and grid estimator (sizes and configurations), fed the same bytes.
+/// and grid estimator (the sizes and settings of [`microslam::profile`]), fed the same bytes.
 pub fn host_replies(bytes: &[u8]) -> Vec<ToHost> {
-    let mut ekf = Box::new(EkfSlam::<
-        f32,
-        { state_dim(FIRMWARE_LANDMARKS) },
-        { factor_len(FIRMWARE_LANDMARKS) },
-    >::new(EkfConfig::MICROCONTROLLER));
-    let config = GridPfConfig::MICROCONTROLLER;
-    let mut grid = Box::new(FirmwareGrid::centred(config.resolution, config.log_odds));
-    let Ok(mut slam) = FirmwareGridSlam::new(&mut grid, config, Pose2::new(0.0, 0.0, 0.0)) else {
+    let mut ekf = Box::new(profile::Ekf::new(profile::EKF_CONFIG));
+    let config = profile::GRID_CONFIG;
+    let mut grid = Box::new(profile::Grid::centred(config.resolution, config.log_odds));
+    let Ok(mut slam) = profile::GridEstimator::new(&mut grid, config, Pose2::new(0.0, 0.0, 0.0))
+    else {
         unreachable!("the firmware's grid configuration is valid")
     };
-    let mut session = Session::<_, _, FIRMWARE_LANDMARKS>::with_grid(
+    let mut session = Session::<_, _, { profile::EKF_LANDMARKS }>::with_grid(
         &mut ekf,
-        EkfConfig::MICROCONTROLLER,
+        profile::EKF_CONFIG,
         &mut slam,
-        FIRMWARE_GRID_SETUP,
+        profile::GRID_SETUP,
     );
     bytes.iter().filter_map(|&b| session.receive(b)).collect()
 }

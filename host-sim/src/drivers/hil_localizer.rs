@@ -8,30 +8,17 @@
 use std::path::Path;
 
 use anyhow::{Result, bail};
-use microslam::ekf::{EkfConfig, EkfSlam, factor_len, state_dim};
 use microslam::geometry::Pose2;
 use microslam::grid::MapImage;
 use microslam::grid::map_image::{DEFAULT_LAYER_LEVELS, encode_map_image_with_layers};
 use microslam::grid::ros_map::RosMap;
-use microslam::pf::{GridLocalizer, GridPfConfig, RelocalizationConfig};
+use microslam::profile;
 use microslam::wire::{
     Command as WireCommand, EstimatorKind, LocalizerEstimator, Odometry, SCAN_CHUNK_BEAMS,
     ScanChunk, Session, ToDevice, ToHost,
 };
 
-use crate::drivers::hil::{FIRMWARE_GRID_SETUP, FIRMWARE_LANDMARKS};
 use crate::inputs::readers::carmen::LaserMessage;
-
-/// Particles of the firmware's localizer (`firmware_example::config::LOCALIZER_PARTICLES`).
-pub const FIRMWARE_LOCALIZER_PARTICLES: usize = 64;
-/// Beams of the firmware's localizer (`firmware_example::config::GRID_BEAMS`).
-pub const FIRMWARE_LOCALIZER_BEAMS: usize = 90;
-/// Settings of the firmware's localizer (`firmware_example::config::LOCALIZER_CONFIG`).
-pub const FIRMWARE_LOCALIZER_CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
-
-/// The firmware's localizer type.
-pub type FirmwareLocalizer<'m> =
-    GridLocalizer<'m, FIRMWARE_LOCALIZER_PARTICLES, FIRMWARE_LOCALIZER_BEAMS>;
 
 /// The map image of `yaml` as the firmware's build script makes it (with
 /// [`DEFAULT_LAYER_LEVELS`] levels of layers).
@@ -41,7 +28,7 @@ pub fn map_image_of(yaml: &Path) -> Result<Vec<u8>> {
 
 /// The map image of `yaml` with `levels` levels of max-pooled layers (0: none).
 pub fn map_image_with_levels(yaml: &Path, levels: u8) -> Result<Vec<u8>> {
-    let config = FIRMWARE_LOCALIZER_CONFIG;
+    let config = profile::LOCALIZER_CONFIG;
     let map = RosMap::read(yaml, &config.log_odds)?;
     if (map.geometry.resolution - config.resolution).abs() > 1e-6 {
         bail!(
@@ -151,25 +138,21 @@ pub fn localizer_messages(
 /// localizer on `image`, fed the same bytes.
 pub fn host_localizer_replies(bytes: &[u8], image: &[u8]) -> Result<Vec<ToHost>> {
     let map = MapImage::parse(image)?;
-    let mut ekf = Box::new(EkfSlam::<
-        f32,
-        { state_dim(FIRMWARE_LANDMARKS) },
-        { factor_len(FIRMWARE_LANDMARKS) },
-    >::new(EkfConfig::MICROCONTROLLER));
+    let mut ekf = Box::new(profile::Ekf::new(profile::EKF_CONFIG));
     let mut localizer =
-        FirmwareLocalizer::new(map.view(), FIRMWARE_LOCALIZER_CONFIG, Pose2::IDENTITY)
+        profile::Localizer::new(map.view(), profile::LOCALIZER_CONFIG, Pose2::IDENTITY)
             .map_err(|e| anyhow::anyhow!("localizer: {e}"))?;
     if let Some(layers) = map.layers() {
         localizer = localizer
-            .with_layers(layers?, RelocalizationConfig::DEFAULT)
+            .with_layers(layers?, profile::RELOCALIZATION)
             .map_err(|e| anyhow::anyhow!("localizer layers: {e}"))?;
     }
     let mut localizer = Box::new(localizer);
     let mut session =
-        Session::<_, _, FIRMWARE_LANDMARKS>::new(&mut ekf, EkfConfig::MICROCONTROLLER)
+        Session::<_, _, { profile::EKF_LANDMARKS }>::new(&mut ekf, profile::EKF_CONFIG)
             .with_localizer(
                 Ok(&mut *localizer as &mut dyn LocalizerEstimator),
-                FIRMWARE_GRID_SETUP,
+                profile::GRID_SETUP,
             );
     Ok(bytes.iter().filter_map(|&b| session.receive(b)).collect())
 }

@@ -7,7 +7,7 @@ pub mod thor;
 mod tum;
 
 pub use plots::{draw_errors, draw_map, write_png};
-pub use tum::{tum_line, write_tum, write_tum_slice};
+pub use tum::{tum_line, tum_text, write_tum, write_tum_slice};
 
 use crate::domain::recording::Recording;
 use crate::drivers::ekf::ReplayRun;

@@ -13,6 +13,19 @@ pub fn tum_line(stamp: f64, pose: &Pose2<f64>) -> String {
     String::from_utf8_lossy(&s).into_owned()
 }
 
+/// Poses as the text of a TUM file: a header line, then one pose a line.
+pub fn tum_text(poses: impl IntoIterator<Item = (f64, Pose2<f64>)>) -> String {
+    let mut text = Vec::with_capacity(4096);
+    text.extend_from_slice(HEADER);
+    for (t, p) in poses {
+        push_line(&mut text, t, &p);
+    }
+    String::from_utf8_lossy(&text).into_owned()
+}
+
+/// The first line of every TUM file written here.
+const HEADER: &[u8] = b"# timestamp x y z qx qy qz qw\n";
+
 /// Writes a slice of poses as a TUM file, the same bytes as [`write_tum`]: two halves of
 /// each window of lines are formatted side by side (rayon), then written in order.
 pub fn write_tum_slice<S: Sync>(
@@ -32,7 +45,7 @@ pub fn write_tum_slice<S: Sync>(
     let file =
         std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
     let mut w = std::io::BufWriter::with_capacity(1 << 16, file);
-    w.write_all(b"# timestamp x y z qx qy qz qw\n")?;
+    w.write_all(HEADER)?;
     let (mut first, mut second) = (Vec::new(), Vec::new());
     for window in items.chunks(2 * HALF) {
         let (a, b) = window.split_at(window.len().min(HALF));
@@ -45,12 +58,12 @@ pub fn write_tum_slice<S: Sync>(
 }
 
 /// Writes poses as a TUM file.
-pub fn write_tum(path: &Path, poses: impl Iterator<Item = (f64, Pose2<f64>)>) -> Result<()> {
+pub fn write_tum(path: &Path, poses: impl IntoIterator<Item = (f64, Pose2<f64>)>) -> Result<()> {
     let file =
         std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
     let mut w = std::io::BufWriter::with_capacity(1 << 16, file);
     let mut line = Vec::with_capacity(128);
-    line.extend_from_slice(b"# timestamp x y z qx qy qz qw\n");
+    line.extend_from_slice(HEADER);
     for (t, p) in poses {
         push_line(&mut line, t, &p);
         if line.len() > 4096 {

@@ -13,7 +13,7 @@
 //! [`microslam::event::Event`] stream: see the module documentation of `microslam::event`.
 
 use anyhow::{Result, bail};
-use microslam::geometry::{Pose2, wrap_angle};
+use microslam::geometry::{Pose2, ray_to_segments, wrap_angle};
 use microslam::grid::OccupancyGrid;
 use microslam::motion::integrate_velocity;
 use microslam::pf::GridPfConfig;
@@ -213,22 +213,8 @@ impl LidarWorld {
 
     /// Distance from `(x, y)` along heading `angle` to the nearest wall (`None`: no wall).
     pub fn cast(&self, x: f64, y: f64, angle: f64) -> Option<f64> {
-        let (dx, dy) = (angle.cos(), angle.sin());
-        let mut best: Option<f64> = None;
-        for w in &self.walls {
-            let (ex, ey) = (w.b[0] - w.a[0], w.b[1] - w.a[1]);
-            let den = dx * ey - dy * ex;
-            if den.abs() < 1e-12 {
-                continue;
-            }
-            let (qx, qy) = (w.a[0] - x, w.a[1] - y);
-            let t = (qx * ey - qy * ex) / den;
-            let u = (qx * dy - qy * dx) / den;
-            if t > 0.0 && (0.0..=1.0).contains(&u) && best.is_none_or(|b| t < b) {
-                best = Some(t);
-            }
-        }
-        best
+        let walls = self.walls.iter().map(|w| [w.a[0], w.a[1], w.b[0], w.b[1]]);
+        ray_to_segments((x, y), (angle.cos(), angle.sin()), walls)
     }
 }
 
