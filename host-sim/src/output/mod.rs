@@ -13,7 +13,7 @@ pub mod thor;
 mod tum;
 
 pub use plots::{draw_errors, draw_map, write_png};
-pub use tum::{tum_line, tum_text, write_tum};
+pub use tum::{tum_line, tum_text, write_tum, write_tum_slice};
 
 use crate::domain::recording::Recording;
 use crate::drivers::ekf::ReplayRun;
@@ -39,10 +39,9 @@ pub fn write_all(
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let (a, b, c) = std::thread::scope(|s| {
         let tum = s.spawn(|| -> Result<()> {
-            write_tum(
-                &out.join("trajectory.tum"),
-                run.trajectory.iter().map(|p| (p.stamp, p.pose)),
-            )
+            write_tum_slice(&out.join("trajectory.tum"), &run.trajectory, |p| {
+                (p.stamp, p.pose)
+            })
         });
         let map = s.spawn(|| -> Result<()> {
             if plots {
