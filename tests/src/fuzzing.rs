@@ -96,12 +96,24 @@ pub fn assert_ekf_healthy<const N: usize, const P: usize>(ekf: &EkfSlam<f32, N, 
 /// `f32`s, arbitrary bit patterns (NaN, ±∞, subnormal, huge). With bit 2 of the header
 /// set there are seven ops, the seventh a pose-covariance inflation (recovery); otherwise
 /// six (so that inputs kept from before the inflation existed replay the same steps).
+/// Bits 3 and 4 of the header add the self-calibration states (odometry scale factors,
+/// sighting range bias) before any step.
 pub fn ekf_steps(data: &[u8]) {
     let Some((&header, mut bytes)) = data.split_first() else {
         return;
     };
     let ops = if header & 4 != 0 { 7 } else { 6 };
     let mut ekf = Box::new(Slam::new(EkfConfig::DEFAULT_F32));
+    // Bits 3 and 4: self-calibration states (odometry scale factors, sighting range bias)
+    // in the slots before the landmarks, as the MRCLAM settings run them.
+    if header & 8 != 0 {
+        ekf.estimate_odometry_scale(0.05, 0.05)
+            .expect("scale states on a fresh filter");
+    }
+    if header & 16 != 0 {
+        ekf.estimate_range_bias(0.1, 0.5)
+            .expect("bias states on a fresh filter");
+    }
     let mut ids = KnownIds::<L>::new();
     while let Some((&op, rest)) = bytes.split_first() {
         bytes = rest;
