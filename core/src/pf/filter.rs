@@ -10,7 +10,6 @@ pub(crate) type ShiftSearch =
     fn(&GridView<'_>, &Pose2<f32>, &[ScanPoint], u8, &mut [u32; MAX_SHIFTS]) -> ShiftScore;
 use super::prediction::drive_arc;
 use super::resampling::resample;
-use super::sampling::standard_normal;
 use super::{FilterConfig, PfError};
 use crate::geometry::Pose2;
 use crate::grid::GridView;
@@ -232,9 +231,9 @@ impl<const P: usize> ParticleFilter<P> {
         }
         let (sd, st, ss) = self.config.motion_noise.std_devs(distance, heading_change);
         for p in self.poses.iter_mut() {
-            let n1 = standard_normal(&mut self.rng);
-            let n2 = standard_normal(&mut self.rng);
-            let n3 = standard_normal(&mut self.rng);
+            let n1: f32 = StandardNormal.sample(&mut self.rng);
+            let n2: f32 = StandardNormal.sample(&mut self.rng);
+            let n3: f32 = StandardNormal.sample(&mut self.rng);
             let moved = drive_arc(p, distance + sd * n1, heading_change + st * n2, ss * n3);
             if moved.is_finite() {
                 *p = moved;

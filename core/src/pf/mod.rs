@@ -2,13 +2,12 @@
 //! correlation and a local shift search.
 //!
 //! - [`ParticleFilter`]: `P` poses with log-weights and a seeded generator
-//!   (`rand_xoshiro`'s Xoshiro128++, Gaussians from [`sampling`], math in `f32` and through `libm`,
+//!   (`rand_xoshiro`'s Xoshiro128++, Gaussians from `rand_distr`, math in `f32` and through `libm`,
 //!   so the same inputs and seed give the same output on every target).
 //! - [`correlation`]: the observation model and the fast shift search, with its
 //!   brute-force reference.
 //! - [`prediction`]: the differential-drive model with noise on the inputs.
 //! - [`resampling`]: stratified and systematic resampling.
-//! - [`sampling`]: the prediction's standard normal draws (an `f32` ziggurat).
 //! - [`GridSlam`]: the seed's SLAM: the best particle writes each scan into the one shared
 //!   grid, which starts from the first scan.
 //! - [`GridLocalizer`]: the same filter against a fixed map ([`crate::grid::GridView`],
@@ -23,7 +22,6 @@ pub mod global;
 mod localizer;
 pub mod prediction;
 pub mod resampling;
-pub mod sampling;
 mod slam;
 
 pub use correlation::{ScanPoint, ScanPoints, ShiftScore};
