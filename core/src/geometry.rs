@@ -72,7 +72,14 @@ pub fn sin_cos_f32(x: f32) -> (f32, f32) {
     const P1: f32 = 1.570_312_5;
     const P2: f32 = 4.837_513e-4;
     const P3: f32 = 7.549_79e-8;
-    let q = crate::grid::floor_i32(x * core::f32::consts::FRAC_2_PI + 0.5);
+    // The nearest quadrant: floor(x·2/π + ½), saturating, 0 for NaN.
+    let y = x * core::f32::consts::FRAC_2_PI + 0.5;
+    let t = y as i32;
+    let q = if (t as f32) > y {
+        t.saturating_sub(1)
+    } else {
+        t
+    };
     let qf = q as f32;
     let r = ((x - qf * P1) - qf * P2) - qf * P3;
     let z = r * r;
