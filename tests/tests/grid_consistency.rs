@@ -51,11 +51,11 @@ fn intel_microcontroller_p32_is_globally_consistent_on_every_seed() {
     // The firmware's settings: P = 32, 90 of the 180 beams. Measured per filter seed
     // (relation m, ATE m); without the shift prior the ATE was 0.38–0.58 m.
     let measured = [
-        (0.02872, 0.06377),
-        (0.02835, 0.10667),
-        (0.02933, 0.07791),
-        (0.03073, 0.08549),
-        (0.02645, 0.05776),
+        (0.02919, 0.08386),
+        (0.02773, 0.07618),
+        (0.02961, 0.06614),
+        (0.03084, 0.08587),
+        (0.02732, 0.09683),
     ];
     for (seed, (rel_m, ate_m)) in measured.iter().enumerate() {
         let config = GridPfConfig {

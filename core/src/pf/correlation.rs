@@ -23,7 +23,7 @@
 //! instructions (on x86 the vectorised byte-wise search is the faster one).
 //! [`search_window_brute_force`] is the plain triple loop, kept as the reference.
 
-use crate::geometry::Pose2;
+use crate::geometry::{Pose2, sin_cos_f32};
 use crate::grid::{GridView, floor_i32};
 use crate::sensors::lidar::{BeamDirections, LidarScan};
 
@@ -167,7 +167,22 @@ pub struct ShiftScore {
     pub score: u32,
 }
 
-/// The cell of a robot-frame point seen from `pose` — the one formula both searches use.
+/// Continuous grid coordinates of a robot-frame point seen from `pose` (`sin`, `cos` of
+/// its heading) — the one formula every search uses.
+#[inline]
+pub fn end_grid(
+    map: &GridView<'_>,
+    pose: &Pose2<f32>,
+    sin: f32,
+    cos: f32,
+    p: &ScanPoint,
+) -> (f32, f32) {
+    let wx = pose.x + cos * p.x - sin * p.y;
+    let wy = pose.y + sin * p.x + cos * p.y;
+    map.geometry().world_to_grid(wx, wy)
+}
+
+/// The cell of a robot-frame point seen from `pose`: the floor of [`end_grid`].
 #[inline]
 pub fn end_cell(
     map: &GridView<'_>,
@@ -176,9 +191,7 @@ pub fn end_cell(
     cos: f32,
     p: &ScanPoint,
 ) -> (i32, i32) {
-    let wx = pose.x + cos * p.x - sin * p.y;
-    let wy = pose.y + sin * p.x + cos * p.y;
-    let (u, v) = map.geometry().world_to_grid(wx, wy);
+    let (u, v) = end_grid(map, pose, sin, cos, p);
     (floor_i32(u), floor_i32(v))
 }
 
@@ -286,7 +299,7 @@ fn search_fixed<const N: usize>(
 ) -> ShiftScore {
     let k = (N / 2) as i32;
     let mut acc = [[0u32; N]; N];
-    let (sin, cos) = libm::sincosf(pose.theta);
+    let (sin, cos) = sin_cos_f32(pose.theta);
     let g = map.geometry();
     let (w, h) = (g.width, g.height);
     let cells = map.cells();
@@ -351,76 +364,111 @@ pub fn search_window_sparse(
     let bits = map.occupancy_bits();
     // The seed's 9 × 9 window (every preset's) gets its own constant-size copy.
     if hw == 4 {
-        search_sparse::<9>(map, bits, pose, points, hw, scores)
+        search_sparse::<9>(map, bits, pose, points, 9, scores)
     } else {
-        search_sparse::<0>(map, bits, pose, points, hw, scores)
+        let n = 2 * usize::from(hw) + 1;
+        search_sparse::<{ 2 * MAX_SHIFT_WINDOW as usize + 1 }>(map, bits, pose, points, n, scores)
     }
 }
 
+/// Columns of a row of [`search_sparse`]'s accumulator: a power of two above the widest
+/// window, so that a bit index masked with `ROW - 1` needs no bounds check.
+const ROW: usize = 16;
+
 /// [`search_window`] over a map with an occupied-cell bitmap: for each end point, each of
-/// the `n = 2k+1` window rows is cut out of the bitmap as `n` bits (one 4-byte read and a
-/// shift) and only its set bits — the occupied cells — add the point's weight to their
-/// shift. Rows without an occupied cell, most of them, cost a load, a shift and a test.
-/// Same integer sums as the other searches, in another order, so the scores are
-/// identical. `N` is the window size when it is known at compile time (`N = 2k+1`), or
-/// 0 for any size (one copy for all of them: a microcontroller's flash is scarce).
-fn search_sparse<const N: usize>(
+/// the `n = 2k+1` window rows is cut out of the bitmap as `n` bits (one 4-byte read and
+/// two shifts) and only its set bits — the occupied cells — add the point's weight to
+/// their shift; a window without any occupied cell costs its `n` reads and one test. Same integer sums as the other searches, in another
+/// order, so the scores are identical. `R ≥ n` is the number of accumulator rows
+/// (`R = n = 9` for the seed's window, so that its rows unroll; 15 for any other size:
+/// one copy for all of them, a microcontroller's flash is scarce).
+///
+/// The end cell's `floor` is taken as a truncation: the two agree whenever the window's
+/// corner is at least one cell inside the grid (then the coordinate is ≥ 1), which is
+/// the only case the bitmap path takes; windows at or over the grid's edge take the
+/// checked path with the exact `floor`.
+fn search_sparse<const R: usize>(
     map: &GridView<'_>,
     bits: Option<&[u8]>,
     pose: &Pose2<f32>,
     points: &[ScanPoint],
-    half_width: u8,
+    n: usize,
     scores: &mut [u32; MAX_SHIFTS],
 ) -> ShiftScore {
-    let n = if N > 0 {
-        N
-    } else {
-        2 * half_width as usize + 1
-    };
+    let n = n.min(R);
     let k = (n / 2) as i32;
-    scores.fill(0);
-    let acc = scores;
-    let (sin, cos) = libm::sincosf(pose.theta);
+    let mut acc = [[0u32; ROW]; R];
+    let (sin, cos) = sin_cos_f32(pose.theta);
     let g = map.geometry();
     let (w, h) = (g.width, g.height);
     let stride = w.div_ceil(8);
-    let row_mask = (1u32 << n) - 1;
+    // The bitmap path needs 1 ≤ x0 ≤ w − n and 1 ≤ y0 ≤ h − n: `(x0 − 1) as u32 <
+    // x_limit` (an empty range when the grid is narrower than the window).
+    let x_limit = w.saturating_sub(n) as u32;
+    let y_limit = h.saturating_sub(n) as u32;
+    // Bit `x0 % 8 + t` of a row read is column `x0 + t`: shifted up to the top `n` bits,
+    // then down to bits `0..n`.
+    let down = 32 - n as u32;
+    let bits = bits.unwrap_or(&[]);
+    // A window is read as `n` rows of 4 bytes one stride apart from the byte holding
+    // column x0 (its bits are in those 4 bytes: x0 % 8 + n ≤ 22).
+    let span = (n - 1) * stride + 4;
     for p in points {
-        let (cx, cy) = end_cell(map, pose, sin, cos, p);
-        let (x0, y0) = (cx.saturating_sub(k), cy.saturating_sub(k));
-        let inside = x0 >= 0 && y0 >= 0 && (x0 as usize) + n <= w && (y0 as usize) + n <= h;
-        // The window's rows: 4 bytes from the one holding column x0 (its n ≤ 15 bits
-        // start at most 7 bits in, so they are all there), one row stride apart. Only
-        // the grid's last rows can lack the bytes past their end: the checked path.
-        let window = match bits {
-            Some(b) if inside => {
-                let first = y0 as usize * stride + x0 as usize / 8;
-                b.get(first..first + (n - 1) * stride + 4)
-            }
-            _ => None,
+        let (u, v) = end_grid(map, pose, sin, cos, p);
+        let x0 = (u as i32).saturating_sub(k);
+        let y0 = (v as i32).saturating_sub(k);
+        let inside = (x0.wrapping_sub(1) as u32) < x_limit && (y0.wrapping_sub(1) as u32) < y_limit;
+        let window = if inside {
+            let first = y0 as usize * stride + (x0 as usize >> 3);
+            bits.get(first..first + span)
+        } else {
+            None
         };
         let Some(window) = window else {
-            add_checked(map, x0, y0, n, p.weight, acc);
+            // At or over the grid's edge, or no bitmap: exact floor, cell by cell.
+            let (x0, y0) = (
+                floor_i32(u).saturating_sub(k),
+                floor_i32(v).saturating_sub(k),
+            );
+            for (r, row_acc) in acc.iter_mut().take(n).enumerate() {
+                for (b, s) in row_acc.iter_mut().take(n).enumerate() {
+                    if map.is_occupied(x0.saturating_add(b as i32), y0.saturating_add(r as i32)) {
+                        *s = s.wrapping_add(p.weight);
+                    }
+                }
+            }
             continue;
         };
-        let shift = x0 as usize % 8;
-        let mut offset = 0;
-        for row_acc in acc.chunks_exact_mut(n).take(n) {
-            let row = window.get(offset..).and_then(<[u8]>::first_chunk::<4>);
-            offset += stride;
-            let Some(&row) = row else {
-                continue;
-            };
-            let mut m = (u32::from_le_bytes(row) >> shift) & row_mask;
+        let up = down - (x0 as u32 & 7);
+        // The window's rows as bit masks (bit t: column x0 + t), all read before any is
+        // used: straight-line loads, and one test skips a window without occupied cells.
+        let masks: [u32; R] = core::array::from_fn(|r| {
+            let offset = r * stride;
+            match window.get(offset..offset + 4) {
+                Some(&[a, b, c, d]) if r < n => (u32::from_le_bytes([a, b, c, d]) << up) >> down,
+                _ => 0,
+            }
+        });
+        if masks.iter().fold(0, |any, m| any | m) == 0 {
+            continue;
+        }
+        for (row_acc, &mask) in acc.iter_mut().zip(masks.iter()) {
+            let mut m = mask;
             while m != 0 {
-                if let Some(s) = row_acc.get_mut(m.trailing_zeros() as usize) {
+                let t = m.trailing_zeros() as usize & (ROW - 1);
+                if let Some(s) = row_acc.get_mut(t) {
                     *s = s.wrapping_add(p.weight);
                 }
                 m &= m - 1;
             }
         }
     }
-    best_shift(&acc[..n * n], (n / 2) as u8)
+    for (dst, row) in scores.chunks_exact_mut(n).zip(acc.iter()) {
+        for (d, s) in dst.iter_mut().zip(row.iter()) {
+            *d = *s;
+        }
+    }
+    best_shift(scores.get(..n * n).unwrap_or(&[]), k as u8)
 }
 
 /// Adds `weight` to every shift of the `n × n` window at `(x0, y0)` (scores row-major in
@@ -448,7 +496,7 @@ pub fn search_window_brute_force(
     let hw = half_width.min(MAX_SHIFT_WINDOW);
     let k = i32::from(hw);
     let n = (2 * k + 1) as usize;
-    let (sin, cos) = libm::sincosf(pose.theta);
+    let (sin, cos) = sin_cos_f32(pose.theta);
     for dy in -k..=k {
         for dx in -k..=k {
             let mut sum = 0u32;

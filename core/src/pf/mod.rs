@@ -2,7 +2,7 @@
 //! correlation and a local shift search.
 //!
 //! - [`ParticleFilter`]: `P` poses with log-weights and a seeded generator
-//!   (`rand_xoshiro`'s Xoshiro128++, Gaussians from `rand_distr`, math through `libm`,
+//!   (`rand_xoshiro`'s Xoshiro128++, Gaussians from `rand_distr`, math in `f32` and through `libm`,
 //!   so the same inputs and seed give the same output on every target).
 //! - [`correlation`]: the observation model and the fast shift search, with its
 //!   brute-force reference.

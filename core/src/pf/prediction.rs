@@ -96,7 +96,7 @@ fn sinc(h: f32) -> f32 {
     if h.abs() < 1e-3 {
         1.0 - h * h / 6.0
     } else {
-        libm::sinf(h) / h
+        crate::geometry::sin_cos_f32(h).0 / h
     }
 }
 
@@ -122,7 +122,7 @@ pub fn drive_arc(
 ) -> Pose2<f32> {
     let half = 0.5 * heading_change;
     let chord = distance * sinc(half);
-    let (s, c) = libm::sincosf(pose.theta + half);
+    let (s, c) = crate::geometry::sin_cos_f32(pose.theta + half);
     Pose2::new(
         pose.x + chord * c - sideways * s,
         pose.y + chord * s + sideways * c,

