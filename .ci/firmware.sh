@@ -132,6 +132,10 @@ awk '/^ekf /{
     /^relocalize /{
         split($2, c, "="); split($6, n, "=");
         printf "%-40s %s\n", "relocalize_" c[2] "x" c[2] "_instructions", n[2];
+    }
+    /^relocalize_budget /{
+        split($2, c, "="); split($6, n, "=");
+        printf "%-40s %s\n", "relocalize_budget_" c[2] "x" c[2] "_instructions", n[2];
     }' "$cost_log" >>"$measured"
 
 step "report"
@@ -166,7 +170,7 @@ awk '
 awk '
     { v[$1] = $2 }
     END {
-        split("localizer_flash_bytes localizer_static_ram_bytes localizer_stm32f411_flash_bytes localizer_stack_peak_bytes localizer_p32_b90_w9_step_instructions localizer_p64_b90_w9_step_instructions localizer_p128_b90_w9_step_instructions relocalize_256x256_instructions", need, " ");
+        split("localizer_flash_bytes localizer_static_ram_bytes localizer_stm32f411_flash_bytes localizer_stack_peak_bytes localizer_p32_b90_w9_step_instructions localizer_p64_b90_w9_step_instructions localizer_p128_b90_w9_step_instructions relocalize_256x256_instructions relocalize_budget_256x256_instructions", need, " ");
         for (i in need) if (!(need[i] in v)) { printf "FAIL: localizer figure %s missing\n", need[i]; bad = 1 }
         ram = v["localizer_static_ram_bytes"] + v["localizer_stack_peak_bytes"];
         printf "localizer firmware: flash %d bytes with the map (bar <= 524288), static RAM + stack %d bytes (bar <= 131072)\n", v["localizer_flash_bytes"], ram;
@@ -177,6 +181,8 @@ awk '
         printf "localizer step P=64, 90 beams, 9x9: %d instructions (bar <= 800000: %s)\n", s, (s <= 800000) ? "met" : "NOT MET";
         r = v["relocalize_256x256_instructions"];
         printf "relocalization on 256x256: %d instructions (bar <= 50000000: %s)\n", r, (r <= 50000000) ? "met" : "NOT MET";
+        b = v["relocalize_budget_256x256_instructions"];
+        printf "relocalization stopped by the node budget: %d instructions (bar <= 50000000: %s)\n", b, (b <= 50000000) ? "met" : "NOT MET";
         if (bad) exit 1
     }' "$measured"
 

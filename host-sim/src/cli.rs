@@ -242,6 +242,17 @@ pub struct GlobalArgs {
     /// Particles spread over this many hypotheses (default: the core's).
     #[arg(long)]
     pub hypotheses: Option<u8>,
+    /// Peaks of the wall-direction correlation whose headings the search visits; 0:
+    /// every heading (default: the core's).
+    #[arg(long)]
+    pub heading_peaks: Option<u8>,
+    /// Half-width of the heading window around each peak, degrees (default: the core's).
+    #[arg(long)]
+    pub heading_window: Option<f32>,
+    /// Minimum score of the search's first pass, a fraction of the beams' total weight
+    /// (default: the core's).
+    #[arg(long)]
+    pub first_pass: Option<f32>,
 }
 
 impl From<&GlobalArgs> for GlobalOptions {
@@ -257,6 +268,9 @@ impl From<&GlobalArgs> for GlobalOptions {
             search_range: a.search_range,
             search_beams: a.search_beams,
             hypotheses: a.hypotheses,
+            heading_peaks: a.heading_peaks,
+            heading_window_deg: a.heading_window,
+            first_pass: a.first_pass,
         }
     }
 }

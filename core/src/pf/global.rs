@@ -28,6 +28,13 @@
 //! the whole map (the first found among equal scores) — the same answer as the
 //! brute-force reference [`search_brute_force`].
 //!
+//! **Heading windows.** With [`GlobalSearchConfig::heading_peaks`] set, only the headings
+//! within [`GlobalSearchConfig::heading_window`] of the peaks of the scan's wall
+//! directions correlated with the map's ([`super::orientation`]) are searched, best peak
+//! first (each peak `s` as `s` and `s + π`); a scan with too few line-like points searches
+//! every heading. Exact within the windows; a robot whose local walls the correlation
+//! does not pick out is not found.
+//!
 //! **Hypotheses.** The `N` best candidates that are pairwise apart by more than the
 //! configured separation (a better candidate nearby replaces a worse one), best first.
 //!
@@ -48,6 +55,14 @@ use core::fmt;
 pub const MAX_SEARCH_BEAMS: usize = 128;
 /// Most candidate headings (a finer configured or derived step is coarsened to this).
 pub const MAX_HEADINGS: u32 = 8192;
+/// Most peaks of the wall-direction correlation a search visits.
+pub const MAX_HEADING_PEAKS: usize = 4;
+/// Most heading windows: two headings per peak, each split in two at most where it
+/// wraps around.
+const MAX_WINDOWS: usize = 4 * MAX_HEADING_PEAKS;
+/// A scan whose line-like end points weigh less than this in all (about as many
+/// points) searches every heading: its wall directions say too little.
+const MIN_SCAN_LINES: f32 = 8.0;
 
 /// Settings of the global search.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -77,6 +92,12 @@ pub struct GlobalSearchConfig {
     pub separation_m: f32,
     /// … and in heading (radians) are the same hypothesis: the better one is kept.
     pub separation_rad: f32,
+    /// Search only the headings around this many peaks of the wall-direction correlation
+    /// ([`super::orientation`]), each taken as `s` and `s + π`; 0 searches every heading
+    /// (at most [`MAX_HEADING_PEAKS`]).
+    pub heading_peaks: u8,
+    /// Half-width of the heading window around each peak, radians.
+    pub heading_window: f32,
 }
 
 impl GlobalSearchConfig {
@@ -88,11 +109,13 @@ impl GlobalSearchConfig {
         heading_step: 0.0,
         min_score_fraction: 0.5,
         relative_score: 0.8,
-        first_pass_fraction: 0.9,
+        first_pass_fraction: 0.8,
         pass_step: 0.1,
-        node_budget: 8_000,
+        node_budget: 10_000,
         separation_m: 0.5,
         separation_rad: 0.35,
+        heading_peaks: 3,
+        heading_window: 0.07,
     };
 
     /// `true` when every setting is finite and in range.
@@ -117,6 +140,9 @@ impl GlobalSearchConfig {
             && self.separation_m >= 0.0
             && self.separation_rad.is_finite()
             && self.separation_rad >= 0.0
+            && usize::from(self.heading_peaks) <= MAX_HEADING_PEAKS
+            && self.heading_window.is_finite()
+            && self.heading_window >= 0.0
     }
 }
 
@@ -271,8 +297,12 @@ pub struct SearchReport {
     pub extent_m: f32,
     /// Heading step, radians.
     pub heading_step: f32,
-    /// Headings searched (all of them when complete).
+    /// Candidate headings over the full turn.
     pub headings: u32,
+    /// Heading windows searched (1: every heading).
+    pub heading_windows: u8,
+    /// Candidate headings inside the windows.
+    pub headings_searched: u32,
     /// Node evaluations: bounds and leaf scores (each one pass over the beams).
     pub nodes: u32,
     /// Of those, leaf scores.
@@ -375,14 +405,46 @@ pub fn heading_step_for(resolution: f32, extent: f32) -> f32 {
     libm::acosf(1.0 - resolution * resolution / (2.0 * d * d))
 }
 
+/// `(sin, cos)` of every heading `j · step` without a trigonometric call per heading
+/// (libm's `sincosf` works in `f64`, which the Cortex-M4F computes in software: several
+/// thousand instructions a call): the rotations by `2^b · step` are computed once per
+/// search and heading `j`'s is the product of those of its set bits.
+struct Rotations {
+    powers: [(f32, f32); HEADING_LEVELS],
+}
+
+impl Rotations {
+    fn new(step: f32) -> Self {
+        let mut powers = [(0.0, 1.0); HEADING_LEVELS];
+        for (b, p) in powers.iter_mut().enumerate() {
+            *p = libm::sincosf(wrap_angle((1u32 << b) as f32 * step));
+        }
+        Self { powers }
+    }
+
+    /// `(sin, cos)` of heading `j` (`j < 2^HEADING_LEVELS`).
+    fn at(&self, j: u32) -> (f32, f32) {
+        let (mut s, mut c) = (0.0f32, 1.0f32);
+        for (b, (sb, cb)) in self.powers.iter().enumerate() {
+            if (j >> b) & 1 == 1 {
+                (s, c) = (s * cb + c * sb, c * cb - s * sb);
+            }
+        }
+        (s, c)
+    }
+}
+
 /// End cells of the selected beams for the robot at the centre of cell (0, 0) facing
-/// `theta`, with their weights.
+/// the heading of rotation `(sin, cos)`, with their weights.
 ///
 /// The robot at the centre of cell (0, 0) puts a robot-frame point `p` at grid
 /// coordinates `0.5 + R(θ) p / r` (cells of `r` metres): two products and a sum per
 /// axis, with `p / r` computed once per search.
-fn end_cells(sel: &Selected, theta: f32, out: &mut [(i32, i32, u32); MAX_SEARCH_BEAMS]) {
-    let (sin, cos) = libm::sincosf(theta);
+fn end_cells(
+    sel: &Selected,
+    (sin, cos): (f32, f32),
+    out: &mut [(i32, i32, u32); MAX_SEARCH_BEAMS],
+) {
     for ((slot, p), (u, v)) in out
         .iter_mut()
         .zip(sel.points.iter().take(sel.len))
@@ -398,20 +460,23 @@ fn end_cells(sel: &Selected, theta: f32, out: &mut [(i32, i32, u32); MAX_SEARCH_
 /// changes (the depth-first search visits many nodes of one heading in a row).
 struct EndCells {
     heading: u32,
+    rotations: Rotations,
     cells: [(i32, i32, u32); MAX_SEARCH_BEAMS],
 }
 
 impl EndCells {
+    fn new(step: f32) -> Self {
+        Self {
+            heading: u32::MAX,
+            rotations: Rotations::new(step),
+            cells: [(0, 0, 0); MAX_SEARCH_BEAMS],
+        }
+    }
+
     /// The end cells for heading index `j` (computed when not held already).
-    fn at(
-        &mut self,
-        sel: &Selected,
-        step: f32,
-        j: u32,
-        report: &mut SearchReport,
-    ) -> &[(i32, i32, u32)] {
+    fn at(&mut self, sel: &Selected, j: u32, report: &mut SearchReport) -> &[(i32, i32, u32)] {
         if self.heading != j {
-            end_cells(sel, heading_angle(j, step), &mut self.cells);
+            end_cells(sel, self.rotations.at(j), &mut self.cells);
             self.heading = j;
             report.rotations += 1;
         }
@@ -433,51 +498,92 @@ fn dilation(rho_cells: f32, delta: f32) -> i32 {
     (rho_cells * delta + 0.01) as i32 + 1
 }
 
+/// Most heading levels of a node (`2^a` headings, `a` ≤ 13 for [`MAX_HEADINGS`]).
+const HEADING_LEVELS: usize = 14;
+
+/// [`dilation`] of every selected beam for every heading level `a ≥ 1` of a node
+/// (`δ = 2^(a−1)` steps), saturated at 255 cells (a window that wide covers every level),
+/// computed once per search: the bound's inner loop then only looks it up.
+struct Dilations {
+    cells: [[u8; MAX_SEARCH_BEAMS]; HEADING_LEVELS],
+}
+
+impl Dilations {
+    fn new(sel: &Selected, step: f32) -> Self {
+        let mut d = Self {
+            cells: [[0; MAX_SEARCH_BEAMS]; HEADING_LEVELS],
+        };
+        for (a, row) in d.cells.iter_mut().enumerate().skip(1) {
+            let delta = (1u32 << (a - 1)) as f32 * step;
+            for (e, rho) in row.iter_mut().zip(sel.rho_cells.iter().take(sel.len)) {
+                *e = dilation(*rho, delta).clamp(0, 255) as u8;
+            }
+        }
+        d
+    }
+}
+
 /// Bound of the node `(headings [j0, j0 + 2^a), block 2^k × 2^k at (x, y))` given the
 /// end cells at the reference heading `j0 + 2^(a−1)` (`j0` for `a = 0`): each beam counts
 /// when any cell is occupied in its window grown by the cells its end may move over the
 /// headings of the node. With `a = 0` and `k = 0`: the exact score.
+///
+/// Stops as soon as the beams still to look at cannot lift the bound above `thr` (the
+/// node is dropped then): the value returned is then some number ≤ `thr`.
 #[allow(clippy::too_many_arguments)]
 fn bound(
     map: &GridView<'_>,
     levels: &Levels<'_>,
-    sel: &Selected,
+    dilations: &Dilations,
     cells: &[(i32, i32, u32)],
-    step: f32,
+    total: u32,
+    thr: u32,
     a: u8,
     k: u8,
     x: i32,
     y: i32,
 ) -> u32 {
+    // The most the node can still score: the total less the beams that missed.
+    let mut possible = total;
     if a == 0 {
-        if k == 0 {
-            return leaf_score(map, cells, x, y);
-        }
-        let mut s = 0u32;
         for (cx, cy, w) in cells {
-            if levels.any(k, cx.wrapping_add(x), cy.wrapping_add(y)) {
-                s = s.wrapping_add(*w);
+            let (u, v) = (cx.wrapping_add(x), cy.wrapping_add(y));
+            let hit = if k == 0 {
+                map.is_occupied(u, v)
+            } else {
+                levels.any(k, u, v)
+            };
+            if !hit {
+                possible = possible.wrapping_sub(*w);
+                if possible <= thr {
+                    return possible;
+                }
             }
         }
-        return s;
+        return possible;
     }
-    let delta = (1u32 << (a - 1)) as f32 * step;
-    let mut s = 0u32;
-    for ((cx, cy, w), rho) in cells.iter().zip(sel.rho_cells.iter()) {
-        let e = dilation(*rho, delta);
-        let size = (1i32 << k).saturating_add(e.saturating_mul(2));
-        let level = (32 - (size.max(1) as u32 - 1).leading_zeros()) as u8;
-        if level > levels.top
-            || levels.any(
+    let Some(row) = dilations.cells.get(usize::from(a)) else {
+        return total;
+    };
+    let block = 1i32 << k;
+    for ((cx, cy, w), e) in cells.iter().zip(row.iter()) {
+        let e = i32::from(*e);
+        let size = block + 2 * e;
+        let level = (32 - (size as u32 - 1).leading_zeros()) as u8;
+        if level <= levels.top
+            && !levels.any(
                 level,
                 cx.wrapping_add(x).wrapping_sub(e),
                 cy.wrapping_add(y).wrapping_sub(e),
             )
         {
-            s = s.wrapping_add(*w);
+            possible = possible.wrapping_sub(*w);
+            if possible <= thr {
+                return possible;
+            }
         }
     }
-    s
+    possible
 }
 
 /// The occupied levels' bitmaps, looked up once per search (the bound's inner loop).
@@ -603,6 +709,85 @@ fn prepare(
     Ok((sel, turn / n as f32, n))
 }
 
+/// The heading windows `(first, last)` (indices into the `headings` candidates of
+/// `step`) the search visits, best peak first; their number. One window of every
+/// heading when the prior is off or the scan shows too few lines.
+fn heading_windows(
+    map: &GridView<'_>,
+    walls: Option<&super::orientation::DirectionHistogram>,
+    points: &[ScanPoint],
+    config: &GlobalSearchConfig,
+    step: f32,
+    headings: u32,
+    out: &mut [(u32, u32); MAX_WINDOWS],
+) -> usize {
+    use super::orientation::{BINS, DirectionHistogram, correlate, peaks};
+    let last = headings.saturating_sub(1);
+    let every = |out: &mut [(u32, u32); MAX_WINDOWS]| {
+        if let Some(w) = out.first_mut() {
+            *w = (0, last);
+        }
+        1
+    };
+    if config.heading_peaks == 0 {
+        return every(out);
+    }
+    let scan = DirectionHistogram::of_scan(points);
+    if scan.total.is_nan() || scan.total < MIN_SCAN_LINES {
+        return every(out);
+    }
+    let computed;
+    let walls = match walls {
+        Some(w) => w,
+        None => {
+            computed = DirectionHistogram::of_map(map);
+            &computed
+        }
+    };
+    if walls.total.is_nan() || walls.total <= 0.0 {
+        return every(out);
+    }
+    let c = correlate(&scan, walls);
+    let bin = core::f32::consts::PI / BINS as f32;
+    let separation = (libm::ceilf(2.0 * config.heading_window / bin) as usize).clamp(3, BINS / 4);
+    let (found, n) = peaks::<MAX_HEADING_PEAKS>(&c, separation);
+    let n = n.min(usize::from(config.heading_peaks));
+    let count = headings as f32;
+    let half = config.heading_window / step;
+    if half.is_nan() || 2.0 * half + 1.0 >= count {
+        return every(out);
+    }
+    let mut len = 0;
+    let mut push = |lo: u32, hi: u32| {
+        if let Some(slot) = out.get_mut(len) {
+            *slot = (lo, hi);
+            len += 1;
+        }
+    };
+    for &(b, _) in found.iter().take(n) {
+        for turn in [0.0, core::f32::consts::PI] {
+            let centre = (b as f32 * bin + turn) / step;
+            let lo = libm::floorf(centre - half) as i64;
+            let hi = libm::ceilf(centre + half) as i64;
+            let n = i64::from(headings);
+            let clamp = |v: i64| v.clamp(0, n - 1) as u32;
+            if lo < 0 {
+                push(clamp(lo + n), last);
+                push(0, clamp(hi));
+            } else if hi >= n {
+                push(clamp(lo), last);
+                push(0, clamp(hi - n));
+            } else {
+                push(clamp(lo), clamp(hi));
+            }
+        }
+    }
+    if len == 0 {
+        return every(out);
+    }
+    len
+}
+
 /// Deepest stack of the search: four children per level of headings and of positions.
 const STACK: usize = 4 * (14 + crate::grid::layers::MAX_LEVELS as usize + 1);
 
@@ -616,6 +801,20 @@ pub fn search<const N: usize>(
     config: &GlobalSearchConfig,
     out: &mut Hypotheses<N>,
 ) -> Result<SearchReport, GlobalError> {
+    search_with_walls(map, layers, None, points, config, out)
+}
+
+/// [`search`] with the map's wall directions computed beforehand
+/// ([`super::orientation::DirectionHistogram::of_map`], one pass over the map that
+/// [`search`] makes every time when [`GlobalSearchConfig::heading_peaks`] is set).
+pub fn search_with_walls<const N: usize>(
+    map: &GridView<'_>,
+    layers: &MaxPoolLayers<'_>,
+    walls: Option<&super::orientation::DirectionHistogram>,
+    points: &[ScanPoint],
+    config: &GlobalSearchConfig,
+    out: &mut Hypotheses<N>,
+) -> Result<SearchReport, GlobalError> {
     let (sel, step, headings) = prepare(map, layers, points, config)?;
     out.clear();
     let min_score = libm::ceilf(config.min_score_fraction * sel.total as f32) as u32;
@@ -624,6 +823,8 @@ pub fn search<const N: usize>(
         extent_m: sel.extent,
         heading_step: step,
         headings,
+        heading_windows: 1,
+        headings_searched: headings,
         nodes: 0,
         leaves: 0,
         rotations: 0,
@@ -645,17 +846,23 @@ pub fn search<const N: usize>(
         .take(sel.len)
         .copied()
         .fold(0.0f32, f32::max);
-    let mut end = EndCells {
-        heading: u32::MAX,
-        cells: [(0, 0, 0); MAX_SEARCH_BEAMS],
-    };
+    let mut end = EndCells::new(step);
     let mut stack = [Node::default(); STACK];
     let levels = Levels::new(layers);
+    let dilations = Dilations::new(&sel, step);
     let threshold = |out: &Hypotheses<N>, pass_min: u32| {
         below_relative(config, out.best())
             .max(pass_min.saturating_sub(1))
             .max(out.floor())
     };
+    let mut windows = [(0u32, 0u32); MAX_WINDOWS];
+    let n_windows = heading_windows(map, walls, points, config, step, headings, &mut windows);
+    report.heading_windows = n_windows as u8;
+    report.headings_searched = windows
+        .iter()
+        .take(n_windows)
+        .map(|(lo, hi)| hi - lo + 1)
+        .sum();
     // Passes at decreasing minimum scores: a high one prunes hard and finds a good match
     // cheaply; a lower one runs only when the higher found nothing.
     let mut fraction = config.first_pass_fraction.max(config.min_score_fraction);
@@ -664,118 +871,130 @@ pub fn search<const N: usize>(
         report.passes += 1;
         report.min_score = pass_min;
         let mut thr = threshold(out, pass_min);
-        let mut ry = 0;
-        while ry < h {
-            let mut rx = 0;
-            while rx < w {
-                let root = Node {
-                    x: rx,
-                    y: ry,
-                    j0: 0,
-                    bound: sel.total,
-                    a: all,
-                    k: top,
-                };
-                rx += size;
-                if !block_free(map, layers, top, root.x, root.y) {
-                    continue;
-                }
-                let mut sp = 0usize;
-                if let Some(slot) = stack.get_mut(sp) {
-                    *slot = root;
-                    sp += 1;
-                }
-                while sp > 0 {
-                    sp -= 1;
-                    let Some(node) = stack.get(sp).copied() else {
-                        break;
-                    };
-                    if node.bound <= thr {
+        for &(lo, hi) in windows.get(..n_windows).unwrap_or(&[]) {
+            // The aligned heading intervals of 2^a0 that cover the window (at most two).
+            let a0 = (32 - (hi - lo).leading_zeros()).min(u32::from(all)) as u8;
+            let mut ry = 0;
+            while ry < h {
+                let mut rx = 0;
+                while rx < w {
+                    let (bx, by) = (rx, ry);
+                    rx += size;
+                    if !block_free(map, layers, top, bx, by) {
                         continue;
                     }
-                    if node.a == 0 && node.k == 0 {
-                        out.offer(
-                            Hypothesis {
-                                pose: pose_at(&g, node.x, node.y, heading_angle(node.j0, step)),
-                                score: node.bound,
-                            },
-                            config.separation_m,
-                            config.separation_rad,
-                        );
-                        thr = threshold(out, pass_min);
-                        continue;
-                    }
-                    // Split the headings while their spread moves the far beams' ends by
-                    // more than half the block, else the block.
-                    let split_heading = node.a > 0
-                        && (node.k == 0
-                            || 2 * dilation(rho_max, (1u32 << (node.a - 1)) as f32 * step)
-                                >= 1 << node.k);
-                    let mut children = [Node::default(); 4];
-                    let mut n = 0;
-                    if split_heading {
-                        let a = node.a - 1;
-                        for j0 in [node.j0, node.j0 + (1 << a)] {
-                            if j0 >= headings {
-                                continue;
-                            }
-                            if let Some(c) = children.get_mut(n) {
-                                *c = Node { j0, a, ..node };
-                                n += 1;
-                            }
-                        }
-                    } else {
-                        let k = node.k - 1;
-                        let half = 1i32 << k;
-                        for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                            let (x, y) = (node.x + dx * half, node.y + dy * half);
-                            if x >= w || y >= h || !block_free(map, layers, k, x, y) {
-                                continue;
-                            }
-                            if let Some(c) = children.get_mut(n) {
-                                *c = Node { x, y, k, ..node };
-                                n += 1;
-                            }
-                        }
-                    }
-                    let mut kept = 0;
-                    for i in 0..n {
-                        let Some(mut c) = children.get(i).copied() else {
-                            break;
-                        };
-                        if report.nodes >= config.node_budget {
-                            report.complete = false;
-                            break 'passes;
-                        }
-                        report.nodes += 1;
-                        if let Some(count) = report.nodes_per_level.get_mut(usize::from(c.k)) {
-                            *count += 1;
-                        }
-                        if c.a == 0 && c.k == 0 {
-                            report.leaves += 1;
-                        }
-                        let cells = end.at(&sel, step, c.reference(), &mut report);
-                        c.bound = bound(map, &levels, &sel, cells, step, c.a, c.k, c.x, c.y);
-                        if c.bound > thr
-                            && let Some(slot) = children.get_mut(kept)
-                        {
-                            *slot = c;
-                            kept += 1;
-                        }
-                    }
-                    // Decreasing bound, equal bounds in child order (insertion sort of at
-                    // most four); pushed in reverse so the best is visited first.
-                    let kids = children.get_mut(..kept).unwrap_or(&mut []);
-                    sort_decreasing(kids);
-                    for kid in kids.iter().rev() {
+                    let mut sp = 0usize;
+                    let mut j0 = (lo >> a0) << a0;
+                    while j0 <= hi && j0 < headings {
                         if let Some(slot) = stack.get_mut(sp) {
-                            *slot = *kid;
+                            *slot = Node {
+                                x: bx,
+                                y: by,
+                                j0,
+                                bound: sel.total,
+                                a: a0,
+                                k: top,
+                            };
                             sp += 1;
                         }
+                        j0 += 1 << a0;
+                    }
+                    // The first interval is visited first.
+                    stack.get_mut(..sp).unwrap_or(&mut []).reverse();
+                    while sp > 0 {
+                        sp -= 1;
+                        let Some(node) = stack.get(sp).copied() else {
+                            break;
+                        };
+                        if node.bound <= thr {
+                            continue;
+                        }
+                        if node.a == 0 && node.k == 0 {
+                            out.offer(
+                                Hypothesis {
+                                    pose: pose_at(&g, node.x, node.y, heading_angle(node.j0, step)),
+                                    score: node.bound,
+                                },
+                                config.separation_m,
+                                config.separation_rad,
+                            );
+                            thr = threshold(out, pass_min);
+                            continue;
+                        }
+                        // Split the headings while their spread moves the far beams' ends by
+                        // more than half the block, else the block.
+                        let split_heading = node.a > 0
+                            && (node.k == 0
+                                || 2 * dilation(rho_max, (1u32 << (node.a - 1)) as f32 * step)
+                                    >= 1 << node.k);
+                        let mut children = [Node::default(); 4];
+                        let mut n = 0;
+                        if split_heading {
+                            let a = node.a - 1;
+                            for j0 in [node.j0, node.j0 + (1 << a)] {
+                                if j0 >= headings || j0 > hi || j0 + (1 << a) <= lo {
+                                    continue;
+                                }
+                                if let Some(c) = children.get_mut(n) {
+                                    *c = Node { j0, a, ..node };
+                                    n += 1;
+                                }
+                            }
+                        } else {
+                            let k = node.k - 1;
+                            let half = 1i32 << k;
+                            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                                let (x, y) = (node.x + dx * half, node.y + dy * half);
+                                if x >= w || y >= h || !block_free(map, layers, k, x, y) {
+                                    continue;
+                                }
+                                if let Some(c) = children.get_mut(n) {
+                                    *c = Node { x, y, k, ..node };
+                                    n += 1;
+                                }
+                            }
+                        }
+                        let mut kept = 0;
+                        for i in 0..n {
+                            let Some(mut c) = children.get(i).copied() else {
+                                break;
+                            };
+                            if report.nodes >= config.node_budget {
+                                report.complete = false;
+                                break 'passes;
+                            }
+                            report.nodes += 1;
+                            if let Some(count) = report.nodes_per_level.get_mut(usize::from(c.k)) {
+                                *count += 1;
+                            }
+                            if c.a == 0 && c.k == 0 {
+                                report.leaves += 1;
+                            }
+                            let cells = end.at(&sel, c.reference(), &mut report);
+                            c.bound = bound(
+                                map, &levels, &dilations, cells, sel.total, thr, c.a, c.k, c.x, c.y,
+                            );
+                            if c.bound > thr
+                                && let Some(slot) = children.get_mut(kept)
+                            {
+                                *slot = c;
+                                kept += 1;
+                            }
+                        }
+                        // Decreasing bound, equal bounds in child order (insertion sort of at
+                        // most four); pushed in reverse so the best is visited first.
+                        let kids = children.get_mut(..kept).unwrap_or(&mut []);
+                        sort_decreasing(kids);
+                        for kid in kids.iter().rev() {
+                            if let Some(slot) = stack.get_mut(sp) {
+                                *slot = *kid;
+                                sp += 1;
+                            }
+                        }
                     }
                 }
+                ry += size;
             }
-            ry += size;
         }
         if !out.is_empty() || fraction <= config.min_score_fraction {
             break 'passes;
@@ -830,9 +1049,10 @@ pub fn search_brute_force<const N: usize>(
     let g = *map.geometry();
     let mut cells = [(0i32, 0i32, 0u32); MAX_SEARCH_BEAMS];
     let mut nodes = 0u32;
+    let rotations = Rotations::new(step);
     for j in 0..headings {
-        let theta = wrap_angle(j as f32 * step);
-        end_cells(&sel, theta, &mut cells);
+        let theta = heading_angle(j, step);
+        end_cells(&sel, rotations.at(j), &mut cells);
         let cells = cells.get(..sel.len).unwrap_or(&[]);
         for y in 0..g.height as i32 {
             for x in 0..g.width as i32 {
@@ -860,6 +1080,8 @@ pub fn search_brute_force<const N: usize>(
         extent_m: sel.extent,
         heading_step: step,
         headings,
+        heading_windows: 1,
+        headings_searched: headings,
         nodes,
         leaves: nodes,
         rotations: headings,
@@ -933,10 +1155,12 @@ mod tests {
             .collect()
     }
 
+    /// Every heading (the brute force searches them all).
     fn config() -> GlobalSearchConfig {
         GlobalSearchConfig {
             heading_step: 0.25,
             node_budget: u32::MAX,
+            heading_peaks: 0,
             ..GlobalSearchConfig::DEFAULT
         }
     }
@@ -949,9 +1173,10 @@ mod tests {
         c: &GlobalSearchConfig,
         h: &Hypothesis,
     ) -> u32 {
-        let (sel, _, _) = prepare(view, layers, points, c).unwrap();
+        let (sel, step, headings) = prepare(view, layers, points, c).unwrap();
+        let j = (h.pose.theta.rem_euclid(2.0 * std::f32::consts::PI) / step).round() as u32;
         let mut cells = [(0, 0, 0); MAX_SEARCH_BEAMS];
-        end_cells(&sel, h.pose.theta, &mut cells);
+        end_cells(&sel, Rotations::new(step).at(j % headings), &mut cells);
         let (x, y) = view.geometry().world_to_cell(h.pose.x, h.pose.y).unwrap();
         leaf_score(view, &cells[..sel.len], x as i32, y as i32)
     }

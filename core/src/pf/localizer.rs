@@ -19,6 +19,7 @@
 
 use super::correlation::ScanPoints;
 use super::global::{self, GlobalError, GlobalSearchConfig, Hypotheses, Hypothesis, SearchReport};
+use super::orientation::DirectionHistogram;
 use super::prediction::arc_between;
 use super::{GridPfConfig, ParticleFilter, PfError, StepReport};
 use crate::geometry::Pose2;
@@ -189,7 +190,7 @@ impl LocalizerStatus {
 /// For global localization give it the map's max-pooled layers
 /// ([`GridLocalizer::with_layers`]; see the module documentation).
 ///
-/// RAM: `28·P + 24·B` bytes plus ~400; the map and its layers are not copied. A global
+/// RAM: `28·P + 24·B` bytes plus ~1 100 (lost detection, relocalization, the map's wall directions); the map and its layers are not copied. A global
 /// search adds ≈ 1.8 KB of stack.
 ///
 /// ```
@@ -233,6 +234,8 @@ pub struct GridLocalizer<'m, const P: usize, const B: usize> {
     config: GridPfConfig,
     pose: Pose2<f32>,
     layers: Option<MaxPoolLayers<'m>>,
+    /// The map's wall directions, made with the layers (the search's heading prior).
+    walls: DirectionHistogram,
     relocalization: RelocalizationConfig,
     status: LocalizerStatus,
     hypotheses: Hypotheses<MAX_HYPOTHESES>,
@@ -257,6 +260,7 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
             config,
             pose: start,
             layers: None,
+            walls: DirectionHistogram::new(),
             relocalization,
             status: LocalizerStatus::new(
                 LocalizerState::Tracking,
@@ -301,6 +305,7 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
             return Err(GlobalError::LayersMismatch);
         }
         self.layers = Some(layers);
+        self.walls = DirectionHistogram::of_map(&self.map);
         self.set_relocalization(relocalization)?;
         Ok(self)
     }
@@ -352,7 +357,9 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
         self.layers.as_ref()
     }
 
-    /// Spreads the particles around `pose` (Gaussian, `std_xy` m, `std_theta` rad).
+    /// Spreads the particles around `pose` (Gaussian, `std_xy` m, `std_theta` rad): the
+    /// pose is given, so the localizer is [`LocalizerState::Tracking`] and no global
+    /// search is pending (a lost or relocalizing state is cleared; the counters stay).
     pub fn reset_around(
         &mut self,
         pose: Pose2<f32>,
@@ -361,6 +368,11 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
     ) -> Result<(), PfError> {
         self.filter.reset_around(pose, std_xy, std_theta)?;
         self.pose = pose;
+        let s = &mut self.status;
+        s.state = LocalizerState::Tracking;
+        s.search_pending = false;
+        s.low_scans = 0;
+        s.good_scans = 0;
         Ok(())
     }
 
@@ -441,9 +453,10 @@ impl<const P: usize, const B: usize> GridLocalizer<'_, P, B> {
         };
         let r = &self.relocalization;
         let mut found = Hypotheses::<MAX_HYPOTHESES>::new();
-        let report = match global::search(
+        let report = match global::search_with_walls(
             &self.map,
             &layers,
+            Some(&self.walls),
             self.points.as_slice(),
             &r.search,
             &mut found,

@@ -20,6 +20,7 @@ pub mod correlation;
 mod filter;
 pub mod global;
 mod localizer;
+pub mod orientation;
 pub mod prediction;
 pub mod resampling;
 mod slam;

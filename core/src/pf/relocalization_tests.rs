@@ -216,3 +216,35 @@ fn bad_inputs_give_errors() {
     // Truncated layers image.
     assert!(MaxPoolLayers::from_bytes(&layers[..layers.len() - 3]).is_err());
 }
+
+#[test]
+fn a_reset_to_a_given_pose_clears_the_lost_state() {
+    let (map, layers) = room_map();
+    let layers = MaxPoolLayers::from_bytes(&layers).unwrap();
+    let sim = simulate(7);
+    let mut loc = GridLocalizer::<64, 180>::without_pose(
+        map.view(),
+        GridPfConfig::DEFAULT,
+        layers,
+        RelocalizationConfig::DEFAULT,
+    )
+    .unwrap();
+    assert_eq!(loc.state(), LocalizerState::Lost);
+    assert!(loc.status().search_pending);
+    // The pose is given: tracking, and the next scan runs no global search.
+    loc.reset_around(sim.truth[0], 0.0, 0.0).unwrap();
+    assert_eq!(loc.state(), LocalizerState::Tracking);
+    assert!(!loc.status().search_pending);
+    drive(&mut loc, &sim, 0, 5);
+    let s = *loc.status();
+    assert_eq!(s.relocalizations, 0, "{s:?}");
+    assert!(s.last_search.is_none(), "{s:?}");
+    assert_eq!(s.state, LocalizerState::Tracking);
+    assert!(close(&loc.pose(), &sim.truth[4], 0.1, 3f32.to_radians()));
+    // The same after a relocalization request.
+    loc.relocalize().unwrap();
+    assert_eq!(loc.state(), LocalizerState::Lost);
+    loc.reset_around(sim.truth[5], 0.0, 0.0).unwrap();
+    assert_eq!(loc.state(), LocalizerState::Tracking);
+    assert!(!loc.status().search_pending);
+}

@@ -352,8 +352,9 @@ fn memory_per_capacity_is_as_documented() {
         slam <= filter + 24 * 90 + 100 + size_of::<GridPfConfig>(),
         "{slam}"
     );
-    // The localizer's lost detection and relocalization state add ~400 B (measured 3672).
-    assert!(slam < 3400 && loc < 3700, "{slam} {loc}");
+    // The localizer's lost detection and relocalization state add ~400 B, the map's
+    // wall-direction histogram 724 B (measured 4424).
+    assert!(slam < 3400 && loc < 4500, "{slam} {loc}");
 }
 
 #[test]

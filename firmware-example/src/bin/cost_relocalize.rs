@@ -6,6 +6,9 @@
 //! at start-up into RAM) and seeds the particles. A separate binary from `cost_grid`: its
 //! 52 KB of layers and `cost_grid`'s 72 KB grid do not fit 128 KB of RAM together.
 //!
+//! Then the worst case of the node budget: the same scan searched with every minimum
+//! score at 0, so nothing is pruned by score and the budget stops the search.
+//!
 //! SysTick wraps every 2²⁴ ticks (≈ 10 M instructions): its exception counts the wraps.
 //! Prints one line on UART0 and exits through semihosting.
 #![no_std]
@@ -21,6 +24,7 @@ use firmware_example::board::{self, Serial};
 use firmware_example::cost::room_range;
 use microslam::geometry::Pose2;
 use microslam::grid::{GridGeometry, GridView, MaxPoolLayers};
+use microslam::pf::global::GlobalSearchConfig;
 use microslam::pf::{GridLocalizer, GridPfConfig, RelocalizationConfig};
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
 use panic_probe as _;
@@ -161,6 +165,37 @@ fn run(out: &mut Serial) -> core::fmt::Result {
         search.is_some_and(|s| s.complete),
         status.relocalizations,
         (err * 1000.0) as u32
+    )?;
+    // The worst case the node budget allows: the same scan with nothing pruned by score
+    // (every minimum score 0), so the search runs until the budget stops it.
+    let exhaustive = RelocalizationConfig {
+        search: GlobalSearchConfig {
+            min_score_fraction: 0.0,
+            first_pass_fraction: 0.0,
+            relative_score: 0.0,
+            ..RelocalizationConfig::DEFAULT.search
+        },
+        ..RelocalizationConfig::DEFAULT
+    };
+    let Ok(mut loc) =
+        GridLocalizer::<PARTICLES, BEAMS>::without_pose(map, CONFIG, layers, exhaustive)
+    else {
+        return writeln!(out, "error localizer");
+    };
+    let mut report = None;
+    let worst = instructions(|| report = Some(loc.observe(&scan)));
+    if !matches!(report, Some(Ok(_))) {
+        return writeln!(out, "error exhaustive relocalization step");
+    }
+    let search = loc.status().last_search;
+    writeln!(
+        out,
+        "relocalize_budget cells={} nodes={} budget={} complete={} instructions={}",
+        CELLS,
+        search.map_or(0, |s| s.nodes),
+        exhaustive.search.node_budget,
+        search.is_some_and(|s| s.complete),
+        worst,
     )?;
     writeln!(
         out,

@@ -251,6 +251,12 @@ pub struct GlobalOptions {
     pub search_beams: Option<u16>,
     /// Particles spread over this many hypotheses.
     pub hypotheses: Option<u8>,
+    /// Peaks of the wall-direction correlation the search visits (0: every heading).
+    pub heading_peaks: Option<u8>,
+    /// Half-width of the heading windows, degrees.
+    pub heading_window_deg: Option<f32>,
+    /// Minimum score of the first pass, a fraction of the beams' total weight.
+    pub first_pass: Option<f32>,
 }
 
 impl Default for GlobalOptions {
@@ -266,6 +272,9 @@ impl Default for GlobalOptions {
             search_range: None,
             search_beams: None,
             hypotheses: None,
+            heading_peaks: None,
+            heading_window_deg: None,
+            first_pass: None,
         }
     }
 }

@@ -73,6 +73,10 @@ pub struct SearchSummary {
     pub beams: u16,
     /// Candidate headings.
     pub headings: u32,
+    /// Heading windows searched.
+    pub heading_windows: u8,
+    /// Candidate headings inside them.
+    pub headings_searched: u32,
     /// Heading step, degrees.
     pub heading_step_deg: f32,
     /// Node evaluations.
@@ -94,6 +98,8 @@ impl From<&SearchReport> for SearchSummary {
         Self {
             beams: r.beams,
             headings: r.headings,
+            heading_windows: r.heading_windows,
+            headings_searched: r.headings_searched,
             heading_step_deg: r.heading_step.to_degrees(),
             nodes: r.nodes,
             leaves: r.leaves,
@@ -351,6 +357,15 @@ pub fn settings_from(
     }
     if let Some(b) = args.search_beams {
         search.max_beams = b;
+    }
+    if let Some(p) = args.heading_peaks {
+        search.heading_peaks = p;
+    }
+    if let Some(w) = args.heading_window_deg {
+        search.heading_window = w.to_radians();
+    }
+    if let Some(f) = args.first_pass {
+        search.first_pass_fraction = f;
     }
     if let Some(h) = args.hypotheses {
         relocalization.hypotheses = h;
