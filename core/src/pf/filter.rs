@@ -8,7 +8,7 @@ use super::correlation::{
 /// A shift search: [`search_window`] or one of its variants.
 pub(crate) type ShiftSearch =
     fn(&GridView<'_>, &Pose2<f32>, &[ScanPoint], u8, &mut [u32; MAX_SHIFTS]) -> ShiftScore;
-use super::prediction::drive_arc;
+use super::prediction::{arc_between, drive_arc};
 use super::resampling::resample;
 use super::{FilterConfig, PfError};
 use crate::geometry::Pose2;
@@ -256,6 +256,17 @@ impl<const P: usize> ParticleFilter<P> {
             return Ok(());
         }
         self.predict(v * dt, omega * dt)
+    }
+
+    /// Odometry form: the arc between the odometry poses before and after the step (only
+    /// their difference is used, so the odometry frame does not matter). A non-finite
+    /// pose is refused and nothing moves.
+    pub fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError> {
+        if !(from.is_finite() && to.is_finite()) {
+            return Err(PfError::NonFiniteInput);
+        }
+        let (d, t) = arc_between(from, to);
+        self.predict(d, t)
     }
 
     /// Weights the particles by the correlation of `points` with `map`: each particle is

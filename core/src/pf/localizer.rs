@@ -20,7 +20,6 @@
 use super::correlation::ScanPoints;
 use super::global::{self, GlobalError, GlobalSearchConfig, Hypotheses, Hypothesis, SearchReport};
 use super::orientation::DirectionHistogram;
-use super::prediction::arc_between;
 use super::{GridPfConfig, ParticleFilter, PfError, StepReport};
 use crate::geometry::Pose2;
 use crate::grid::{GridView, MaxPoolLayers, ScanIntegration};
@@ -403,11 +402,7 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
 
     /// Prediction with odometry poses before and after the step.
     pub fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError> {
-        if !(from.is_finite() && to.is_finite()) {
-            return Err(PfError::NonFiniteInput);
-        }
-        let (d, t) = arc_between(from, to);
-        self.filter.predict(d, t)
+        self.filter.predict_odometry(from, to)
     }
 
     /// Scores the scan against the map, shifts, reweights and resamples; before that, when

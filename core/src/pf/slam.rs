@@ -2,7 +2,6 @@
 
 use super::correlation::{ScanPoints, search_window, search_window_sparse};
 use super::filter::ShiftSearch;
-use super::prediction::arc_between;
 use super::{GridPfConfig, ParticleFilter, PfError};
 use crate::geometry::Pose2;
 use crate::grid::{OccupancyGrid, ScanIntegration};
@@ -165,11 +164,7 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const B
     /// Prediction with the odometry poses before and after the step (only their
     /// difference is used, so the odometry frame does not matter).
     pub fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError> {
-        if !(from.is_finite() && to.is_finite()) {
-            return Err(PfError::NonFiniteInput);
-        }
-        let (d, t) = arc_between(from, to);
-        self.filter.predict(d, t)
+        self.filter.predict_odometry(from, to)
     }
 
     /// Processes one scan: scores all particles (except for the first scan), moves them
