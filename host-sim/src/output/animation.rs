@@ -59,7 +59,7 @@ impl AnimationSettings {
 }
 
 /// What an animation shows: a run recorded with snapshots
-/// ([`crate::drivers::grid::run_slam_recorded`]) and its inputs.
+/// ([`crate::drivers::grid::run_slam_observed`] with `snapshot_every` > 0) and its inputs.
 #[derive(Clone, Copy)]
 pub struct Animation<'a> {
     /// The run, with [`GridRun::snapshots`].
