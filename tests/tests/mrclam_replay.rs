@@ -32,11 +32,11 @@ fn se2(v: &host_sim::metrics::Aligned) -> f64 {
 /// Measured with known ids, f64: (robot, ATE(se2) m, landmarks(se2) m, pose NEES mean,
 /// share of steps inside the 95 % NEES band, dead reckoning ATE(se2) m).
 const KNOWN: [(u8, f64, f64, f64, f64, f64); 5] = [
-    (1, 0.2275, 0.3368, 3.808, 0.957, 2.0983),
-    (2, 0.2335, 0.1293, 5.945, 0.854, 2.0757),
-    (3, 0.2548, 0.3344, 2.407, 0.946, 3.0537),
-    (4, 0.2647, 0.1773, 8.865, 0.502, 1.2656),
-    (5, 0.1630, 0.1265, 8.128, 0.480, 1.1411),
+    (1, 0.1473, 0.1178, 1.347, 1.000, 2.0983),
+    (2, 0.1920, 0.1000, 5.815, 0.864, 2.0757),
+    (3, 0.1617, 0.2344, 1.770, 0.990, 3.0537),
+    (4, 0.2854, 0.1664, 2.887, 0.965, 1.2656),
+    (5, 0.1358, 0.0816, 4.312, 0.950, 1.1411),
 ];
 
 /// The range bias `r + b₀ + b₂ β²` of each robot's sightings fitted by least squares
@@ -72,22 +72,21 @@ fn check_known(robot: u8) {
     // The floor: odometry alone, independent of the settings' noise figures.
     let d = se2(&m.dead_reckoning_ate_rmse_m);
     assert!((d - dr).abs() < 0.001, "dead reckoning {d}");
-    // At least 4× better than dead reckoning on every robot (measured 4.8× to 12×).
+    // At least 4× better than dead reckoning on every robot (measured 4.4× to 18.9×).
     assert!(se2(&m.ate_rmse_m) * 4.0 < d, "{m:?}");
     // Every robot ≤ 0.30 m, NEES mean ≤ 10.
     assert!(se2(&m.ate_rmse_m) <= 0.30 && n <= 10.0, "{m:?}");
     // The self-calibration finds the range bias the ground truth shows (measured within
-    // 0.021 m and 0.13 m/rad²) and a speed scale below 1 (the odometry reads 5–10 % fast;
+    // 0.057 m and 0.091 m/rad²; the sightings' bearing noise of the settings, 0.1 rad,
+    // leaves b₀ less well determined than the 0.03 rad of earlier settings did, which
+    // came within 0.021 m) and a speed scale below 1 (the odometry reads 5–10 % fast;
     // measured 0.93–0.97).
     let &(_, b0, b2) = RANGE_BIAS_FROM_GROUND_TRUTH
         .iter()
         .find(|k| k.0 == robot)
         .expect("robot");
     let [e0, e2] = m.calibration.range_bias.expect("range bias estimated");
-    assert!(
-        (e0 - b0).abs() < 0.03 && (e2 - b2).abs() < 0.15,
-        "{e0} {e2}"
-    );
+    assert!((e0 - b0).abs() < 0.06 && (e2 - b2).abs() < 0.1, "{e0} {e2}");
     let [sv, sw] = m
         .calibration
         .odometry_scale
@@ -143,6 +142,7 @@ fn uncalibrated() -> Settings {
     o.angular_std_per_radps = 0.05;
     o.speed_scale_std = 0.0;
     s.range_std = 0.3;
+    s.bearing_std = 0.03;
     s.range_bias_offset_std = 0.0;
     s.range_bias_curvature_std = 0.0;
     settings
@@ -150,8 +150,8 @@ fn uncalibrated() -> Settings {
 
 #[test]
 fn self_calibrated_settings_hold_robot3_without_supervision() {
-    // With the self-calibration the filter stays consistent (NEES 2.4) on robot 3 even
-    // with `[recovery]` off: measured 0.254 m, 4 sightings gated.
+    // With the self-calibration the filter stays consistent (NEES 1.8) on robot 3 even
+    // with `[recovery]` off: measured 0.162 m, 4 sightings gated.
     let mut settings = Settings::load_for("mrclam", None, Some(AssociationMode::Known)).unwrap();
     settings.recovery = host_sim::domain::config::RecoverySettings::default();
     let rec = recording(3);
@@ -164,7 +164,7 @@ fn self_calibrated_settings_hold_robot3_without_supervision() {
     )
     .unwrap();
     let m = evaluate(rec, &run);
-    assert!(se2(&m.ate_rmse_m) < bound(0.2541), "{m:?}");
+    assert!(se2(&m.ate_rmse_m) < bound(0.1619), "{m:?}");
     assert!(m.counts.gated < 10, "{:?}", m.counts);
 }
 
