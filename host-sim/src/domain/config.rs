@@ -155,9 +155,14 @@ impl Settings {
     /// The defaults of `family` with the file `path` (if any) laid over them, for the
     /// association `mode` (`None`: the file's own `association.mode`).
     ///
-    /// With an unknown-id mode (ICNN, JCBB), the `[unknown_ids]` table of the files, when
-    /// present, is laid over the rest: association needs noise figures that keep the
-    /// filter consistent, which are not always those that score best with known ids.
+    /// With an unknown-id mode (ICNN, JCBB), the `[unknown_ids]` table, when present, is
+    /// laid over the rest: association needs noise figures that keep the filter
+    /// consistent, which are not always those that score best with known ids. The layers,
+    /// each over the ones before it: the built-in settings, the built-in `[unknown_ids]`
+    /// (unknown ids only), the file, the file's `[unknown_ids]` (unknown ids only), and
+    /// `mode`. So a key the file sets is never undone by the built-in overlay: with
+    /// `-a jcbb`, a file (or a `sweep` grid) with `[sighting] range_std = 0.4` runs with
+    /// 0.4.
     pub fn load_for(
         family: &str,
         path: Option<&Path>,
@@ -182,13 +187,32 @@ impl Settings {
     /// the built-in defaults); `origin` names them in errors.
     pub fn load_over(
         family: &str,
-        over: toml::Table,
+        mut over: toml::Table,
         mode: Option<AssociationMode>,
         origin: &str,
     ) -> Result<Self> {
         let mut base: toml::Table = toml::from_str(builtin_text(family)?)?;
+        let builtin_unknown = base.remove("unknown_ids");
+        let over_unknown = over.remove("unknown_ids");
+        let mode_of = |t: &toml::Table| {
+            t.get("association")
+                .and_then(|a| a.get("mode"))
+                .and_then(|m| m.as_str())
+                .map(str::to_owned)
+        };
+        let unknown_ids = match mode {
+            Some(mode) => mode != AssociationMode::Known,
+            None => mode_of(&over)
+                .or_else(|| mode_of(&base))
+                .is_some_and(|m| m != "known"),
+        };
+        if unknown_ids && let Some(toml::Value::Table(t)) = builtin_unknown {
+            merge(&mut base, t);
+        }
         merge(&mut base, over);
-        let unknown = base.remove("unknown_ids");
+        if unknown_ids && let Some(toml::Value::Table(t)) = over_unknown {
+            merge(&mut base, t);
+        }
         if let Some(mode) = mode {
             let mut table = toml::Table::new();
             table.insert("mode".into(), toml::Value::try_from(mode)?);
@@ -196,17 +220,6 @@ impl Settings {
                 &mut base,
                 toml::Table::from_iter([("association".to_owned(), toml::Value::Table(table))]),
             );
-        }
-        let file_mode = base
-            .get("association")
-            .and_then(|a| a.get("mode"))
-            .and_then(|m| m.as_str())
-            .unwrap_or("known")
-            .to_owned();
-        if file_mode != "known"
-            && let Some(toml::Value::Table(over)) = unknown
-        {
-            merge(&mut base, over);
         }
         let settings: Self = toml::Value::Table(base)
             .try_into()
@@ -423,5 +436,46 @@ mod tests {
         assert_eq!(known.sighting.range_std, base.sighting.range_std);
         assert_eq!(jcbb.sighting.range_std, 0.3);
         assert_eq!(jcbb.association.mode, AssociationMode::Jcbb);
+    }
+
+    #[test]
+    fn a_files_keys_win_over_the_builtin_unknown_id_overlay() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.toml");
+        let builtin_jcbb = Settings::load_for("mrclam", None, Some(AssociationMode::Jcbb)).unwrap();
+        let builtin_known =
+            Settings::load_for("mrclam", None, Some(AssociationMode::Known)).unwrap();
+        // The built-in overlay changes these two keys for unknown ids (else this test
+        // checks nothing).
+        assert_ne!(
+            builtin_jcbb.sighting.range_std,
+            builtin_known.sighting.range_std
+        );
+        assert_ne!(
+            builtin_jcbb.sighting.bearing_std,
+            builtin_known.sighting.bearing_std
+        );
+        std::fs::write(
+            &p,
+            "[sighting]\nrange_std = 0.55\n[unknown_ids.sighting]\nbearing_std = 0.07\n",
+        )
+        .unwrap();
+        let jcbb = Settings::load_for("mrclam", Some(&p), Some(AssociationMode::Jcbb)).unwrap();
+        assert_eq!(jcbb.sighting.range_std, 0.55, "the file's plain key");
+        assert_eq!(jcbb.sighting.bearing_std, 0.07, "the file's overlay");
+        // Keys the file leaves alone keep the built-in overlay's values.
+        assert_eq!(jcbb.odometry, builtin_jcbb.odometry);
+        assert_eq!(jcbb.association, builtin_jcbb.association);
+        let known = Settings::load_for("mrclam", Some(&p), Some(AssociationMode::Known)).unwrap();
+        assert_eq!(known.sighting.range_std, 0.55);
+        assert_eq!(
+            known.sighting.bearing_std,
+            builtin_known.sighting.bearing_std
+        );
+        // The mode may also come from the file.
+        std::fs::write(&p, "[association]\nmode = \"icnn\"\n").unwrap();
+        let icnn = Settings::load_for("mrclam", Some(&p), None).unwrap();
+        assert_eq!(icnn.association.mode, AssociationMode::Icnn);
+        assert_eq!(icnn.sighting, builtin_jcbb.sighting);
     }
 }
