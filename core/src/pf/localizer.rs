@@ -410,17 +410,7 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
     /// search on the scan and spreads the particles over its hypotheses. Then updates the
     /// lost detection ([`GridLocalizer::status`]).
     pub fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
-        if !scan.geometry.is_valid() {
-            return Err(PfError::InvalidScan);
-        }
-        let beams = self.points.load(
-            scan,
-            self.config.beam_decimation,
-            self.config.range_weight_exponent,
-        );
-        if beams == 0 {
-            return Err(PfError::EmptyScan);
-        }
+        let beams = self.config.load_scan(&mut self.points, scan)?;
         if self.status.search_pending {
             self.search_and_seed();
         }

@@ -178,6 +178,23 @@ impl GridPfConfig {
             && self.shift_prior_std_cells >= 0.0
     }
 
+    /// Loads the usable beams of `scan` into `points` with these settings' decimation
+    /// and range weighting: the first step of every grid filter's `observe`. Refuses an
+    /// invalid geometry and a scan with no usable beam.
+    pub(crate) fn load_scan<const B: usize>(
+        &self,
+        points: &mut correlation::ScanPoints<B>,
+        scan: &crate::sensors::lidar::LidarScan<'_>,
+    ) -> Result<usize, PfError> {
+        if !scan.geometry.is_valid() {
+            return Err(PfError::InvalidScan);
+        }
+        match points.load(scan, self.beam_decimation, self.range_weight_exponent) {
+            0 => Err(PfError::EmptyScan),
+            beams => Ok(beams),
+        }
+    }
+
     /// The shift prior as a penalty in correlation units (fixed point) per cell² (0:
     /// none): `1 / (2σ² · log_likelihood_per_unit)` units of 1.0.
     pub fn shift_penalty(&self) -> f32 {

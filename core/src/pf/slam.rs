@@ -171,17 +171,7 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const B
     /// to their best shifts, resamples if needed, and writes the scan into the map at the
     /// estimate.
     pub fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
-        if !scan.geometry.is_valid() {
-            return Err(PfError::InvalidScan);
-        }
-        let beams = self.points.load(
-            scan,
-            self.config.beam_decimation,
-            self.config.range_weight_exponent,
-        );
-        if beams == 0 {
-            return Err(PfError::EmptyScan);
-        }
+        let beams = self.config.load_scan(&mut self.points, scan)?;
         let mut report = StepReport {
             pose: self.pose,
             n_eff: P as f32,

@@ -56,17 +56,23 @@ pub fn interpolate_pose(truth: &[TruePose], stamp: f64) -> Option<Pose2<f64>> {
     let Some(b) = truth.get(i) else {
         return Some(a.pose);
     };
+    Some(between(a, b, stamp))
+}
+
+/// The pose at `stamp` on the straight segment from `a` to `b`, the heading along the
+/// shorter arc (`a` when the two share a stamp).
+fn between(a: &TruePose, b: &TruePose, stamp: f64) -> Pose2<f64> {
     let span = b.stamp - a.stamp;
     let s = if span > 0.0 {
         (stamp - a.stamp) / span
     } else {
         0.0
     };
-    Some(Pose2::new(
+    Pose2::new(
         a.pose.x + s * (b.pose.x - a.pose.x),
         a.pose.y + s * (b.pose.y - a.pose.y),
         wrap_near(a.pose.theta + s * wrap_near(b.pose.theta - a.pose.theta)),
-    ))
+    )
 }
 
 /// Interpolates ground truth at non-decreasing stamps by walking forward (no search):
@@ -101,17 +107,7 @@ impl<'a> TruthCursor<'a> {
         let Some(b) = t.get(self.next) else {
             return Some(a.pose);
         };
-        let span = b.stamp - a.stamp;
-        let s = if span > 0.0 {
-            (stamp - a.stamp) / span
-        } else {
-            0.0
-        };
-        Some(Pose2::new(
-            a.pose.x + s * (b.pose.x - a.pose.x),
-            a.pose.y + s * (b.pose.y - a.pose.y),
-            wrap_near(a.pose.theta + s * wrap_near(b.pose.theta - a.pose.theta)),
-        ))
+        Some(between(a, b, stamp))
     }
 }
 
