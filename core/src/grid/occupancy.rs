@@ -279,6 +279,40 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
         true
     }
 
+    /// −miss on every cell of the free ray from `(x0, y0)` to `(x1, y1)` that lies on the
+    /// grid, the end cell excluded: the cells [`walk_to_end`] visits, each written as
+    /// [`OccupancyGrid::update_cell`] would, in the map update's innermost loop. The
+    /// geometry of a grid is either `W × H` or, [`OccupancyGrid::zeroed`], `0 × 0` (nothing
+    /// written), so the bounds are the constants. `false` when the ray is too long to draw.
+    fn miss_ray(&mut self, x0: i32, y0: i32, x1: i32, y1: i32) -> bool {
+        let lo = self.log_odds;
+        let t = lo.occupied_above;
+        let live = self.geometry.width != 0;
+        let cells = self.cells.as_flattened_mut();
+        let occupied = &mut self.occupied;
+        walk_to_end(x0, y0, x1, y1, |x, y| {
+            // Negative coordinates wrap to large unsigned ones.
+            if !live || x as u32 >= W as u32 || y as u32 >= H as u32 {
+                return;
+            }
+            let (x, y) = (x as usize, y as usize);
+            let Some(c) = cells.get_mut(y * W + x) else {
+                return;
+            };
+            let old = *c;
+            let new = lo.after_miss(old);
+            *c = new;
+            // A miss only lowers a cell: it can only leave the occupied set.
+            if BITMAP > 0
+                && old > t
+                && new <= t
+                && let Some(bits) = occupied.get_mut(y * W.div_ceil(8) + x / 8)
+            {
+                *bits ^= 1u8 << (x % 8);
+            }
+        })
+    }
+
     /// End points counted off the grid since the last [`OccupancyGrid::reset`].
     pub fn off_grid_points(&self) -> u32 {
         self.off_grid
@@ -336,11 +370,7 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
                     continue;
                 }
                 if pass == 0 {
-                    let lo = self.log_odds;
-                    let drawn = walk_to_end(sx, sy, ex, ey, |cx, cy| {
-                        self.update_cell(cx, cy, |c| lo.after_miss(c));
-                    });
-                    if drawn {
+                    if self.miss_ray(sx, sy, ex, ey) {
                         report.beams += 1;
                     } else {
                         report.rays_skipped += 1;
@@ -390,6 +420,58 @@ mod tests {
         )
         .unwrap();
         assert_eq!(grid.occupancy_bits(), &want[..]);
+    }
+
+    #[test]
+    fn miss_ray_writes_the_cells_of_the_walk() {
+        // Rays from inside, from outside (crossing the grid or not), along the borders,
+        // degenerate and long, against the cell-by-cell writes they stand for.
+        const BITMAP: usize = crate::grid::occupancy_bytes(37, 23);
+        let model = LogOdds::SEED;
+        let mut fast = OccupancyGrid::<37, 23, BITMAP>::new(0.1, 0.0, 0.0, model);
+        let mut slow = OccupancyGrid::<37, 23, BITMAP>::new(0.1, 0.0, 0.0, model);
+        for x in 0..37 {
+            for y in 0..23 {
+                // −100 (the floor) to 39, across the occupied threshold (20).
+                let v = ((x * 7 + y * 13) % 140 - 100) as i8;
+                fast.set_cell(x, y, v);
+                slow.set_cell(x, y, v);
+            }
+        }
+        let mut state = 12345u32;
+        let mut next = |range: i32| {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as i32 % range - range / 4
+        };
+        let mut rays = vec![(0, 0, 36, 22), (36, 22, 0, 0), (-5, 3, 50, 3), (3, 3, 3, 3)];
+        rays.extend([
+            (0, -1, 36, -1),
+            (-1, 0, -1, 22),
+            (18, 11, 18, 400),
+            (-9, -9, -2, -1),
+        ]);
+        for _ in 0..400 {
+            rays.push((next(60), next(40), next(60), next(40)));
+        }
+        for (x0, y0, x1, y1) in rays {
+            let drawn = fast.miss_ray(x0, y0, x1, y1);
+            let lo = slow.log_odds;
+            let walked = walk_to_end(x0, y0, x1, y1, |cx, cy| {
+                slow.update_cell(cx, cy, |c| lo.after_miss(c));
+            });
+            assert_eq!(drawn, walked);
+            assert_eq!(fast.cells(), slow.cells(), "ray {x0},{y0} → {x1},{y1}");
+            assert_eq!(fast.occupancy_bits(), slow.occupancy_bits());
+        }
+        assert_bitmap_matches(&fast);
+        assert!(
+            fast.occupancy_bits().iter().any(|w| *w != 0),
+            "some cells stay occupied"
+        );
+        // A zeroed grid (0 × 0 until `init`) takes no write.
+        let mut zeroed = OccupancyGrid::<37, 23, BITMAP>::zeroed();
+        zeroed.miss_ray(0, 0, 36, 22);
+        assert!(zeroed.cells().iter().all(|c| *c == 0));
     }
 
     #[test]
