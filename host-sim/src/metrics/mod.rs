@@ -351,7 +351,7 @@ fn purity(recording: &Recording, run: &ReplayRun) -> (Option<f64>, Option<f64>) 
 
 #[cfg(test)]
 mod tests {
-    use super::smallest_position_variance;
+    use crate::metrics::smallest_position_variance;
 
     #[test]
     fn smallest_position_variance_of_a_thin_rotated_covariance() {
