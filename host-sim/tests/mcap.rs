@@ -6,7 +6,7 @@ use foxglove::Decode;
 use foxglove::messages::{FrameTransforms, Grid, LaserScan, PosesInFrame, SceneUpdate};
 use host_sim::commands::sim::{SimOptions, run_cli};
 use host_sim::domain::datasets::dataset_path;
-use host_sim::domain::grid::{GRID_CELLS, carmen_lidar};
+use host_sim::domain::grid::{GRID_BITMAP, GRID_CELLS, carmen_lidar};
 use host_sim::drivers::grid::{GridRunOptions, carmen_inputs, run_slam_observed};
 use host_sim::inputs::readers::carmen::{front_scans, read_log};
 use host_sim::output::mcap::McapFile;
@@ -72,7 +72,7 @@ fn an_intel_grid_slam_recording_reads_back() {
         truth: &[],
         growing_map: true,
     };
-    let run = run_slam_observed::<GRID_CELLS>(
+    let run = run_slam_observed::<GRID_CELLS, GRID_BITMAP>(
         &inputs,
         Pose2::IDENTITY,
         &options,

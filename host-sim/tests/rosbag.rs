@@ -3,7 +3,7 @@
 //! refused with the file and the topic named.
 
 use host_sim::domain::datasets::dataset_path;
-use host_sim::domain::grid::{GRID_CELLS, carmen_lidar};
+use host_sim::domain::grid::{GRID_BITMAP, GRID_CELLS, carmen_lidar};
 use host_sim::drivers::grid::{GridRunOptions, carmen_inputs, run_slam};
 use host_sim::inputs::readers::carmen::{LaserMessage, front_scans, read_log};
 use host_sim::inputs::readers::rosbag::{self, BagOptions, MountSource, msg};
@@ -60,9 +60,14 @@ fn the_intel_bag_replays_like_the_carmen_log() {
         lidar,
     };
     let from_bag: Vec<&LaserMessage> = bag.scans.iter().collect();
-    let a =
-        run_slam::<GRID_CELLS>(&carmen_inputs(&refs), Pose2::IDENTITY, &options, &|_| {}).unwrap();
-    let b = run_slam::<GRID_CELLS>(
+    let a = run_slam::<GRID_CELLS, GRID_BITMAP>(
+        &carmen_inputs(&refs),
+        Pose2::IDENTITY,
+        &options,
+        &|_| {},
+    )
+    .unwrap();
+    let b = run_slam::<GRID_CELLS, GRID_BITMAP>(
         &carmen_inputs(&from_bag),
         Pose2::IDENTITY,
         &GridRunOptions {

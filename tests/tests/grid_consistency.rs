@@ -4,10 +4,12 @@
 //! `cargo test --release -p microslam-replay-tests --test grid_consistency -- --nocapture`).
 
 use host_sim::domain::datasets::dataset_path;
-use host_sim::domain::grid::{GRID_CELLS, carmen_lidar};
+use host_sim::domain::grid::{GRID_BITMAP, GRID_CELLS, carmen_lidar};
 use host_sim::drivers::grid::{self, GridRunOptions, carmen_inputs, f32_pose, sim_inputs};
 use host_sim::inputs::readers::carmen::{front_scans, read_log};
-use host_sim::inputs::sim::lidar_world::{LidarRecording, LidarWorld, SIM_GRID_CELLS, simulate};
+use host_sim::inputs::sim::lidar_world::{
+    LidarRecording, LidarWorld, SIM_GRID_BITMAP, SIM_GRID_CELLS, simulate,
+};
 use host_sim::metrics::grid::ate_m;
 use host_sim::metrics::reference::grid_run_ate;
 use host_sim::metrics::relations::{self, relation_error};
@@ -35,7 +37,8 @@ fn intel_run(particles: usize, config: GridPfConfig) -> (f64, f64, usize) {
     };
     let inputs = carmen_inputs(&front_scans(&log));
     let run =
-        grid::run_slam::<GRID_CELLS>(&inputs, Pose2::IDENTITY, &options, &|_| {}).expect("run");
+        grid::run_slam::<GRID_CELLS, GRID_BITMAP>(&inputs, Pose2::IDENTITY, &options, &|_| {})
+            .expect("run");
     let rel = relation_error(&run, &rels);
     let reference = dataset_path("intel/intel.gfs.log").expect("corrected log");
     let ate = grid_run_ate(&run, &reference, GFS_OFFSET_S).expect("ATE");
@@ -89,7 +92,8 @@ fn sim_slam(rec: &LidarRecording, particles: usize, config: GridPfConfig) -> gri
         lidar: rec.lidar,
     };
     let start = f32_pose(&rec.scans[0].truth);
-    grid::run_slam::<SIM_GRID_CELLS>(&sim_inputs(rec), start, &options, &|_| {}).expect("run")
+    grid::run_slam::<SIM_GRID_CELLS, SIM_GRID_BITMAP>(&sim_inputs(rec), start, &options, &|_| {})
+        .expect("run")
 }
 
 #[test]

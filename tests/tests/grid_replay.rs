@@ -5,8 +5,8 @@
 //! --nocapture` (docs/testing.md).
 
 use host_sim::domain::datasets::dataset_path;
-use host_sim::domain::grid::GRID_CELLS;
 use host_sim::domain::grid::carmen_lidar;
+use host_sim::domain::grid::{GRID_BITMAP, GRID_CELLS};
 use host_sim::drivers::grid::{GridRunOptions, carmen_inputs, run_localizer, run_slam};
 use host_sim::inputs::readers::carmen::{front_scans, read_log};
 use host_sim::metrics::relations::{self, relation_error};
@@ -46,7 +46,7 @@ fn intel_grid_slam_relation_error() {
         config: GridPfConfig::DEFAULT,
         lidar: carmen_lidar(180),
     };
-    let run = run_slam::<GRID_CELLS>(
+    let run = run_slam::<GRID_CELLS, GRID_BITMAP>(
         &carmen_inputs(&front_scans(&log)),
         Pose2::IDENTITY,
         &options,
@@ -94,7 +94,7 @@ fn intel_grid_slam_microcontroller_settings() {
         config,
         lidar: carmen_lidar(180),
     };
-    let run = run_slam::<GRID_CELLS>(
+    let run = run_slam::<GRID_CELLS, GRID_BITMAP>(
         &carmen_inputs(&front_scans(&log)),
         Pose2::IDENTITY,
         &options,
@@ -122,8 +122,13 @@ fn intel_grid_slam_with_faults_refuses_exactly_what_was_injected() {
     let (faulty, injected) = host_sim::inputs::faults::inject_scans(&clean, &rates, 1);
     assert!(injected.total() > 300 && injected.stuck > 0, "{injected:?}");
     let scans: Vec<_> = faulty.iter().collect();
-    let run = run_slam::<GRID_CELLS>(&carmen_inputs(&scans), Pose2::IDENTITY, &options, &|_| {})
-        .expect("the run completes");
+    let run = run_slam::<GRID_CELLS, GRID_BITMAP>(
+        &carmen_inputs(&scans),
+        Pose2::IDENTITY,
+        &options,
+        &|_| {},
+    )
+    .expect("the run completes");
     // The log itself has no NaN: every refusal is an injected fault, and every injected
     // NaN (with the copies made by duplication and the stuck lidar) is refused.
     assert_eq!(run.refused_odometry, injected.nan_odometry, "{injected:?}");

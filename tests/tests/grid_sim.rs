@@ -8,7 +8,7 @@
 
 use host_sim::drivers::grid::{self, GridRun, GridRunOptions, f32_pose, sim_inputs};
 use host_sim::inputs::sim::lidar_world::{
-    LidarRecording, LidarWorld, SIM_GRID_CELLS, simulate, true_map,
+    LidarRecording, LidarWorld, SIM_GRID_BITMAP, SIM_GRID_CELLS, simulate, true_map,
 };
 use host_sim::metrics::grid::{ate_m, odometry_ate_m};
 use microslam::grid::GridView;
@@ -38,7 +38,8 @@ fn options(rec: &LidarRecording, particles: usize, config: GridPfConfig) -> Grid
 fn run_slam(rec: &LidarRecording, particles: usize, config: GridPfConfig) -> GridRun {
     let start = f32_pose(&rec.scans[0].truth);
     let opts = options(rec, particles, config);
-    grid::run_slam::<SIM_GRID_CELLS>(&sim_inputs(rec), start, &opts, &|_| {}).unwrap()
+    grid::run_slam::<SIM_GRID_CELLS, SIM_GRID_BITMAP>(&sim_inputs(rec), start, &opts, &|_| {})
+        .unwrap()
 }
 
 /// The localizer on `map` from the true start pose.

@@ -5,7 +5,7 @@
 //! (`firmware_qemu.rs`); here its accuracy is checked against the benchmark relations.
 
 use host_sim::domain::datasets::dataset_path;
-use host_sim::domain::grid::{GRID_CELLS, carmen_lidar};
+use host_sim::domain::grid::{GRID_BITMAP, GRID_CELLS, carmen_lidar};
 use host_sim::drivers::grid::{GridRunOptions, carmen_inputs, run_slam};
 use host_sim::drivers::hil::encode_all;
 use host_sim::drivers::hil_localizer::{host_localizer_replies, localizer_messages, map_image_of};
@@ -28,7 +28,7 @@ fn device_localizer_on_the_intel_slam_map_meets_the_relation_error_bar() {
         config: GridPfConfig::DEFAULT,
         lidar: carmen_lidar(180),
     };
-    let slam = run_slam::<GRID_CELLS>(
+    let slam = run_slam::<GRID_CELLS, GRID_BITMAP>(
         &carmen_inputs(&front_scans(&log)),
         Pose2::IDENTITY,
         &options,

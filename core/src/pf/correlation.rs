@@ -371,6 +371,12 @@ pub fn search_window_sparse(
     }
 }
 
+/// End points whose grid coordinates [`search_sparse`] computes in one pass before it
+/// reads their windows: on a host CPU the pass runs several points per vector
+/// instruction; a microcontroller has no vector unit, and a point at a time saves it the
+/// stores and loads of the buffers.
+const END_POINT_CHUNK: usize = if cfg!(target_os = "none") { 1 } else { 32 };
+
 /// Columns of a row of [`search_sparse`]'s accumulator: a power of two above the widest
 /// window, so that a bit index masked with `ROW - 1` needs no bounds check.
 const ROW: usize = 16;
@@ -413,10 +419,8 @@ fn search_sparse<const R: usize>(
     // A window is read as `n` rows of 4 bytes one stride apart from the byte holding
     // column x0 (its bits are in those 4 bytes: x0 % 8 + n ≤ 22).
     let span = (n - 1) * stride + 4;
-    for p in points {
-        let (u, v) = end_grid(map, pose, sin, cos, p);
-        let x0 = (u as i32).saturating_sub(k);
-        let y0 = (v as i32).saturating_sub(k);
+    // One end point: `(u, v)` in grid coordinates, `(x0, y0)` its window's corner.
+    let mut add_point = |p: &ScanPoint, u: f32, v: f32, x0: i32, y0: i32| {
         let inside = (x0.wrapping_sub(1) as u32) < x_limit && (y0.wrapping_sub(1) as u32) < y_limit;
         let window = if inside {
             let first = y0 as usize * stride + (x0 as usize >> 3);
@@ -437,7 +441,7 @@ fn search_sparse<const R: usize>(
                     }
                 }
             }
-            continue;
+            return;
         };
         let up = down - (x0 as u32 & 7);
         // The window's rows as bit masks (bit t: column x0 + t), all read before any is
@@ -450,7 +454,7 @@ fn search_sparse<const R: usize>(
             }
         });
         if masks.iter().fold(0, |any, m| any | m) == 0 {
-            continue;
+            return;
         }
         for (row_acc, &mask) in acc.iter_mut().zip(masks.iter()) {
             let mut m = mask;
@@ -460,6 +464,31 @@ fn search_sparse<const R: usize>(
                     *s = s.wrapping_add(p.weight);
                 }
                 m &= m - 1;
+            }
+        }
+    };
+    let corner = |u: f32, v: f32| ((u as i32).saturating_sub(k), (v as i32).saturating_sub(k));
+    if END_POINT_CHUNK == 1 {
+        for p in points {
+            let (u, v) = end_grid(map, pose, sin, cos, p);
+            let (x0, y0) = corner(u, v);
+            add_point(p, u, v, x0, y0);
+        }
+    } else {
+        // Two passes per chunk: first the end points' coordinates and corners
+        // (straight-line work that vector units do several points at a time), then the
+        // windows.
+        let mut grid = [(0f32, 0f32); END_POINT_CHUNK];
+        let mut corners = [(0i32, 0i32); END_POINT_CHUNK];
+        for chunk in points.chunks(END_POINT_CHUNK) {
+            for (p, g) in chunk.iter().zip(grid.iter_mut()) {
+                *g = end_grid(map, pose, sin, cos, p);
+            }
+            for (&(u, v), c) in grid.iter().zip(corners.iter_mut()) {
+                *c = corner(u, v);
+            }
+            for ((p, &(u, v)), &(x0, y0)) in chunk.iter().zip(grid.iter()).zip(corners.iter()) {
+                add_point(p, u, v, x0, y0);
             }
         }
     }

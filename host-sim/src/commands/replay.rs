@@ -3,7 +3,7 @@
 //! and pictures; `thor:` runs give the encoder + IMU dead reckoning.
 
 use crate::domain::config::Settings;
-use crate::domain::grid::{GRID_CELLS, GridOptions, Preset, carmen_lidar};
+use crate::domain::grid::{GRID_BITMAP, GRID_CELLS, GridOptions, Preset, carmen_lidar};
 use crate::domain::recording::Recording;
 use crate::domain::{AssociationMode, FilterKind, Precision};
 use crate::drivers::ekf::replay;
@@ -345,7 +345,14 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
     let log_odds = options.config.log_odds;
     let run =
         super::recorded_grid_run(mcap.as_mut(), "", inputs.len(), log_odds, &[], true, |o| {
-            run_slam_observed::<GRID_CELLS>(&inputs, Pose2::IDENTITY, &options, &progress, o, every)
+            run_slam_observed::<GRID_CELLS, GRID_BITMAP>(
+                &inputs,
+                Pose2::IDENTITY,
+                &options,
+                &progress,
+                o,
+                every,
+            )
         })?;
     pb.finish_and_clear();
     let rel = super::relation_error_for(&path, args.grid.relations.as_deref(), &run)?;

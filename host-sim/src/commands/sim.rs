@@ -11,7 +11,7 @@ use crate::domain::grid::{GlobalOptions, Preset};
 use crate::drivers::grid::{
     GridRunOptions, f32_pose, run_localizer_observed, run_slam_observed, sim_inputs,
 };
-use crate::inputs::sim::lidar_world::{LidarRecording, SIM_GRID_CELLS, true_map};
+use crate::inputs::sim::lidar_world::{LidarRecording, SIM_GRID_BITMAP, SIM_GRID_CELLS, true_map};
 use crate::inputs::sim::simulate;
 use crate::metrics::grid::{ate_m, odometry_ate_m, yaw_rmse_deg};
 use crate::output::animation::{Animation, AnimationSettings, write_gif};
@@ -183,7 +183,16 @@ pub fn run_and_write(
         lo,
         &truth_poses,
         true,
-        |o| run_slam_observed::<SIM_GRID_CELLS>(&inputs, start, &options, &|_| {}, o, every),
+        |o| {
+            run_slam_observed::<SIM_GRID_CELLS, SIM_GRID_BITMAP>(
+                &inputs,
+                start,
+                &options,
+                &|_| {},
+                o,
+                every,
+            )
+        },
     )?;
     let slam_wall = started.elapsed().as_secs_f64();
     let map = true_map(&rec.world.walls, &config);

@@ -146,8 +146,8 @@ trait GridFilter {
     }
 }
 
-impl<const W: usize, const H: usize, const P: usize, const B: usize> GridFilter
-    for GridSlam<'_, W, H, P, B>
+impl<const W: usize, const H: usize, const P: usize, const B: usize, const BITMAP: usize> GridFilter
+    for GridSlam<'_, W, H, P, B, BITMAP>
 {
     fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError> {
         GridSlam::predict_odometry(self, from, to)
@@ -270,19 +270,19 @@ macro_rules! dispatch_particles {
 ///
 /// Runs on a thread with a 64 MB stack: a large grid is built on the stack before it is
 /// boxed in unoptimised builds.
-pub fn run_slam<const N: usize>(
+pub fn run_slam<const N: usize, const BITMAP: usize>(
     inputs: &[GridInput<'_>],
     start: Pose2<f32>,
     options: &GridRunOptions,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<GridRun> {
-    run_slam_observed::<N>(inputs, start, options, progress, None, 0)
+    run_slam_observed::<N, BITMAP>(inputs, start, options, progress, None, 0)
 }
 
 /// [`run_slam`] with every step shown to `observer` and, when `snapshot_every` is not 0,
 /// the map recorded every `snapshot_every` scans and after the last one
 /// ([`GridRun::snapshots`]: what `--animate` draws).
-pub fn run_slam_observed<const N: usize>(
+pub fn run_slam_observed<const N: usize, const BITMAP: usize>(
     inputs: &[GridInput<'_>],
     start: Pose2<f32>,
     options: &GridRunOptions,
@@ -297,7 +297,7 @@ pub fn run_slam_observed<const N: usize>(
                 dispatch_particles!(
                     options.particles,
                     slam_p,
-                    [N,],
+                    [N, BITMAP,],
                     inputs,
                     start,
                     options,
@@ -312,7 +312,7 @@ pub fn run_slam_observed<const N: usize>(
     })
 }
 
-fn slam_p<const N: usize, const P: usize>(
+fn slam_p<const N: usize, const BITMAP: usize, const P: usize>(
     inputs: &[GridInput<'_>],
     start: Pose2<f32>,
     options: &GridRunOptions,
@@ -321,11 +321,14 @@ fn slam_p<const N: usize, const P: usize>(
     snapshot_every: usize,
 ) -> Result<GridRun> {
     let c = options.config;
-    let mut grid = Box::new(OccupancyGrid::<N, N>::centred(c.resolution, c.log_odds));
+    let mut grid = Box::new(OccupancyGrid::<N, N, BITMAP>::centred(
+        c.resolution,
+        c.log_odds,
+    ));
     let mut run = GridRun::empty(Vec::new(), *grid.geometry(), inputs.len());
     let t0 = Instant::now();
     {
-        let mut slam = GridSlam::<N, N, P, MAX_BEAMS>::new(&mut grid, c, start)
+        let mut slam = GridSlam::<N, N, P, MAX_BEAMS, BITMAP>::new(&mut grid, c, start)
             .map_err(|e| anyhow!("grid SLAM: {e}"))?;
         drive(
             &mut slam,

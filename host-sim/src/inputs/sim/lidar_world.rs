@@ -359,6 +359,8 @@ pub fn simulate(world: &LidarWorld, seed: u64) -> Result<LidarRecording> {
 
 /// Grid edge in cells: 256 × 256 (12.8 m at 5 cm, 64 KB — the firmware's map size).
 pub const SIM_GRID_CELLS: usize = 256;
+/// Bytes of the simulator grid's occupied-cell bitmap (8 KB, as on the firmware).
+pub const SIM_GRID_BITMAP: usize = microslam::grid::occupancy_bytes(SIM_GRID_CELLS, SIM_GRID_CELLS);
 
 /// The simulator's grid.
 pub type SimGrid = OccupancyGrid<SIM_GRID_CELLS, SIM_GRID_CELLS>;
