@@ -189,6 +189,13 @@ impl LogOdds {
     pub fn after_miss(&self, value: i8) -> i8 {
         value.saturating_sub(self.miss).clamp(self.min, self.max)
     }
+
+    /// [`LogOdds::after_miss`] of every cell value, indexed by the value's byte
+    /// (`value as u8`): one load per cell in a map update's innermost loop instead of a
+    /// subtraction and two comparisons.
+    pub(crate) fn miss_table(&self) -> [i8; 256] {
+        core::array::from_fn(|b| self.after_miss(b as u8 as i8))
+    }
 }
 
 /// Why a map could not be built or used.
