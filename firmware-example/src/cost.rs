@@ -3,8 +3,37 @@
 //! QEMU's virtual clock advances 64 ns per executed instruction; SysTick, clocked from
 //! the 25 MHz core clock of mps2-an386, ticks every 40 ns: `instructions = ticks · 40 / 64`.
 
+use core::fmt::Write;
+
 use cortex_m::peripheral::SYST;
 use cortex_m::peripheral::syst::SystClkSource;
+
+use crate::board::{self, Serial};
+
+/// The body of a cost binary's `main`: sets up the board, runs `run` with the UART and an
+/// instruction counter, and halts through semihosting with exit code 0 (all written), 1
+/// (`run` failed to write) or 2 (the core peripherals were already taken).
+pub fn run_and_halt(run: impl FnOnce(&mut Serial, &mut Ticks) -> core::fmt::Result) -> ! {
+    let Some(cp) = cortex_m::Peripherals::take() else {
+        board::halt(2)
+    };
+    let (mut out, _led) = board::init();
+    let mut ticks = Ticks::new(cp.SYST);
+    let code = if run(&mut out, &mut ticks).is_ok() {
+        0
+    } else {
+        1
+    };
+    let _ = embedded_io::Write::flush(&mut out);
+    board::halt(code)
+}
+
+/// The last lines of every cost binary's output: the stack's high-water mark
+/// (`stack_peak_bytes=…`, read by `.ci/firmware.sh`) and `done`.
+pub fn report_end(out: &mut Serial) -> core::fmt::Result {
+    writeln!(out, "stack_peak_bytes={}", crate::stack::peak_bytes())?;
+    writeln!(out, "done")
+}
 
 /// Counts SysTick ticks of a closure (the counter must not wrap: 2²⁴ ticks ≈ 10 M
 /// instructions; a wrap is reported as `u32::MAX` ticks).

@@ -168,28 +168,12 @@ fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
     measure_localizer::<32>(out, ticks, map)?;
     measure_localizer::<64>(out, ticks, map)?;
     measure_localizer::<128>(out, ticks, map)?;
-    writeln!(
-        out,
-        "stack_peak_bytes={}",
-        firmware_example::stack::peak_bytes()
-    )?;
-    writeln!(out, "done")
+    firmware_example::cost::report_end(out)
 }
 
 #[entry]
 fn main() -> ! {
-    let Some(cp) = cortex_m::Peripherals::take() else {
-        board::halt(2)
-    };
-    let (mut out, _led) = board::init();
-    let mut ticks = Ticks::new(cp.SYST);
-    let code = if run(&mut out, &mut ticks).is_ok() {
-        0
-    } else {
-        1
-    };
-    let _ = embedded_io::Write::flush(&mut out);
-    board::halt(code)
+    firmware_example::cost::run_and_halt(run)
 }
 
 #[exception]

@@ -197,12 +197,7 @@ fn run(out: &mut Serial) -> core::fmt::Result {
         search.is_some_and(|s| s.complete),
         worst,
     )?;
-    writeln!(
-        out,
-        "stack_peak_bytes={}",
-        firmware_example::stack::peak_bytes()
-    )?;
-    writeln!(out, "done")
+    firmware_example::cost::report_end(out)
 }
 
 #[entry]
