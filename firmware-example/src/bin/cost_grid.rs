@@ -16,7 +16,7 @@ use firmware_example::cost::{Ticks, room_range, thousand_nops};
 use microslam::geometry::Pose2;
 use microslam::grid::GridView;
 use microslam::grid::{OccupancyGrid, occupancy_bytes};
-use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam};
+use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam, PfError, StepReport};
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
 use panic_probe as _;
 use static_cell::ConstStaticCell;
@@ -46,22 +46,52 @@ fn scan_at(pose: &Pose2<f32>, ranges: &mut [f32; BEAMS]) {
     }
 }
 
-fn measure<const P: usize>(
+/// What [`drive`] needs of a grid filter: [`GridSlam`] and [`GridLocalizer`] alike.
+trait GridStep {
+    fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError>;
+    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError>;
+    fn pose(&self) -> Pose2<f32>;
+}
+
+impl<const P: usize> GridStep for GridSlam<'_, 256, 256, P, BEAMS, { occupancy_bytes(256, 256) }> {
+    fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError> {
+        GridSlam::predict_velocity(self, v, omega, dt)
+    }
+    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
+        GridSlam::observe(self, scan)
+    }
+    fn pose(&self) -> Pose2<f32> {
+        GridSlam::pose(self)
+    }
+}
+
+impl<const P: usize> GridStep for GridLocalizer<'_, P, BEAMS> {
+    fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError> {
+        GridLocalizer::predict_velocity(self, v, omega, dt)
+    }
+    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
+        GridLocalizer::observe(self, scan)
+    }
+    fn pose(&self) -> Pose2<f32> {
+        GridLocalizer::pose(self)
+    }
+}
+
+/// Where every drive starts (the filters are started there too).
+const START: Pose2<f32> = Pose2::new(-1.0, -1.0, 0.3);
+
+/// Drives `filter` from [`START`] for [`STEPS`] steps of an arc through the room,
+/// counting the instructions of each prediction and scan, and prints one line named
+/// `what` with their means.
+fn drive<F: GridStep>(
     out: &mut Serial,
     ticks: &mut Ticks,
-    grid: &mut Grid,
+    what: &str,
+    particles: usize,
+    filter: &mut F,
 ) -> core::fmt::Result {
-    let mut truth = Pose2::new(-1.0, -1.0, 0.3);
-    let Ok(mut slam) =
-        GridSlam::<256, 256, P, BEAMS, { occupancy_bytes(256, 256) }>::new(grid, CONFIG, truth)
-    else {
-        return writeln!(out, "error grid p={P} new");
-    };
+    let mut truth = START;
     let mut ranges = [0.0f32; BEAMS];
-    scan_at(&truth, &mut ranges);
-    if slam.observe(&LidarScan::new(&ranges, LIDAR)).is_err() {
-        return writeln!(out, "error grid p={P} first scan");
-    }
     let (v, omega, dt) = (0.4f32, 0.3f32, 0.1f32);
     let (mut predict, mut observe, mut resamples) = (0u32, 0u32, 0u32);
     for _ in 0..STEPS {
@@ -71,21 +101,22 @@ fn measure<const P: usize>(
             truth.theta + omega * dt,
         );
         let mut r = Ok(());
-        predict += ticks.instructions(|| r = slam.predict_velocity(v, omega, dt));
+        predict += ticks.instructions(|| r = filter.predict_velocity(v, omega, dt));
         scan_at(&truth, &mut ranges);
         let scan = LidarScan::new(&ranges, LIDAR);
         let mut report = None;
-        observe += ticks.instructions(|| report = Some(slam.observe(&scan)));
+        observe += ticks.instructions(|| report = Some(filter.observe(&scan)));
         match (r, report) {
             (Ok(()), Some(Ok(rep))) => resamples += u32::from(rep.resampled),
-            _ => return writeln!(out, "error grid p={P} step"),
+            _ => return writeln!(out, "error {what} p={particles} step"),
         }
     }
-    let est = slam.pose();
+    let est = filter.pose();
     writeln!(
         out,
-        "grid p={} beams={} step={} predict={} observe={} resamples={} error_mm={}",
-        P,
+        "{} p={} beams={} step={} predict={} observe={} resamples={} error_mm={}",
+        what,
+        particles,
         BEAMS,
         (predict + observe) / STEPS,
         predict / STEPS,
@@ -95,6 +126,25 @@ fn measure<const P: usize>(
     )
 }
 
+/// Grid SLAM's step: the map of the first scan at [`START`], then [`drive`].
+fn measure<const P: usize>(
+    out: &mut Serial,
+    ticks: &mut Ticks,
+    grid: &mut Grid,
+) -> core::fmt::Result {
+    let Ok(mut slam) =
+        GridSlam::<256, 256, P, BEAMS, { occupancy_bytes(256, 256) }>::new(grid, CONFIG, START)
+    else {
+        return writeln!(out, "error grid p={P} new");
+    };
+    let mut ranges = [0.0f32; BEAMS];
+    scan_at(&START, &mut ranges);
+    if slam.observe(&LidarScan::new(&ranges, LIDAR)).is_err() {
+        return writeln!(out, "error grid p={P} first scan");
+    }
+    drive(out, ticks, "grid", P, &mut slam)
+}
+
 /// The localizer's step (prediction + scan) on `map`, started at the true pose, along the
 /// same drive as [`measure`].
 fn measure_localizer<const P: usize>(
@@ -102,42 +152,10 @@ fn measure_localizer<const P: usize>(
     ticks: &mut Ticks,
     map: GridView<'_>,
 ) -> core::fmt::Result {
-    let mut truth = Pose2::new(-1.0, -1.0, 0.3);
-    let Ok(mut loc) = GridLocalizer::<P, BEAMS>::new(map, CONFIG, truth) else {
+    let Ok(mut loc) = GridLocalizer::<P, BEAMS>::new(map, CONFIG, START) else {
         return writeln!(out, "error localizer p={P} new");
     };
-    let mut ranges = [0.0f32; BEAMS];
-    let (v, omega, dt) = (0.4f32, 0.3f32, 0.1f32);
-    let (mut predict, mut observe, mut resamples) = (0u32, 0u32, 0u32);
-    for _ in 0..STEPS {
-        truth = Pose2::new(
-            truth.x + v * dt * libm::cosf(truth.theta),
-            truth.y + v * dt * libm::sinf(truth.theta),
-            truth.theta + omega * dt,
-        );
-        let mut r = Ok(());
-        predict += ticks.instructions(|| r = loc.predict_velocity(v, omega, dt));
-        scan_at(&truth, &mut ranges);
-        let scan = LidarScan::new(&ranges, LIDAR);
-        let mut report = None;
-        observe += ticks.instructions(|| report = Some(loc.observe(&scan)));
-        match (r, report) {
-            (Ok(()), Some(Ok(rep))) => resamples += u32::from(rep.resampled),
-            _ => return writeln!(out, "error localizer p={P} step"),
-        }
-    }
-    let est = loc.pose();
-    writeln!(
-        out,
-        "localizer p={} beams={} step={} predict={} observe={} resamples={} error_mm={}",
-        P,
-        BEAMS,
-        (predict + observe) / STEPS,
-        predict / STEPS,
-        observe / STEPS,
-        resamples,
-        (libm::hypotf(est.x - truth.x, est.y - truth.y) * 1000.0) as u32
-    )
+    drive(out, ticks, "localizer", P, &mut loc)
 }
 
 fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
