@@ -66,9 +66,9 @@
 //!
 //! | landmarks | N | P | bytes |
 //! | --- | --- | --- | --- |
-//! | 16 | 35 | 630 | 2 744 |
-//! | 32 | 67 | 2 278 | 9 464 |
-//! | 64 | 131 | 8 646 | 35 192 |
+//! | 16 | 35 | 630 | 2 788 |
+//! | 32 | 67 | 2 278 | 9 508 |
+//! | 64 | 131 | 8 646 | 35 236 |
 //!
 //! Such a filter belongs in a `static` on a microcontroller: [`EkfSlam::new`] is a
 //! `const fn`, so `static`s are laid out by the linker (`.bss`/`.data`) and never pass
@@ -145,8 +145,8 @@ const BIAS_SLOT: u16 = 2;
 const MAX_CALIBRATION_SLOTS: usize = 2;
 
 /// Bytes an `f32` filter uses beyond its mean and covariance factor (configuration,
-/// counters).
-pub const EKF_OVERHEAD_BYTES_F32: usize = 84;
+/// counters, the kept robot summary).
+pub const EKF_OVERHEAD_BYTES_F32: usize = 128;
 
 /// Settings of the landmark EKF: noise, sensor mount and gate.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -347,6 +347,12 @@ pub struct EkfSlam<T: Real, const N: usize, const P: usize> {
     calibration: u16,
     config: EkfConfig<T>,
     counters: EkfCounters,
+    /// The robot summary ([`EkfSlam::robot_summary`]) of the factor as it is, when the
+    /// last write was a prediction (which computes it for the new state): the pose
+    /// covariance of an odometry sample and the next prediction read it instead of each
+    /// computing it again. Every write of the factor goes through
+    /// [`EkfSlam::factor_mut`], which clears it.
+    summary: Option<(Matrix3<T>, T)>,
 }
 
 /// One scalar measurement row: `(index inside the factor, coefficient)` for the five
@@ -382,6 +388,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
                 gated: 0,
                 rejected: 0,
             },
+            summary: None,
         }
     }
 
@@ -395,7 +402,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             return Err(EkfError::NonFiniteInput);
         }
         let k = self.active_dim();
-        if let Some(active) = self.factor.get_mut(..row_start(k)) {
+        if let Some(active) = self.factor_mut().get_mut(..row_start(k)) {
             active.fill(T::ZERO);
         }
         self.mean.rows_mut(0, k).fill(T::ZERO);
@@ -404,6 +411,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         self.mean[2] = wrap_angle(pose.theta);
         self.slots = 0;
         self.calibration = 0;
+        self.summary = None;
         self.config = config;
         self.counters = EkfCounters::default();
         Ok(())
@@ -493,11 +501,11 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
                     .unwrap_or(T::ZERO);
             }
         }
-        if let Some(rows) = self.factor.get_mut(row_start(r0)..row_start(r0 + 5)) {
+        if let Some(rows) = self.factor_mut().get_mut(row_start(r0)..row_start(r0 + 5)) {
             rows.fill(T::ZERO);
         }
         for (i, std) in stds.iter().enumerate() {
-            if let Some(p) = self.factor.get_mut(row_start(r0 + i) + r0 + i) {
+            if let Some(p) = self.factor_mut().get_mut(row_start(r0 + i) + r0 + i) {
                 *p = *std * *std;
             }
         }
@@ -505,9 +513,10 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         self.mean[3 + r0 + 1] = mean[1];
         self.slots += 1;
         self.calibration |= bit;
+        self.summary = None;
         for (c, row) in coupling.iter().enumerate().take(r0) {
             for (a, v) in row.iter().enumerate() {
-                if let Some(e) = self.factor.get_mut(row_start(r0 + 2 + a) + c) {
+                if let Some(e) = self.factor_mut().get_mut(row_start(r0 + 2 + a) + c) {
                     *e = *v;
                 }
             }
@@ -643,7 +652,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         let r0 = self.active_dim() - 3;
         for a in 0..3 {
             let start = row_start(r0 + a) + r0;
-            if let Some(row) = self.factor.get_mut(start..=start + a) {
+            if let Some(row) = self.factor_mut().get_mut(start..=start + a) {
                 for (b, slot) in row.iter_mut().enumerate() {
                     *slot = if b == a { d[a] } else { l[a][b] };
                 }
@@ -656,6 +665,24 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// maximum in the loop saves a third of its host instructions but, unrolled, costs the
     /// firmware 4 KB of flash.)
     fn robot_summary(&self) -> (Matrix3<T>, T) {
+        if let Some(cached) = self.summary {
+            debug_assert!(
+                same_summary(&cached, &self.compute_robot_summary()),
+                "a write of the factor bypassed factor_mut"
+            );
+            return cached;
+        }
+        self.compute_robot_summary()
+    }
+
+    /// The factor, to write: clears the cached robot summary first.
+    fn factor_mut(&mut self) -> &mut [T; P] {
+        self.summary = None;
+        &mut self.factor
+    }
+
+    /// [`EkfSlam::robot_summary`] computed from the factor.
+    fn compute_robot_summary(&self) -> (Matrix3<T>, T) {
         let r0 = self.active_dim() - 3;
         let (lrr, dr) = self.robot_block();
         let rows = [0, 1, 2].map(|a| {
@@ -708,7 +735,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     fn robot_coupling_mut(&mut self) -> Option<[&mut [T]; 3]> {
         let r0 = self.active_dim() - 3;
         let s0 = row_start(r0);
-        let all = self.factor.get_mut(s0..row_start(r0 + 3))?;
+        let all = self.factor_mut().get_mut(s0..row_start(r0 + 3))?;
         let (a, rest) = all.split_at_mut(r0 + 1);
         let (b, c) = rest.split_at_mut(r0 + 2);
         Some([a.get_mut(..r0)?, b.get_mut(..r0)?, c.get_mut(..r0)?])
@@ -896,6 +923,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             }
         }
         self.set_robot_block(&l, &d);
+        self.summary = Some(self.compute_robot_summary());
         Ok(())
     }
 
@@ -1256,7 +1284,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             let len = if pair { 2 * i + 3 } else { i + 1 };
             let start = row_start(i);
             let (Some(rows), Some(head), Some(&[_, va, _, vb])) = (
-                self.factor.get_mut(start..start + len),
+                self.factor_mut().get_mut(start..start + len),
                 terms.get(..i),
                 terms.get(i),
             ) else {
@@ -1407,7 +1435,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         for a in (0..3).rev() {
             let from = row_start(r0 + a);
             let to = row_start(r0 + 2 + a);
-            self.factor.copy_within(from..from + r0, to);
+            self.factor_mut().copy_within(from..from + r0, to);
         }
         // The landmark rows r0, r0 + 1: G_R L_rm, then l5's own block.
         let new_robot = [0, 1, 2].map(|a| row_start(r0 + 2 + a));
@@ -1420,7 +1448,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             });
             for a in 0..2 {
                 let v = gr[(a, 0)] * col[0] + gr[(a, 1)] * col[1] + gr[(a, 2)] * col[2];
-                if let Some(slot) = self.factor.get_mut(row_start(r0 + a) + c) {
+                if let Some(slot) = self.factor_mut().get_mut(row_start(r0 + a) + c) {
                     *slot = v;
                 }
             }
@@ -1433,7 +1461,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
                     lb[1].get(c).copied().unwrap_or(T::ZERO),
                 );
                 for a in 0..2 {
-                    if let Some(slot) = self.factor.get_mut(row_start(r0 + a) + c) {
+                    if let Some(slot) = self.factor_mut().get_mut(row_start(r0 + a) + c) {
                         *slot += g_bias[(a, 0)] * l0 + g_bias[(a, 1)] * l1;
                     }
                 }
@@ -1442,7 +1470,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         // The new 5 × 5 block: rows r0 … r0 + 4, columns r0 ….
         for a in 0..5 {
             let start = row_start(r0 + a) + r0;
-            if let Some(row) = self.factor.get_mut(start..=start + a) {
+            if let Some(row) = self.factor_mut().get_mut(start..=start + a) {
                 for (b, slot) in row.iter_mut().enumerate() {
                     *slot = if b == a { d5[a] } else { l5[a][b] };
                 }
@@ -1451,6 +1479,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         self.mean.fixed_rows_mut::<2>(k).copy_from(&g.landmark);
         let index = self.landmark_count();
         self.slots = self.slots.saturating_add(1);
+        self.summary = None;
         Ok(index)
     }
 }
@@ -1559,6 +1588,14 @@ fn max_abs<T: Real>(values: impl Iterator<Item = T>) -> T {
 /// `x > 0`, false for NaN.
 fn is_positive<T: Real>(x: T) -> bool {
     x > T::ZERO
+}
+
+/// Two robot summaries are the same numbers (NaN equal to NaN): the check that a cached
+/// summary is the one its factor gives.
+fn same_summary<T: Real>(a: &(Matrix3<T>, T), b: &(Matrix3<T>, T)) -> bool {
+    #[allow(clippy::eq_op)]
+    let same = |x: T, y: T| x == y || (x != x && y != y);
+    a.0.iter().zip(b.0.iter()).all(|(&x, &y)| same(x, y)) && same(a.1, b.1)
 }
 
 #[cfg(test)]
