@@ -16,8 +16,9 @@ use firmware_example::cost::{Ticks, room_range, thousand_nops};
 use microslam::geometry::Pose2;
 use microslam::grid::GridView;
 use microslam::grid::{OccupancyGrid, occupancy_bytes};
-use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam, PfError, StepReport};
+use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam};
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+use microslam::wire::GridEstimator;
 use panic_probe as _;
 use static_cell::ConstStaticCell;
 
@@ -46,44 +47,13 @@ fn scan_at(pose: &Pose2<f32>, ranges: &mut [f32; BEAMS]) {
     }
 }
 
-/// What [`drive`] needs of a grid filter: [`GridSlam`] and [`GridLocalizer`] alike.
-trait GridStep {
-    fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError>;
-    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError>;
-    fn pose(&self) -> Pose2<f32>;
-}
-
-impl<const P: usize> GridStep for GridSlam<'_, 256, 256, P, BEAMS, { occupancy_bytes(256, 256) }> {
-    fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError> {
-        GridSlam::predict_velocity(self, v, omega, dt)
-    }
-    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
-        GridSlam::observe(self, scan)
-    }
-    fn pose(&self) -> Pose2<f32> {
-        GridSlam::pose(self)
-    }
-}
-
-impl<const P: usize> GridStep for GridLocalizer<'_, P, BEAMS> {
-    fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError> {
-        GridLocalizer::predict_velocity(self, v, omega, dt)
-    }
-    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
-        GridLocalizer::observe(self, scan)
-    }
-    fn pose(&self) -> Pose2<f32> {
-        GridLocalizer::pose(self)
-    }
-}
-
 /// Where every drive starts (the filters are started there too).
 const START: Pose2<f32> = Pose2::new(-1.0, -1.0, 0.3);
 
 /// Drives `filter` from [`START`] for [`STEPS`] steps of an arc through the room,
 /// counting the instructions of each prediction and scan, and prints one line named
 /// `what` with their means.
-fn drive<F: GridStep>(
+fn drive<F: GridEstimator>(
     out: &mut Serial,
     ticks: &mut Ticks,
     what: &str,
