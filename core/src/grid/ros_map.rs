@@ -46,6 +46,21 @@ fn error(path: &Path, message: impl Into<String>) -> RosMapError {
 }
 
 impl RosMap {
+    /// The bitmap of the cells above `occupied_above` ([`super::fill_occupancy_bits`]),
+    /// for [`super::GridView::with_occupancy_bits`]: a view with it runs the sparse shift
+    /// search, the one a map image in flash runs on the device (the same scores as the
+    /// byte-wise search over the cells, in fewer instructions).
+    pub fn occupancy_bits(&self, occupied_above: i8) -> Vec<u8> {
+        let (w, h) = (self.geometry.width, self.geometry.height);
+        let mut bits = std::vec![0u8; super::occupancy_bytes(w, h)];
+        // `read` made `cells` width × height long; a hand-built map of another length
+        // gets an empty bitmap, which `with_occupancy_bits` refuses with a clear error.
+        if super::fill_occupancy_bits(&self.cells, w, h, occupied_above, &mut bits).is_err() {
+            bits.clear();
+        }
+        bits
+    }
+
     /// Reads `yaml` (fields `image`, `resolution`, `origin`; `negate: 1` inverts the
     /// grey levels) and the PGM it names (relative to the yaml's folder).
     pub fn read(yaml: &Path, log_odds: &LogOdds) -> Result<Self, RosMapError> {
@@ -246,6 +261,8 @@ mod tests {
         assert_eq!(map.cells[0], -100);
         // The top row's black corner.
         assert_eq!(map.cells[3], 100);
+        // The bitmap: one byte per 3-cell row, the black cells (2, 0) and (0, 1) set.
+        assert_eq!(map.occupancy_bits(0), [0b100, 0b001]);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -38,7 +38,9 @@ pub fn localize_cli(
     let path = resolve_log(file)?;
     let log = read_log(&path)?;
     let options = options_from(config, grid, &log)?;
-    let RosMap { cells, geometry } = RosMap::read(map, &options.config.log_odds)?;
+    let ros_map = RosMap::read(map, &options.config.log_odds)?;
+    let bits = ros_map.occupancy_bits(options.config.log_odds.occupied_above);
+    let RosMap { cells, geometry } = ros_map;
     if (geometry.resolution - options.config.resolution).abs() > 1e-6 {
         bail!(
             "{}: map resolution {} differs from the configured {}",
@@ -48,6 +50,7 @@ pub fn localize_cli(
         );
     }
     let view = GridView::new(&cells, geometry, options.config.log_odds.occupied_above)
+        .and_then(|v| v.with_occupancy_bits(&bits))
         .map_err(|e| anyhow!("{}: {e}", map.display()))?;
     let scans = front_scans(&log);
     let frames: Vec<GridInput<'_>> = carmen_inputs(&scans);
@@ -138,8 +141,11 @@ pub fn sim_cli(
 ) -> Result<()> {
     let started = Instant::now();
     let map_path = grid_out.join("slam").join("map.yaml");
-    let RosMap { cells, geometry } = RosMap::read(&map_path, &config.log_odds)?;
+    let ros_map = RosMap::read(&map_path, &config.log_odds)?;
+    let bits = ros_map.occupancy_bits(config.log_odds.occupied_above);
+    let RosMap { cells, geometry } = ros_map;
     let view = GridView::new(&cells, geometry, config.log_odds.occupied_above)
+        .and_then(|v| v.with_occupancy_bits(&bits))
         .map_err(|e| anyhow!("{}: {e}", map_path.display()))?;
     let frames: Vec<GridInput<'_>> = sim_inputs(rec);
     let start = rec

@@ -61,7 +61,9 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
         &args.grid,
         &args.bag,
     )?;
-    let RosMap { cells, geometry } = RosMap::read(&args.map, &options.config.log_odds)?;
+    let ros_map = RosMap::read(&args.map, &options.config.log_odds)?;
+    let bits = ros_map.occupancy_bits(options.config.log_odds.occupied_above);
+    let RosMap { cells, geometry } = ros_map;
     if (geometry.resolution - options.config.resolution).abs() > 1e-6 {
         bail!(
             "map resolution {} differs from the configured {}",
@@ -70,6 +72,7 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
         );
     }
     let view = GridView::new(&cells, geometry, options.config.log_odds.occupied_above)
+        .and_then(|v| v.with_occupancy_bits(&bits))
         .map_err(|e| anyhow::anyhow!("map: {e}"))?;
     let scans = front_scans(&log);
     let inputs = carmen_inputs(&scans);
