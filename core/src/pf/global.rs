@@ -1135,22 +1135,13 @@ mod tests {
         mount: Pose2::new(0.0, 0.0, 0.0),
     };
 
-    /// Ranges seen from `pose` on `view` by marching each beam in quarter cells.
+    /// Ranges seen from `pose` on `view` (out to 4 m).
     fn ray_cast(view: &GridView<'_>, pose: &Pose2<f32>) -> Vec<f32> {
-        let res = view.geometry().resolution;
         (0..60)
             .map(|i| {
                 let a = pose.theta + LIDAR.beam_angle(i);
-                let mut r = 0.0f32;
-                while r < 4.0 {
-                    r += res * 0.25;
-                    let (x, y) = (pose.x + r * a.cos(), pose.y + r * a.sin());
-                    let (u, v) = view.geometry().world_to_grid(x, y);
-                    if view.is_occupied(u.floor() as i32, v.floor() as i32) {
-                        return r;
-                    }
-                }
-                f32::INFINITY
+                view.ray_range(pose.x, pose.y, a, 4.0)
+                    .unwrap_or(f32::INFINITY)
             })
             .collect()
     }
