@@ -4,6 +4,13 @@
 //! localizer (no map writes) at P = 32, 64, 128 on the map the SLAM runs built, read
 //! through its occupied-cell bitmap alone (as a map image in flash is).
 //!
+//! Built with `MICROSLAM_MAP` (the map image in flash, `cfg(microslam_map)`), it times
+//! the localizer on that map instead (`localizer_map` lines): the scans are ray-cast in
+//! the map itself from the map frame's origin (the first pose of the run that built it)
+//! along the same arc, so the end points meet the map's real walls. A room map built
+//! from nine scans has thin walls and many windows without an occupied cell; a map of a
+//! whole run has the walls a robot meets, and its step costs what a robot pays.
+//!
 //! Prints one line per P on UART0 and exits through semihosting.
 #![no_std]
 #![no_main]
@@ -12,21 +19,16 @@ use core::fmt::Write;
 
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use firmware_example::board::{self, Serial};
-use firmware_example::cost::{Ticks, room_range, thousand_nops};
+use firmware_example::cost::{Ticks, thousand_nops};
 use microslam::geometry::Pose2;
 use microslam::grid::GridView;
-use microslam::grid::{OccupancyGrid, occupancy_bytes};
-use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam};
+use microslam::pf::{GridLocalizer, GridPfConfig};
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
 use microslam::wire::GridEstimator;
 use panic_probe as _;
-use static_cell::ConstStaticCell;
 
 const BEAMS: usize = 90;
 const CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
-type Grid = OccupancyGrid<256, 256, { occupancy_bytes(256, 256) }>;
-
-static GRID: ConstStaticCell<Grid> = ConstStaticCell::new(Grid::zeroed());
 
 /// Steps measured per P (after the first scan, which only builds the map).
 const STEPS: u32 = 8;
@@ -40,27 +42,19 @@ const LIDAR: LidarGeometry = LidarGeometry {
     mount: Pose2::new(0.0, 0.0, 0.0),
 };
 
-fn scan_at(pose: &Pose2<f32>, ranges: &mut [f32; BEAMS]) {
-    for (i, r) in ranges.iter_mut().enumerate() {
-        let a = pose.theta + LIDAR.beam_angle(i);
-        *r = room_range(pose.x, pose.y, a);
-    }
-}
-
-/// Where every drive starts (the filters are started there too).
-const START: Pose2<f32> = Pose2::new(-1.0, -1.0, 0.3);
-
-/// Drives `filter` from [`START`] for [`STEPS`] steps of an arc through the room,
-/// counting the instructions of each prediction and scan, and prints one line named
-/// `what` with their means.
+/// Drives `filter` from `start` for [`STEPS`] steps of an arc, with the scans `scan_at`
+/// gives at each true pose, counting the instructions of each prediction and scan, and
+/// prints one line named `what` with their means.
 fn drive<F: GridEstimator>(
     out: &mut Serial,
     ticks: &mut Ticks,
     what: &str,
     particles: usize,
     filter: &mut F,
+    start: Pose2<f32>,
+    scan_at: impl Fn(&Pose2<f32>, &mut [f32; BEAMS]),
 ) -> core::fmt::Result {
-    let mut truth = START;
+    let mut truth = start;
     let mut ranges = [0.0f32; BEAMS];
     let (v, omega, dt) = (0.4f32, 0.3f32, 0.1f32);
     let (mut predict, mut observe, mut resamples) = (0u32, 0u32, 0u32);
@@ -96,68 +90,145 @@ fn drive<F: GridEstimator>(
     )
 }
 
-/// Grid SLAM's step: the map of the first scan at [`START`], then [`drive`].
-fn measure<const P: usize>(
-    out: &mut Serial,
-    ticks: &mut Ticks,
-    grid: &mut Grid,
-) -> core::fmt::Result {
-    let Ok(mut slam) =
-        GridSlam::<256, 256, P, BEAMS, { occupancy_bytes(256, 256) }>::new(grid, CONFIG, START)
-    else {
-        return writeln!(out, "error grid p={P} new");
-    };
-    let mut ranges = [0.0f32; BEAMS];
-    scan_at(&START, &mut ranges);
-    if slam.observe(&LidarScan::new(&ranges, LIDAR)).is_err() {
-        return writeln!(out, "error grid p={P} first scan");
+/// The synthetic room: grid SLAM, then the localizer on the map it built.
+#[cfg(not(microslam_map))]
+mod room {
+    use super::*;
+    use firmware_example::cost::room_range;
+    use microslam::grid::{OccupancyGrid, occupancy_bytes};
+    use microslam::pf::GridSlam;
+    use static_cell::ConstStaticCell;
+
+    type Grid = OccupancyGrid<256, 256, { occupancy_bytes(256, 256) }>;
+
+    static GRID: ConstStaticCell<Grid> = ConstStaticCell::new(Grid::zeroed());
+
+    /// Where every drive starts (the filters are started there too).
+    const START: Pose2<f32> = Pose2::new(-1.0, -1.0, 0.3);
+
+    fn scan_at(pose: &Pose2<f32>, ranges: &mut [f32; BEAMS]) {
+        for (i, r) in ranges.iter_mut().enumerate() {
+            let a = pose.theta + LIDAR.beam_angle(i);
+            *r = room_range(pose.x, pose.y, a);
+        }
     }
-    drive(out, ticks, "grid", P, &mut slam)
+
+    /// Grid SLAM's step: the map of the first scan at [`START`], then [`drive`].
+    fn measure<const P: usize>(
+        out: &mut Serial,
+        ticks: &mut Ticks,
+        grid: &mut Grid,
+    ) -> core::fmt::Result {
+        let Ok(mut slam) =
+            GridSlam::<256, 256, P, BEAMS, { occupancy_bytes(256, 256) }>::new(grid, CONFIG, START)
+        else {
+            return writeln!(out, "error grid p={P} new");
+        };
+        let mut ranges = [0.0f32; BEAMS];
+        scan_at(&START, &mut ranges);
+        if slam.observe(&LidarScan::new(&ranges, LIDAR)).is_err() {
+            return writeln!(out, "error grid p={P} first scan");
+        }
+        drive(out, ticks, "grid", P, &mut slam, START, scan_at)
+    }
+
+    /// The localizer's step (prediction + scan) on `map`, started at the true pose, along the
+    /// same drive as [`measure`].
+    fn measure_localizer<const P: usize>(
+        out: &mut Serial,
+        ticks: &mut Ticks,
+        map: GridView<'_>,
+    ) -> core::fmt::Result {
+        let Ok(mut loc) = GridLocalizer::<P, BEAMS>::new(map, CONFIG, START) else {
+            return writeln!(out, "error localizer p={P} new");
+        };
+        drive(out, ticks, "localizer", P, &mut loc, START, scan_at)
+    }
+
+    pub fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
+        writeln!(
+            out,
+            "calibration nops=1000 instructions={}",
+            ticks.instructions(thousand_nops)
+        )?;
+        let grid = GRID.take();
+        if grid
+            .init_centred(CONFIG.resolution, CONFIG.log_odds)
+            .is_err()
+        {
+            return writeln!(out, "error grid init");
+        }
+        measure::<16>(out, ticks, grid)?;
+        measure::<32>(out, ticks, grid)?;
+        measure::<64>(out, ticks, grid)?;
+        // The map the last SLAM run built, as the bitmap alone (a map image's view).
+        let view = grid.view();
+        let Some(bits) = view.occupancy_bits() else {
+            return writeln!(out, "error grid has no bitmap");
+        };
+        let Ok(map) = GridView::from_occupancy_bits(bits, *view.geometry(), view.occupied_above())
+        else {
+            return writeln!(out, "error localizer map");
+        };
+        measure_localizer::<32>(out, ticks, map)?;
+        measure_localizer::<64>(out, ticks, map)?;
+        measure_localizer::<128>(out, ticks, map)?;
+        firmware_example::cost::report_end(out)
+    }
 }
 
-/// The localizer's step (prediction + scan) on `map`, started at the true pose, along the
-/// same drive as [`measure`].
-fn measure_localizer<const P: usize>(
-    out: &mut Serial,
-    ticks: &mut Ticks,
-    map: GridView<'_>,
-) -> core::fmt::Result {
-    let Ok(mut loc) = GridLocalizer::<P, BEAMS>::new(map, CONFIG, START) else {
-        return writeln!(out, "error localizer p={P} new");
-    };
-    drive(out, ticks, "localizer", P, &mut loc)
+/// The map image in flash (`MICROSLAM_MAP`).
+#[cfg(microslam_map)]
+mod flash_map {
+    use super::*;
+    use microslam::grid::MapImage;
+
+    /// The localizer's step on the map image in flash, started at the map frame's origin,
+    /// with scans ray-cast in the map (see the module documentation).
+    fn measure_flash_map<const P: usize>(
+        out: &mut Serial,
+        ticks: &mut Ticks,
+        map: GridView<'_>,
+    ) -> core::fmt::Result {
+        let start = Pose2::new(0.0, 0.0, 0.0);
+        let Ok(mut loc) = GridLocalizer::<P, BEAMS>::new(map, CONFIG, start) else {
+            return writeln!(out, "error localizer_map p={P} new");
+        };
+        let cast = |pose: &Pose2<f32>, ranges: &mut [f32; BEAMS]| {
+            for (i, r) in ranges.iter_mut().enumerate() {
+                let a = pose.theta + LIDAR.beam_angle(i);
+                *r = map
+                    .ray_range(pose.x, pose.y, a, LIDAR.max_range)
+                    .unwrap_or(f32::INFINITY);
+            }
+        };
+        drive(out, ticks, "localizer_map", P, &mut loc, start, cast)
+    }
+
+    pub fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
+        writeln!(
+            out,
+            "calibration nops=1000 instructions={}",
+            ticks.instructions(thousand_nops)
+        )?;
+        let Ok(image) = MapImage::parse(firmware_example::config::MAP_IMAGE) else {
+            return writeln!(out, "error map image refused");
+        };
+        let map = image.view();
+        let g = map.geometry();
+        writeln!(out, "map cells={}x{}", g.width, g.height)?;
+        measure_flash_map::<32>(out, ticks, map)?;
+        measure_flash_map::<64>(out, ticks, map)?;
+        measure_flash_map::<128>(out, ticks, map)?;
+        firmware_example::cost::report_end(out)
+    }
 }
 
-fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
-    writeln!(
-        out,
-        "calibration nops=1000 instructions={}",
-        ticks.instructions(thousand_nops)
-    )?;
-    let grid = GRID.take();
-    if grid
-        .init_centred(CONFIG.resolution, CONFIG.log_odds)
-        .is_err()
-    {
-        return writeln!(out, "error grid init");
-    }
-    measure::<16>(out, ticks, grid)?;
-    measure::<32>(out, ticks, grid)?;
-    measure::<64>(out, ticks, grid)?;
-    // The map the last SLAM run built, as the bitmap alone (a map image's view).
-    let view = grid.view();
-    let Some(bits) = view.occupancy_bits() else {
-        return writeln!(out, "error grid has no bitmap");
-    };
-    let Ok(map) = GridView::from_occupancy_bits(bits, *view.geometry(), view.occupied_above())
-    else {
-        return writeln!(out, "error localizer map");
-    };
-    measure_localizer::<32>(out, ticks, map)?;
-    measure_localizer::<64>(out, ticks, map)?;
-    measure_localizer::<128>(out, ticks, map)?;
-    firmware_example::cost::report_end(out)
-}
+#[cfg(not(microslam_map))]
+use room::run;
+
+#[cfg(microslam_map)]
+use flash_map::run;
 
 #[entry]
 fn main() -> ! {
