@@ -28,6 +28,16 @@ pub fn run_and_halt(run: impl FnOnce(&mut Serial, &mut Ticks) -> core::fmt::Resu
     board::halt(code)
 }
 
+/// The first line of the grid and EKF cost binaries' output: the instructions QEMU counts
+/// for 1000 `nop`s (`calibration nops=1000 instructions=…`; 1000 when the counter is right).
+pub fn report_calibration(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
+    writeln!(
+        out,
+        "calibration nops=1000 instructions={}",
+        ticks.instructions(thousand_nops)
+    )
+}
+
 /// The last lines of every cost binary's output: the stack's high-water mark
 /// (`stack_peak_bytes=…`, read by `.ci/firmware.sh`) and `done`.
 pub fn report_end(out: &mut Serial) -> core::fmt::Result {
@@ -82,6 +92,21 @@ pub fn thousand_nops() {
     // SAFETY: only `nop`s.
     unsafe { core::arch::asm!(".rept 1000", "nop", ".endr", options(nomem, nostack)) };
 }
+
+/// Beams of the cost measurements' lidar ([`LIDAR`]).
+pub const BEAMS: usize = 90;
+
+/// The cost measurements' lidar: [`BEAMS`] beams over 360°, 0.1 to 10 m, at the robot's
+/// centre (the firmware's beam count).
+pub const LIDAR: microslam::sensors::lidar::LidarGeometry =
+    microslam::sensors::lidar::LidarGeometry {
+        first_angle: -core::f32::consts::PI,
+        angle_increment: 2.0 * core::f32::consts::PI / BEAMS as f32,
+        min_range: 0.1,
+        max_range: 10.0,
+        no_return_range: 10.0,
+        mount: microslam::geometry::Pose2::new(0.0, 0.0, 0.0),
+    };
 
 /// The walls of the cost measurements' world (`[x1, y1, x2, y2]`, metres): the room
 /// `[-3, 3]²` and a pillar `[1, 1.6] × [-0.5, 0.5]`.

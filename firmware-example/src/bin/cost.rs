@@ -15,7 +15,7 @@ use core::fmt::Write;
 
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use firmware_example::board::{self, Serial};
-use firmware_example::cost::{Ticks, thousand_nops};
+use firmware_example::cost::Ticks;
 use microslam::ekf::{EkfConfig, EkfSlam, UpdateOutcome, factor_len, state_dim};
 use microslam::sensors::range_bearing::RangeBearing;
 use panic_probe as _;
@@ -118,11 +118,7 @@ fn measure<const N: usize, const P: usize>(
 }
 
 fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
-    writeln!(
-        out,
-        "calibration nops=1000 instructions={}",
-        ticks.instructions(thousand_nops)
-    )?;
+    firmware_example::cost::report_calibration(out, ticks)?;
     measure(out, ticks, EKF16.take(), 16)?;
     measure(out, ticks, EKF32.take(), 32)?;
     measure(out, ticks, EKF64.take(), 64)?;

@@ -19,28 +19,18 @@ use core::fmt::Write;
 
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use firmware_example::board::{self, Serial};
-use firmware_example::cost::{Ticks, thousand_nops};
+use firmware_example::cost::{BEAMS, LIDAR, Ticks, report_calibration};
 use microslam::geometry::Pose2;
 use microslam::grid::GridView;
 use microslam::pf::{GridLocalizer, GridPfConfig};
-use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+use microslam::sensors::lidar::LidarScan;
 use microslam::wire::GridEstimator;
 use panic_probe as _;
 
-const BEAMS: usize = 90;
 const CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
 
 /// Steps measured per P (after the first scan, which only builds the map).
 const STEPS: u32 = 8;
-
-const LIDAR: LidarGeometry = LidarGeometry {
-    first_angle: -core::f32::consts::PI,
-    angle_increment: 2.0 * core::f32::consts::PI / BEAMS as f32,
-    min_range: 0.1,
-    max_range: 10.0,
-    no_return_range: 10.0,
-    mount: Pose2::new(0.0, 0.0, 0.0),
-};
 
 /// Drives `filter` from `start` for [`STEPS`] steps of an arc, with the scans `scan_at`
 /// gives at each true pose, counting the instructions of each prediction and scan, and
@@ -146,11 +136,7 @@ mod room {
     }
 
     pub fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
-        writeln!(
-            out,
-            "calibration nops=1000 instructions={}",
-            ticks.instructions(thousand_nops)
-        )?;
+        report_calibration(out, ticks)?;
         let grid = GRID.take();
         if grid
             .init_centred(CONFIG.resolution, CONFIG.log_odds)
@@ -206,11 +192,7 @@ mod flash_map {
     }
 
     pub fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
-        writeln!(
-            out,
-            "calibration nops=1000 instructions={}",
-            ticks.instructions(thousand_nops)
-        )?;
+        report_calibration(out, ticks)?;
         let Ok(image) = MapImage::parse(firmware_example::config::MAP_IMAGE) else {
             return writeln!(out, "error map image refused");
         };

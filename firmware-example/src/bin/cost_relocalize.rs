@@ -21,16 +21,15 @@ use cortex_m::peripheral::SYST;
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use firmware_example::board::{self, Serial};
-use firmware_example::cost::room_range;
+use firmware_example::cost::{BEAMS, LIDAR, room_range};
 use microslam::geometry::Pose2;
 use microslam::grid::{GridGeometry, GridView, MaxPoolLayers};
 use microslam::pf::global::GlobalSearchConfig;
 use microslam::pf::{GridLocalizer, GridPfConfig, RelocalizationConfig};
-use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+use microslam::sensors::lidar::LidarScan;
 use panic_probe as _;
 use static_cell::ConstStaticCell;
 
-const BEAMS: usize = 90;
 const PARTICLES: usize = 64;
 const CELLS: usize = 256;
 const RESOLUTION: f32 = 0.05;
@@ -39,15 +38,6 @@ const CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
 const LAYER_BYTES: usize = match MaxPoolLayers::bytes_for(CELLS, CELLS, LEVELS) {
     Some(n) => n,
     None => 0,
-};
-
-const LIDAR: LidarGeometry = LidarGeometry {
-    first_angle: -core::f32::consts::PI,
-    angle_increment: 2.0 * core::f32::consts::PI / BEAMS as f32,
-    min_range: 0.1,
-    max_range: 10.0,
-    no_return_range: 10.0,
-    mount: Pose2::new(0.0, 0.0, 0.0),
 };
 
 /// Log-odds of the cell whose centre is `(x, y)`: walls of the room `[-3, 3]²` and the
