@@ -342,3 +342,45 @@ fn the_range_bias_converges_from_sightings() {
     assert!((b0 - true_b0).abs() < 0.01, "offset {b0}");
     assert!((b2 - true_b2).abs() < 0.05, "curvature {b2}");
 }
+
+/// A long velocity step with the scale factors as states: their share of the robot's
+/// new covariance (`F_s P_ss F_sᵀ` and the cross terms) counts towards the variance caps
+/// and the finiteness check. Found by the `ekf_steps` fuzzer in `f32` (a step of 10³⁶ s
+/// that left an infinite pose variance); here in `f32` and `f64`, with steps from an hour
+/// to beyond overflow.
+#[test]
+fn a_long_step_keeps_the_pose_covariance_within_the_caps() {
+    use microslam::ekf::{MAX_HEADING_VARIANCE, MAX_POSITION_VARIANCE};
+    fn check<T: microslam::scalar::Real + std::fmt::Debug>(config: EkfConfig<T>, dts: &[f64]) {
+        for &dt in dts {
+            let mut slam = EkfSlam::<T, { state_dim(2) }, { factor_len(2) }>::new(config);
+            slam.estimate_odometry_scale(T::lit(0.05), T::lit(0.05))
+                .unwrap();
+            let before = slam.factor_storage().to_vec();
+            match slam.predict_velocity(T::lit(12.0), T::lit(0.75), T::lit(dt)) {
+                Err(e) => {
+                    assert_eq!(e, EkfError::NumericalFailure, "dt {dt}");
+                    assert_eq!(slam.factor_storage().to_vec(), before, "dt {dt}");
+                }
+                Ok(()) => {
+                    let p = slam.pose_covariance();
+                    let caps = [
+                        MAX_POSITION_VARIANCE,
+                        MAX_POSITION_VARIANCE,
+                        MAX_HEADING_VARIANCE,
+                    ];
+                    for (a, cap) in caps.into_iter().enumerate() {
+                        let v = p[(a, a)].to_f64();
+                        assert!(
+                            v.is_finite() && v <= cap * 1.001,
+                            "dt {dt}: variance {a} = {v}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+    let dts = [3600.0, 1.0e6, 1.0e12, 1.0e20, 1.0e30, 1.0e36];
+    check(EkfConfig::DEFAULT_F32, &dts);
+    check(EkfConfig::DEFAULT_F64, &dts);
+}

@@ -866,8 +866,16 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         wrt_scale: Option<&[[T; 2]; 3]>,
     ) -> Result<(), EkfError> {
         let (p_rr, coupling) = self.robot_summary();
-        let new_rr =
+        let mut new_rr =
             f * p_rr * f.transpose() + g * Matrix3::from_diagonal(&(*q).into()) * g.transpose();
+        if let Some(fs) = wrt_scale.filter(|_| self.calibration & SCALE_SLOT != 0) {
+            // The scale states move the robot too: its variances gain the diagonal of
+            // F P_Rs F_sᵀ + F_s P_sR Fᵀ + F_s P_ss F_sᵀ, which the caps and the finiteness
+            // check below must see (a long step can make it overflow on its own).
+            for (a, v) in self.scale_motion_variances(f, fs).into_iter().enumerate() {
+                new_rr[(a, a)] += v;
+            }
+        }
         let scale = capped([
             (new_rr[(0, 0)], MAX_POSITION_VARIANCE),
             (new_rr[(1, 1)], MAX_POSITION_VARIANCE),
@@ -925,6 +933,36 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         self.set_robot_block(&l, &d);
         self.summary = Some(self.compute_robot_summary());
         Ok(())
+    }
+
+    /// The diagonal of what a motion with `∂pose'/∂(s_v, s_ω) = fs` adds to the robot
+    /// covariance through the odometry scale states (factor rows 0 and 1,
+    /// `L_s = [[1, 0], [l₁₀, 1]]`): of `F P_Rs F_sᵀ + F_s P_sR Fᵀ + F_s P_ss F_sᵀ`, with
+    /// `P_Rs` and `P_ss` read from the scale columns of the factor (O(1)). The caps and
+    /// the finiteness check need the diagonal only: a covariance's off-diagonal entries
+    /// are bounded by its diagonal.
+    fn scale_motion_variances(&self, f: &Matrix3<T>, fs: &[[T; 2]; 3]) -> [T; 3] {
+        let r0 = self.active_dim() - 3;
+        let (d0, d1) = (pivot(&self.factor, 0), pivot(&self.factor, 1));
+        let l10 = self.factor.get(1).copied().unwrap_or(T::ZERO);
+        // P_Rs row b: (L_b0 D₀, L_b0 D₀ l₁₀ + L_b1 D₁).
+        let prs = [0, 1, 2].map(|b| {
+            let row = strict_row(&self.factor, r0 + b);
+            let l0 = row.first().copied().unwrap_or(T::ZERO);
+            let l1 = row.get(1).copied().unwrap_or(T::ZERO);
+            [l0 * d0, l0 * d0 * l10 + l1 * d1]
+        });
+        [0, 1, 2].map(|a| {
+            let [s0, s1] = fs[a];
+            let (mut u0, mut u1) = (T::ZERO, T::ZERO);
+            for (b, [p0, p1]) in prs.iter().enumerate() {
+                u0 += f[(a, b)] * *p0;
+                u1 += f[(a, b)] * *p1;
+            }
+            // P_ss = [[D₀, D₀ l₁₀], [D₀ l₁₀, D₀ l₁₀² + D₁]]: s P_ss sᵀ = D₀ (s₀ + l₁₀ s₁)² + D₁ s₁².
+            let t = s0 + l10 * s1;
+            T::lit(2.0) * (u0 * s0 + u1 * s1) + d0 * t * t + d1 * s1 * s1
+        })
     }
 
     /// The two measurement rows of a sighting of the landmark in slot `index` with Jacobians
