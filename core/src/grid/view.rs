@@ -158,24 +158,50 @@ impl<'a> GridView<'a> {
     }
 
     /// Range from `(x, y)` (metres, world frame) along `angle` (radians) to the first
-    /// occupied cell, marching in quarter cells: what a lidar at that pose would measure on
-    /// this map (for simulating scans on a map, e.g. to test or time a localizer on it).
-    /// `None` when no occupied cell is met within `max_range`, or for a non-finite input.
+    /// occupied cell, sampled every quarter cell (at `k · resolution / 4`, `k ≥ 1`): what a
+    /// lidar at that pose would measure on this map (for simulating scans on a map, e.g.
+    /// to test or time a localizer on it). `None` when no occupied cell is met within
+    /// `max_range` (the last sample may lie up to a quarter cell beyond it), for a
+    /// non-finite input or an invalid geometry. Only the part of the ray over the grid is
+    /// sampled, so the work is bounded by the grid's size whatever `max_range` is.
     pub fn ray_range(&self, x: f32, y: f32, angle: f32, max_range: f32) -> Option<f32> {
-        if !(x.is_finite() && y.is_finite() && angle.is_finite() && max_range.is_finite()) {
+        let g = &self.geometry;
+        let finite = x.is_finite() && y.is_finite() && angle.is_finite() && max_range.is_finite();
+        if !(finite && g.is_valid()) {
             return None;
         }
         let (sin, cos) = libm::sincosf(angle);
-        let step = 0.25 * self.geometry.resolution;
-        let mut r = 0.0f32;
-        while r < max_range {
-            r += step;
-            let (u, v) = self.geometry.world_to_grid(x + r * cos, y + r * sin);
-            if self.is_occupied(super::floor_i32(u), super::floor_i32(v)) {
-                return Some(r);
+        // The ray's stretch over the grid's rectangle (slab test), within 0 ..= max_range.
+        let (w, h) = (
+            g.width as f32 * g.resolution,
+            g.height as f32 * g.resolution,
+        );
+        let (mut enter, mut exit) = (0.0f32, max_range);
+        for (start, dir, low, size) in [(x, cos, g.origin_x, w), (y, sin, g.origin_y, h)] {
+            if dir == 0.0 {
+                if start < low || start > low + size {
+                    return None;
+                }
+                continue;
             }
+            let (a, b) = ((low - start) / dir, (low + size - start) / dir);
+            enter = enter.max(a.min(b));
+            exit = exit.min(a.max(b));
         }
-        None
+        let step = 0.25 * g.resolution;
+        if !(enter.is_finite() && exit.is_finite()) || enter > exit + step {
+            return None;
+        }
+        // Samples k · step for k ≥ 1 from the one at or before the entry to one past the
+        // exit; k is an integer, so the march cannot stall where r + step rounds to r.
+        let first = libm::floorf(enter / step).max(1.0) as u32;
+        let last = libm::ceilf(exit / step) as u32;
+        (first..=last).find_map(|k| {
+            let r = k as f32 * step;
+            let (u, v) = g.world_to_grid(x + r * cos, y + r * sin);
+            self.is_occupied(super::floor_i32(u), super::floor_i32(v))
+                .then_some(r)
+        })
     }
 
     /// The bitmap's bit of cell `(ix, iy)`; `false` off the grid or without a bitmap.
@@ -346,6 +372,24 @@ mod tests {
         assert_eq!(view.ray_range(0.0, 0.05, 0.0, 0.45), None);
         assert_eq!(view.ray_range(f32::NAN, 0.0, 0.0, 5.0), None);
         assert_eq!(view.ray_range(0.0, 0.0, 0.0, f32::INFINITY), None);
+        // From far outside, towards the grid: the wall is met; away from it: nothing.
+        let r = view.ray_range(-1.0e3, 0.05, 0.0, 2.0e3).unwrap();
+        assert!((1000.5..=1000.6).contains(&r), "{r}");
+        assert_eq!(
+            view.ray_range(-1.0e3, 0.05, core::f32::consts::PI, 2.0e3),
+            None
+        );
+        // A range far beyond f32's quarter-cell resolution ends (the ray leaves the grid).
+        assert_eq!(
+            view.ray_range(0.0, 0.05, core::f32::consts::PI, 1.0e30),
+            None
+        );
+        // Along a row outside the grid, and inside it along an axis with a zero component.
+        assert_eq!(view.ray_range(0.0, 5.0, 0.0, 10.0), None);
+        assert!(
+            view.ray_range(0.55, -0.95, core::f32::consts::FRAC_PI_2, 5.0)
+                .is_some()
+        );
     }
 
     #[test]
