@@ -13,10 +13,12 @@
 //! - [`GridLocalizer`]: the same filter against a fixed map ([`crate::grid::GridView`],
 //!   e.g. in flash); it never writes the map. It detects when it is lost and finds
 //!   itself again anywhere in the map with [`global`], the exact correlative search.
+//! - [`GridEstimator`]: the interface a drive loop uses for either of them.
 //!
 //! All settings are in [`GridPfConfig`]; [`GridPfConfig::SEED`] is the seed exactly.
 
 pub mod correlation;
+mod estimator;
 mod filter;
 pub mod global;
 mod localizer;
@@ -26,6 +28,7 @@ pub mod resampling;
 mod slam;
 
 pub use correlation::{ScanPoint, ScanPoints, ShiftScore};
+pub use estimator::GridEstimator;
 pub use filter::{ParticleFilter, UpdateReport};
 pub use localizer::{
     GridLocalizer, LocalizerState, LocalizerStatus, LostDetection, MAX_HYPOTHESES,

@@ -43,6 +43,7 @@ pub mod messages;
 pub mod scan;
 pub mod session;
 
+pub use crate::pf::GridEstimator;
 pub use events::EventsToWire;
 pub use frame::{
     EncodeError, FrameDecoder, FrameError, MAX_FRAME_LEN, MAX_PAYLOAD_LEN, WireCounters,
@@ -53,7 +54,7 @@ pub use messages::{
     SCAN_CHUNK_BEAMS, ScanChunk, Status, StepResult, ToDevice, ToHost, TrackingState,
 };
 pub use scan::{Scan, ScanAssembler, ScanError};
-pub use session::{GridEstimator, GridSetup, LocalizerEstimator, MAX_SCAN_BEAMS, Session};
+pub use session::{GridSetup, LocalizerEstimator, MAX_SCAN_BEAMS, Session};
 
 #[cfg(test)]
 mod tests;

@@ -13,7 +13,7 @@ use crate::association::{Observed, observe_known_supervised};
 use crate::ekf::health::{HealthConfig, HealthStatus, Supervisor};
 use crate::ekf::{EkfConfig, EkfSlam, UpdateOutcome};
 use crate::geometry::Pose2;
-use crate::pf::{GridLocalizer, GridSlam, LocalizerState, PfError, StepReport};
+use crate::pf::{GridEstimator, GridLocalizer, LocalizerState};
 use crate::sensors::lidar::{LidarGeometry, LidarScan};
 use crate::sensors::range_bearing::RangeBearing;
 use crate::sensors::wheel_odometry::{DiffDriveGeometry, WheelTicks};
@@ -29,57 +29,6 @@ use super::scan::ScanAssembler;
 /// dropped and answered with [`StepResult::Rejected`].
 pub const MAX_SCAN_BEAMS: usize = 360;
 
-/// A grid estimator as a [`Session`] drives it: object-safe, so that the session's type
-/// does not depend on the grid's size or particle count. Implemented by [`GridSlam`].
-pub trait GridEstimator {
-    /// Starts over at `start` (map cleared, particles re-drawn from the seed).
-    fn reset(&mut self, start: Pose2<f32>) -> Result<(), PfError>;
-    /// Prediction with a pose increment in the previous robot frame.
-    fn predict_increment(&mut self, increment: &Pose2<f32>) -> Result<(), PfError>;
-    /// Prediction with the arc `(distance, heading_change)`.
-    fn predict_arc(&mut self, distance: f32, heading_change: f32) -> Result<(), PfError>;
-    /// Prediction with `(v, ω)` held for `dt` seconds.
-    fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError>;
-    /// One scan.
-    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError>;
-    /// The estimate.
-    fn pose(&self) -> Pose2<f32>;
-    /// How often the particles were resampled.
-    fn resamples(&self) -> u32;
-    /// Covariance of the particle cloud, upper triangle `[xx, xy, xθ, yy, yθ, θθ]`
-    /// ([`crate::pf::ParticleFilter::pose_covariance`]).
-    fn pose_covariance(&self) -> [f32; 6];
-}
-
-impl<const W: usize, const H: usize, const P: usize, const B: usize, const BITMAP: usize>
-    GridEstimator for GridSlam<'_, W, H, P, B, BITMAP>
-{
-    fn reset(&mut self, start: Pose2<f32>) -> Result<(), PfError> {
-        GridSlam::reset(self, start)
-    }
-    fn predict_increment(&mut self, increment: &Pose2<f32>) -> Result<(), PfError> {
-        self.predict_odometry(&Pose2::new(0.0, 0.0, 0.0), increment)
-    }
-    fn predict_arc(&mut self, distance: f32, heading_change: f32) -> Result<(), PfError> {
-        self.predict(distance, heading_change)
-    }
-    fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError> {
-        GridSlam::predict_velocity(self, v, omega, dt)
-    }
-    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
-        GridSlam::observe(self, scan)
-    }
-    fn pose(&self) -> Pose2<f32> {
-        GridSlam::pose(self)
-    }
-    fn resamples(&self) -> u32 {
-        self.filter().resample_count()
-    }
-    fn pose_covariance(&self) -> [f32; 6] {
-        self.filter().pose_covariance()
-    }
-}
-
 /// A localizer on a fixed map as a [`Session`] drives it: a [`GridEstimator`] (reset puts
 /// every particle at the pose and the state to tracking) that can also be sent looking
 /// for itself and reports where it stands. Implemented by [`GridLocalizer`].
@@ -89,33 +38,6 @@ pub trait LocalizerEstimator: GridEstimator {
     fn relocalize(&mut self) -> Result<(), Refusal>;
     /// Tracking, lost or relocalized, with its counters.
     fn report(&self) -> LocalizerReport;
-}
-
-impl<const P: usize, const B: usize> GridEstimator for GridLocalizer<'_, P, B> {
-    fn reset(&mut self, start: Pose2<f32>) -> Result<(), PfError> {
-        self.reset_around(start, 0.0, 0.0)
-    }
-    fn predict_increment(&mut self, increment: &Pose2<f32>) -> Result<(), PfError> {
-        self.predict_odometry(&Pose2::new(0.0, 0.0, 0.0), increment)
-    }
-    fn predict_arc(&mut self, distance: f32, heading_change: f32) -> Result<(), PfError> {
-        self.predict(distance, heading_change)
-    }
-    fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError> {
-        GridLocalizer::predict_velocity(self, v, omega, dt)
-    }
-    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
-        GridLocalizer::observe(self, scan)
-    }
-    fn pose(&self) -> Pose2<f32> {
-        GridLocalizer::pose(self)
-    }
-    fn resamples(&self) -> u32 {
-        self.filter().resample_count()
-    }
-    fn pose_covariance(&self) -> [f32; 6] {
-        self.filter().pose_covariance()
-    }
 }
 
 impl<const P: usize, const B: usize> LocalizerEstimator for GridLocalizer<'_, P, B> {
@@ -806,23 +728,16 @@ mod tests {
     #[test]
     fn grid_session_matches_direct_calls_on_the_grid_slam() {
         use crate::grid::OccupancyGrid;
-        use crate::pf::GridPfConfig;
+        use crate::pf::{GridPfConfig, GridSlam};
         use crate::wire::ScanChunk;
         type Slam<'g> = GridSlam<'g, 64, 64, 8, 40>;
         let config = GridPfConfig::MICROCONTROLLER;
         let setup = GridSetup {
-            lidar: LidarGeometry {
-                first_angle: 0.0,
-                angle_increment: 0.0,
-                min_range: 0.1,
-                max_range: 30.0,
-                no_return_range: f32::INFINITY,
-                mount: Pose2::new(0.0, 0.0, 0.0),
-            },
             wheels: DiffDriveGeometry {
                 metres_per_tick: 0.002,
                 track_width: 0.4,
             },
+            ..GridSetup::EXAMPLE
         };
         // A square room 2.4 m wide seen from the centre: 40 beams, 0 mm = no return.
         let inc = core::f32::consts::TAU / 40.0;

@@ -14,7 +14,7 @@ use crate::inputs::sim::lidar_world::LidarRecording;
 use anyhow::{Result, anyhow, bail};
 use microslam::geometry::Pose2;
 use microslam::grid::{GridGeometry, GridView, OccupancyGrid};
-use microslam::pf::{GridLocalizer, GridPfConfig, GridSlam, PfError, StepReport};
+use microslam::pf::{GridEstimator, GridLocalizer, GridPfConfig, GridSlam};
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
 use std::time::Instant;
 
@@ -133,13 +133,10 @@ pub trait GridObserver: Send {
     fn step(&mut self, step: &GridStep<'_>) -> Result<()>;
 }
 
-/// What the drive loop needs of a grid filter: SLAM and the localizer alike.
-trait GridFilter {
-    fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError>;
-    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError>;
-    fn pose(&self) -> Pose2<f32>;
+/// What the drive loop needs of a grid filter besides [`GridEstimator`]: its particles
+/// and its map, for the observer and the map snapshots.
+trait GridFilter: GridEstimator {
     fn particles(&self) -> &[Pose2<f32>];
-    fn covariance(&self) -> [f32; 6];
     fn view(&self) -> GridView<'_>;
     fn cells(&self) -> &[i8] {
         self.view().cells()
@@ -149,20 +146,8 @@ trait GridFilter {
 impl<const W: usize, const H: usize, const P: usize, const B: usize, const BITMAP: usize> GridFilter
     for GridSlam<'_, W, H, P, B, BITMAP>
 {
-    fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError> {
-        GridSlam::predict_odometry(self, from, to)
-    }
-    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
-        GridSlam::observe(self, scan)
-    }
-    fn pose(&self) -> Pose2<f32> {
-        GridSlam::pose(self)
-    }
     fn particles(&self) -> &[Pose2<f32>] {
         self.filter().poses()
-    }
-    fn covariance(&self) -> [f32; 6] {
-        self.filter().pose_covariance()
     }
     fn view(&self) -> GridView<'_> {
         self.map().view()
@@ -170,20 +155,8 @@ impl<const W: usize, const H: usize, const P: usize, const B: usize, const BITMA
 }
 
 impl<const P: usize, const B: usize> GridFilter for GridLocalizer<'_, P, B> {
-    fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError> {
-        GridLocalizer::predict_odometry(self, from, to)
-    }
-    fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
-        GridLocalizer::observe(self, scan)
-    }
-    fn pose(&self) -> Pose2<f32> {
-        GridLocalizer::pose(self)
-    }
     fn particles(&self) -> &[Pose2<f32>] {
         self.filter().poses()
-    }
-    fn covariance(&self) -> [f32; 6] {
-        self.filter().pose_covariance()
     }
     fn view(&self) -> GridView<'_> {
         *self.map()
@@ -233,7 +206,7 @@ fn drive(
                 stamp: input.stamp,
                 odometry: odom,
                 pose: filter.pose(),
-                covariance: filter.covariance(),
+                covariance: filter.pose_covariance(),
                 ranges: input.ranges,
                 lidar,
                 particles: filter.particles(),
