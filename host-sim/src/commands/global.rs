@@ -9,12 +9,12 @@ use crate::drivers::global::{
 use crate::drivers::grid::{GridInput, carmen_inputs, f32_pose, sim_inputs};
 use crate::inputs::readers::DatasetSpec;
 use crate::inputs::readers::carmen::{front_scans, read_log, resolve_log};
+use crate::inputs::readers::map::LocalizationMap;
 use crate::inputs::sim::lidar_world::LidarRecording;
 use crate::metrics::global::metrics;
 use anyhow::{Result, anyhow, bail};
 use microslam::geometry::Pose2;
 use microslam::grid::GridView;
-use microslam::grid::ros_map::RosMap;
 use microslam::pf::GridPfConfig;
 use std::path::Path;
 use std::time::Instant;
@@ -38,20 +38,8 @@ pub fn localize_cli(
     let path = resolve_log(file)?;
     let log = read_log(&path)?;
     let options = options_from(config, grid, &log)?;
-    let ros_map = RosMap::read(map, &options.config.log_odds)?;
-    let bits = ros_map.occupancy_bits(options.config.log_odds.occupied_above);
-    let RosMap { cells, geometry } = ros_map;
-    if (geometry.resolution - options.config.resolution).abs() > 1e-6 {
-        bail!(
-            "{}: map resolution {} differs from the configured {}",
-            map.display(),
-            geometry.resolution,
-            options.config.resolution
-        );
-    }
-    let view = GridView::new(&cells, geometry, options.config.log_odds.occupied_above)
-        .and_then(|v| v.with_occupancy_bits(&bits))
-        .map_err(|e| anyhow!("{}: {e}", map.display()))?;
+    let loaded = LocalizationMap::read(map, &options.config)?;
+    let view = loaded.view()?;
     let scans = front_scans(&log);
     let frames: Vec<GridInput<'_>> = carmen_inputs(&scans);
     let name = path
@@ -141,12 +129,8 @@ pub fn sim_cli(
 ) -> Result<()> {
     let started = Instant::now();
     let map_path = grid_out.join("slam").join("map.yaml");
-    let ros_map = RosMap::read(&map_path, &config.log_odds)?;
-    let bits = ros_map.occupancy_bits(config.log_odds.occupied_above);
-    let RosMap { cells, geometry } = ros_map;
-    let view = GridView::new(&cells, geometry, config.log_odds.occupied_above)
-        .and_then(|v| v.with_occupancy_bits(&bits))
-        .map_err(|e| anyhow!("{}: {e}", map_path.display()))?;
+    let map = LocalizationMap::read(&map_path, &config)?;
+    let view = map.view()?;
     let frames: Vec<GridInput<'_>> = sim_inputs(rec);
     let start = rec
         .scans

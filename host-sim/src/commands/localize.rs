@@ -5,13 +5,12 @@ use super::replay::{lidar_log, metrics_json, report, scan_progress_bar, with_ref
 use crate::domain::grid::{GlobalOptions, GridOptions};
 use crate::drivers::grid::{carmen_inputs, run_localizer_observed};
 use crate::inputs::readers::DatasetSpec;
-use crate::inputs::readers::carmen::{front_scans, resolve_log};
+use crate::inputs::readers::carmen::front_scans;
+use crate::inputs::readers::map::LocalizationMap;
 use crate::inputs::readers::rosbag::BagOptions;
 use crate::output::grid_map::write_outputs;
-use anyhow::{Result, bail};
+use anyhow::Result;
 use microslam::geometry::Pose2;
-use microslam::grid::GridView;
-use microslam::grid::ros_map::RosMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -50,30 +49,10 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
         );
     }
     let start = Instant::now();
-    let (DatasetSpec::Carmen(file) | DatasetSpec::Rosbag(file)) = &args.dataset else {
-        bail!("localize needs a lidar dataset (carmen:<file> or rosbag:<file.mcap>)");
-    };
-    let path = resolve_log(file)?;
-    let (log, options) = lidar_log(
-        &args.dataset,
-        &path,
-        args.config.as_deref(),
-        &args.grid,
-        &args.bag,
-    )?;
-    let ros_map = RosMap::read(&args.map, &options.config.log_odds)?;
-    let bits = ros_map.occupancy_bits(options.config.log_odds.occupied_above);
-    let RosMap { cells, geometry } = ros_map;
-    if (geometry.resolution - options.config.resolution).abs() > 1e-6 {
-        bail!(
-            "map resolution {} differs from the configured {}",
-            geometry.resolution,
-            options.config.resolution
-        );
-    }
-    let view = GridView::new(&cells, geometry, options.config.log_odds.occupied_above)
-        .and_then(|v| v.with_occupancy_bits(&bits))
-        .map_err(|e| anyhow::anyhow!("map: {e}"))?;
+    let lidar = lidar_log(&args.dataset, args.config.as_deref(), &args.grid, &args.bag)?;
+    let (log, options) = (lidar.log, lidar.options);
+    let map = LocalizationMap::read(&args.map, &options.config)?;
+    let view = map.view()?;
     let scans = front_scans(&log);
     let inputs = carmen_inputs(&scans);
     let pb = scan_progress_bar(scans.len(), quiet);
@@ -96,17 +75,14 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
             )
         })?;
     pb.finish_and_clear();
-    let rel = super::relation_error_for(&path, args.grid.relations.as_deref(), &run)?;
-    let name = path
-        .file_name()
-        .map_or_else(|| file.clone(), |n| n.to_string_lossy().to_string());
+    let rel = super::relation_error_for(&lidar.path, args.grid.relations.as_deref(), &run)?;
     let wall = start.elapsed().as_secs_f64();
     let metrics = with_reference(
-        metrics_json(&name, &run, &options, rel, None, wall),
+        metrics_json(&lidar.name, &run, &options, rel, None, wall),
         &run,
         &args.grid,
     )?;
     write_outputs(&args.out, &run, &options.config, &metrics, None)?;
-    report(quiet, &name, &metrics, &args.out);
+    report(quiet, &lidar.name, &metrics, &args.out);
     super::close_mcap(mcap, quiet)
 }

@@ -291,24 +291,11 @@ pub(crate) fn report(quiet: bool, dataset: &str, metrics: &serde_json::Value, ou
 /// `host-sim replay --filter grid-slam --dataset carmen:<file>` (and `thor:<dir>`).
 fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
     let start = Instant::now();
-    let file = match &args.dataset {
-        DatasetSpec::Carmen(f) | DatasetSpec::Rosbag(f) => f,
-        DatasetSpec::Thor(dir) => {
-            return thor_replay(dir, args.run, &args.out, quiet);
-        }
-        other => bail!(
-            "grid SLAM needs a lidar dataset (carmen:<file> or rosbag:<file.mcap>), not {}",
-            other.family()
-        ),
-    };
-    let path = resolve_log(file)?;
-    let (log, options) = lidar_log(
-        &args.dataset,
-        &path,
-        args.config.as_deref(),
-        &args.grid,
-        &args.bag,
-    )?;
+    if let DatasetSpec::Thor(dir) = &args.dataset {
+        return thor_replay(dir, args.run, &args.out, quiet);
+    }
+    let lidar = lidar_log(&args.dataset, args.config.as_deref(), &args.grid, &args.bag)?;
+    let (log, options) = (lidar.log, lidar.options);
     let clean = front_scans(&log);
     // Faults (`--faults`) go into a copy of the laser messages.
     let (faulty, faults) = match args.faults.filter(|f| !f.is_none()) {
@@ -355,20 +342,17 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
             )
         })?;
     pb.finish_and_clear();
-    let rel = super::relation_error_for(&path, args.grid.relations.as_deref(), &run)?;
-    let name = path
-        .file_name()
-        .map_or_else(|| file.clone(), |n| n.to_string_lossy().to_string());
+    let rel = super::relation_error_for(&lidar.path, args.grid.relations.as_deref(), &run)?;
     // Wall time: the whole replay (reading, filtering, metrics) before the files are written.
     let wall = start.elapsed().as_secs_f64();
     let metrics = with_reference(
-        metrics_json(&name, &run, &options, rel, faults.as_ref(), wall),
+        metrics_json(&lidar.name, &run, &options, rel, faults.as_ref(), wall),
         &run,
         &args.grid,
     )?;
     write_outputs(&args.out, &run, &options.config, &metrics, None)?;
     if let Some(gif) = &args.animate {
-        let title = format!("Grid SLAM: {name}");
+        let title = format!("Grid SLAM: {}", lidar.name);
         write_gif(
             gif,
             &Animation {
@@ -382,13 +366,50 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
             &animation,
         )?;
     }
-    report(quiet, &name, &metrics, &args.out);
+    report(quiet, &lidar.name, &metrics, &args.out);
     super::close_mcap(mcap, quiet)
 }
 
-/// The laser messages and grid settings of a lidar dataset at `path`: a CARMEN log, or a
-/// ROS 2 bag (its scans as laser messages, its lidar geometry).
+/// A lidar dataset read for a grid run.
+pub(crate) struct LidarLog {
+    /// The file, resolved.
+    pub path: PathBuf,
+    /// The name reports give it: the file's name.
+    pub name: String,
+    /// Its laser messages.
+    pub log: CarmenLog,
+    /// The grid settings for it.
+    pub options: GridRunOptions,
+}
+
+/// The lidar dataset `spec` (its file found by [`resolve_log`]): a CARMEN log, or a ROS 2
+/// bag (its scans as laser messages, its lidar geometry), with its grid settings.
 pub(crate) fn lidar_log(
+    spec: &DatasetSpec,
+    config: Option<&Path>,
+    grid: &GridOptions,
+    bag: &BagOptions,
+) -> Result<LidarLog> {
+    let (DatasetSpec::Carmen(file) | DatasetSpec::Rosbag(file)) = spec else {
+        bail!(
+            "a grid run needs a lidar dataset (carmen:<file> or rosbag:<file.mcap>), not {}",
+            spec.family()
+        );
+    };
+    let path = resolve_log(file)?;
+    let name = path
+        .file_name()
+        .map_or_else(|| file.to_string(), |n| n.to_string_lossy().to_string());
+    let (log, options) = read_lidar(spec, &path, config, grid, bag)?;
+    Ok(LidarLog {
+        path,
+        name,
+        log,
+        options,
+    })
+}
+
+fn read_lidar(
     spec: &DatasetSpec,
     path: &Path,
     config: Option<&Path>,

@@ -4,6 +4,7 @@
 //! is an error naming the file and the line number.
 
 pub mod carmen;
+pub mod map;
 pub mod mrclam;
 pub mod reference;
 pub mod rosbag;
