@@ -171,6 +171,31 @@ pub struct FaultReport {
     pub injected: FaultCounts,
 }
 
+/// One coin per fault, each falling with its rate.
+struct Coins {
+    drop: Bernoulli,
+    duplicate: Bernoulli,
+    reorder: Bernoulli,
+    nan: Bernoulli,
+    spike: Bernoulli,
+    backwards: Bernoulli,
+    stuck: Bernoulli,
+}
+
+impl Coins {
+    fn new(rates: &FaultRates) -> Self {
+        Self {
+            drop: coin(rates.drop),
+            duplicate: coin(rates.duplicate),
+            reorder: coin(rates.reorder),
+            nan: coin(rates.nan),
+            spike: coin(rates.spike),
+            backwards: coin(rates.backwards),
+            stuck: coin(rates.stuck),
+        }
+    }
+}
+
 fn coin(p: f64) -> Bernoulli {
     // Rates are validated to 0..=1 when parsed; clamp for rates built in code.
     Bernoulli::new(p.clamp(0.0, 1.0))
@@ -209,22 +234,42 @@ fn spike(kind: &mut EventKind<f64>) -> bool {
 
 /// Delivers `item`: swapped with the one before it when the previous draw asked for a
 /// swap (`swap_next`), otherwise a draw decides whether it will swap with the next one.
-fn push_maybe_swapped<T>(
-    out: &mut Vec<T>,
-    item: T,
-    swap_next: &mut bool,
-    reorder: &Bernoulli,
-    rng: &mut Xoshiro256PlusPlus,
-    counts: &mut FaultCounts,
-) {
-    out.push(item);
-    let n = out.len();
-    if *swap_next && n >= 2 {
-        out.swap(n - 2, n - 1);
-        counts.reordered += 1;
-        *swap_next = false;
-    } else if reorder.sample(rng) {
-        *swap_next = true;
+/// A fault injection under way: the coins, the generator they draw from, whether the next
+/// item swaps places with the one before, and the counts so far.
+struct Injection {
+    coins: Coins,
+    rng: Xoshiro256PlusPlus,
+    swap_next: bool,
+    counts: FaultCounts,
+}
+
+impl Injection {
+    fn new(rates: &FaultRates, seed: u64) -> Self {
+        Self {
+            coins: Coins::new(rates),
+            rng: Xoshiro256PlusPlus::seed_from_u64(seed),
+            swap_next: false,
+            counts: FaultCounts::default(),
+        }
+    }
+
+    /// Whether `coin` falls this time.
+    fn falls(&mut self, coin: fn(&Coins) -> &Bernoulli) -> bool {
+        coin(&self.coins).sample(&mut self.rng)
+    }
+
+    /// Delivers `item`: after the one before it when that one drew a swap (then counted),
+    /// and draws whether the next one swaps with it.
+    fn deliver<T>(&mut self, out: &mut Vec<T>, item: T) {
+        out.push(item);
+        let n = out.len();
+        if self.swap_next && n >= 2 {
+            out.swap(n - 2, n - 1);
+            self.counts.reordered += 1;
+            self.swap_next = false;
+        } else if self.coins.reorder.sample(&mut self.rng) {
+            self.swap_next = true;
+        }
     }
 }
 
@@ -236,41 +281,31 @@ pub fn inject(
     rates: &FaultRates,
     seed: u64,
 ) -> (Vec<Event<f64>>, FaultCounts) {
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let (drop, dup, reorder, nan, spk, back) = (
-        coin(rates.drop),
-        coin(rates.duplicate),
-        coin(rates.reorder),
-        coin(rates.nan),
-        coin(rates.spike),
-        coin(rates.backwards),
-    );
-    let mut counts = FaultCounts::default();
+    let mut f = Injection::new(rates, seed);
     let mut out = Vec::with_capacity(events.len() + events.len() / 8);
-    let mut swap_next = false;
     for event in events {
-        if drop.sample(&mut rng) {
-            counts.dropped += 1;
+        if f.falls(|c| &c.drop) {
+            f.counts.dropped += 1;
             continue;
         }
         let mut e = *event;
-        if nan.sample(&mut rng) && poison(&mut e.kind) {
-            counts.nan += 1;
+        if f.falls(|c| &c.nan) && poison(&mut e.kind) {
+            f.counts.nan += 1;
         }
-        if spk.sample(&mut rng) && spike(&mut e.kind) {
-            counts.spiked += 1;
+        if f.falls(|c| &c.spike) && spike(&mut e.kind) {
+            f.counts.spiked += 1;
         }
-        if back.sample(&mut rng) {
+        if f.falls(|c| &c.backwards) {
             e.stamp -= 1.0;
-            counts.backwards += 1;
+            f.counts.backwards += 1;
         }
-        push_maybe_swapped(&mut out, e, &mut swap_next, &reorder, &mut rng, &mut counts);
-        if dup.sample(&mut rng) {
+        f.deliver(&mut out, e);
+        if f.falls(|c| &c.duplicate) {
             out.push(e);
-            counts.duplicated += 1;
+            f.counts.duplicated += 1;
         }
     }
-    (out, counts)
+    (out, f.counts)
 }
 
 /// Beams a range spike covers (a reflection burst): that many consecutive ranges ×3.
@@ -288,40 +323,29 @@ pub fn inject_scans(
     rates: &FaultRates,
     seed: u64,
 ) -> (Vec<LaserMessage>, FaultCounts) {
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let (drop, dup, reorder, nan, spk, back, stuck) = (
-        coin(rates.drop),
-        coin(rates.duplicate),
-        coin(rates.reorder),
-        coin(rates.nan),
-        coin(rates.spike),
-        coin(rates.backwards),
-        coin(rates.stuck),
-    );
+    let mut f = Injection::new(rates, seed);
     let half = coin(0.5);
-    let mut counts = FaultCounts::default();
     let mut out: Vec<LaserMessage> = Vec::with_capacity(scans.len() + scans.len() / 8);
     // The previous delivered scan's ranges and how many NaNs were injected into them.
     let mut previous: Option<(Vec<f32>, usize)> = None;
-    let mut swap_next = false;
     for scan in scans {
-        if drop.sample(&mut rng) {
-            counts.dropped += 1;
+        if f.falls(|c| &c.drop) {
+            f.counts.dropped += 1;
             continue;
         }
         let mut m = (*scan).clone();
         let mut nan_ranges = 0;
-        if stuck.sample(&mut rng)
+        if f.falls(|c| &c.stuck)
             && let Some((r, injected)) = &previous
         {
             m.ranges.clone_from(r);
             nan_ranges = *injected;
-            counts.stuck += 1;
+            f.counts.stuck += 1;
         }
         let n = m.ranges.len();
-        if nan.sample(&mut rng) {
-            let beam = Uniform::new(0, n).map_or(0, |u| u.sample(&mut rng));
-            if half.sample(&mut rng) || n == 0 {
+        if f.falls(|c| &c.nan) {
+            let beam = Uniform::new(0, n).map_or(0, |u| u.sample(&mut f.rng));
+            if half.sample(&mut f.rng) || n == 0 {
                 m.odom[0] = f64::NAN;
             } else if let Some(r) = m.ranges.get_mut(beam)
                 && !r.is_nan()
@@ -329,33 +353,33 @@ pub fn inject_scans(
                 *r = f32::NAN;
                 nan_ranges += 1;
             }
-            counts.nan += 1;
+            f.counts.nan += 1;
         }
-        if spk.sample(&mut rng) && n > 0 {
-            let start = Uniform::new(0, n).map_or(0, |u| u.sample(&mut rng));
+        if f.falls(|c| &c.spike) && n > 0 {
+            let start = Uniform::new(0, n).map_or(0, |u| u.sample(&mut f.rng));
             for r in m.ranges.iter_mut().skip(start).take(SPIKE_BEAMS) {
                 *r *= 3.0;
             }
-            counts.spiked += 1;
+            f.counts.spiked += 1;
         }
-        if back.sample(&mut rng) {
+        if f.falls(|c| &c.backwards) {
             m.stamp -= 1.0;
-            counts.backwards += 1;
+            f.counts.backwards += 1;
         }
         previous = Some((m.ranges.clone(), nan_ranges));
         let nan_odometry = usize::from(m.odom.iter().any(|v| v.is_nan()));
-        let twice = dup.sample(&mut rng).then(|| m.clone());
-        counts.nan_odometry += nan_odometry;
-        counts.nan_ranges += nan_ranges;
-        push_maybe_swapped(&mut out, m, &mut swap_next, &reorder, &mut rng, &mut counts);
+        let twice = f.falls(|c| &c.duplicate).then(|| m.clone());
+        f.counts.nan_odometry += nan_odometry;
+        f.counts.nan_ranges += nan_ranges;
+        f.deliver(&mut out, m);
         if let Some(t) = twice {
             out.push(t);
-            counts.duplicated += 1;
-            counts.nan_odometry += nan_odometry;
-            counts.nan_ranges += nan_ranges;
+            f.counts.duplicated += 1;
+            f.counts.nan_odometry += nan_odometry;
+            f.counts.nan_ranges += nan_ranges;
         }
     }
-    (out, counts)
+    (out, f.counts)
 }
 
 #[cfg(test)]
