@@ -26,6 +26,20 @@ use embedded_hal::digital::OutputPin;
 use embedded_io::{Read, Write};
 use microslam::wire::{MAX_FRAME_LEN, Session, ToHost, encode_frame};
 
+/// Defines the binary's `HardFault` handler: log the faulting address (defmt) and halt
+/// with code 3 ([`board::halt`]). One handler for every binary of this package; each
+/// invokes the macro once at its top level.
+#[macro_export]
+macro_rules! hard_fault_halts {
+    () => {
+        #[cortex_m_rt::exception]
+        unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+            defmt::error!("HardFault at pc = {:#010x}", frame.pc());
+            $crate::board::halt(3)
+        }
+    };
+}
+
 /// Events between two toggles of the heartbeat LED.
 pub const HEARTBEAT_EVENTS: u32 = 64;
 

@@ -8,7 +8,7 @@
 #![no_std]
 #![no_main]
 
-use cortex_m_rt::{ExceptionFrame, entry, exception};
+use cortex_m_rt::entry;
 use firmware_example::config::{EKF_CONFIG, EKF_LANDMARKS, Ekf, GRID_SETUP, ZEROED_EKF_CONFIG};
 use firmware_example::{board, serve, stack};
 use microslam::wire::Session;
@@ -127,8 +127,4 @@ mod grid {
     }
 }
 
-#[exception]
-unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
-    defmt::error!("HardFault at pc = {:#010x}", frame.pc());
-    board::halt(3)
-}
+firmware_example::hard_fault_halts!();

@@ -13,8 +13,8 @@
 
 use core::fmt::Write;
 
-use cortex_m_rt::{ExceptionFrame, entry, exception};
-use firmware_example::board::{self, Serial};
+use cortex_m_rt::entry;
+use firmware_example::board::Serial;
 use firmware_example::cost::Ticks;
 use microslam::ekf::{EkfConfig, EkfSlam, UpdateOutcome, factor_len, state_dim};
 use microslam::sensors::range_bearing::RangeBearing;
@@ -130,8 +130,4 @@ fn main() -> ! {
     firmware_example::cost::run_and_halt(run)
 }
 
-#[exception]
-unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
-    defmt::error!("HardFault at pc = {:#010x}", frame.pc());
-    board::halt(3)
-}
+firmware_example::hard_fault_halts!();

@@ -17,8 +17,8 @@
 
 use core::fmt::Write;
 
-use cortex_m_rt::{ExceptionFrame, entry, exception};
-use firmware_example::board::{self, Serial};
+use cortex_m_rt::entry;
+use firmware_example::board::Serial;
 use firmware_example::cost::{BEAMS, LIDAR, Ticks, report_calibration};
 use microslam::geometry::Pose2;
 use microslam::grid::GridView;
@@ -217,8 +217,4 @@ fn main() -> ! {
     firmware_example::cost::run_and_halt(run)
 }
 
-#[exception]
-unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
-    defmt::error!("HardFault at pc = {:#010x}", frame.pc());
-    board::halt(3)
-}
+firmware_example::hard_fault_halts!();

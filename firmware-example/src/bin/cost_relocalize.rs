@@ -19,7 +19,7 @@ use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::peripheral::SYST;
 use cortex_m::peripheral::syst::SystClkSource;
-use cortex_m_rt::{ExceptionFrame, entry, exception};
+use cortex_m_rt::{entry, exception};
 use firmware_example::board::{self, Serial};
 use firmware_example::cost::{BEAMS, LIDAR, room_range};
 use microslam::geometry::Pose2;
@@ -209,8 +209,4 @@ fn main() -> ! {
     board::halt(code)
 }
 
-#[exception]
-unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
-    defmt::error!("HardFault at pc = {:#010x}", frame.pc());
-    board::halt(3)
-}
+firmware_example::hard_fault_halts!();
