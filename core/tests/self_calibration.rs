@@ -106,6 +106,40 @@ fn prediction_matches_the_dense_propagation_with_the_scale_jacobian() {
     assert!((slam.pose().theta - step.pose.theta).abs() < 1e-15);
 }
 
+/// 3000 steps of 0.1 s of a robot circling four landmarks with odometry `(0.2 m/s, 0.15
+/// rad/s)` while it truly moves at `scale` times that; every 5th step each landmark's
+/// exact sighting goes through `camera` (which may distort or drop it), then to the
+/// filter (a landmark's first sighting adds it).
+fn circle_among_landmarks(
+    slam: &mut Slam,
+    scale: (f64, f64),
+    camera: impl Fn(RangeBearing<f64>) -> Option<RangeBearing<f64>>,
+) {
+    let landmarks = [(2.0, 1.0), (-1.0, 2.5), (0.5, -2.0), (3.0, -1.0)];
+    let sensor = RangeBearingSensor::at_robot_origin();
+    let mut truth = Pose2::IDENTITY;
+    let (v, w, dt) = (0.2, 0.15, 0.1);
+    let mut seen = [None; 4];
+    for i in 0..3000 {
+        truth = integrate_velocity(&truth, scale.0 * v, scale.1 * w, dt).pose;
+        slam.predict_velocity(v, w, dt).unwrap();
+        if i % 5 != 0 {
+            continue;
+        }
+        for (j, &(x, y)) in landmarks.iter().enumerate() {
+            let Some(z) = camera(sensor.predict(&truth, &Vector2::new(x, y)).unwrap().z) else {
+                continue;
+            };
+            match seen[j] {
+                Some(index) => {
+                    slam.update(index, &z).unwrap();
+                }
+                None => seen[j] = Some(slam.add_landmark(&z).unwrap()),
+            }
+        }
+    }
+}
+
 /// A robot whose odometry reports 1/0.9 of its speed and 1/0.85 of its turn rate drives
 /// circles among four landmarks; the filter, told nothing of the errors, finds them.
 #[test]
@@ -117,27 +151,7 @@ fn the_factors_converge_to_the_true_scale_from_sightings() {
     let mut slam = Slam::new(config);
     slam.init(config, Pose2::IDENTITY).unwrap();
     slam.estimate_odometry_scale(0.1, 0.1).unwrap();
-    let landmarks = [(2.0, 1.0), (-1.0, 2.5), (0.5, -2.0), (3.0, -1.0)];
-    let sensor = RangeBearingSensor::at_robot_origin();
-    let mut truth = Pose2::IDENTITY;
-    let (v, w, dt) = (0.2, 0.15, 0.1);
-    let mut seen = [None; 4];
-    for i in 0..3000 {
-        truth = integrate_velocity(&truth, true_sv * v, true_sw * w, dt).pose;
-        slam.predict_velocity(v, w, dt).unwrap();
-        if i % 5 != 0 {
-            continue;
-        }
-        for (j, &(x, y)) in landmarks.iter().enumerate() {
-            let z = sensor.predict(&truth, &Vector2::new(x, y)).unwrap().z;
-            match seen[j] {
-                Some(index) => {
-                    slam.update(index, &z).unwrap();
-                }
-                None => seen[j] = Some(slam.add_landmark(&z).unwrap()),
-            }
-        }
-    }
+    circle_among_landmarks(&mut slam, (true_sv, true_sw), Some);
     let (sv, sw) = slam.odometry_scale().unwrap();
     assert!((sv - true_sv).abs() < 0.01, "speed scale {sv}");
     assert!((sw - true_sw).abs() < 0.01, "turn scale {sw}");
@@ -309,35 +323,14 @@ fn the_range_bias_converges_from_sightings() {
     let mut slam = Slam::new(config);
     slam.init(config, Pose2::IDENTITY).unwrap();
     slam.estimate_range_bias(0.2, 2.0).unwrap();
-    let landmarks = [(2.0, 1.0), (-1.0, 2.5), (0.5, -2.0), (3.0, -1.0)];
-    let sensor = RangeBearingSensor::at_robot_origin();
-    let mut truth = Pose2::IDENTITY;
-    let (v, w, dt) = (0.2, 0.15, 0.1);
-    let mut seen = [None; 4];
-    for i in 0..3000 {
-        truth = integrate_velocity(&truth, v, w, dt).pose;
-        slam.predict_velocity(v, w, dt).unwrap();
-        if i % 5 != 0 {
-            continue;
+    circle_among_landmarks(&mut slam, (1.0, 1.0), |mut z| {
+        // A camera's field of view: ±0.6 rad.
+        if z.bearing.abs() > 0.6 {
+            return None;
         }
-        for (j, &(x, y)) in landmarks.iter().enumerate() {
-            let mut z = sensor.predict(&truth, &Vector2::new(x, y)).unwrap().z;
-            // A camera's field of view: ±0.6 rad.
-            if z.bearing.abs() > 0.6 {
-                continue;
-            }
-            z.range += true_b0 + true_b2 * z.bearing * z.bearing;
-            if z.range < 0.5 {
-                continue;
-            }
-            match seen[j] {
-                Some(index) => {
-                    slam.update(index, &z).unwrap();
-                }
-                None => seen[j] = Some(slam.add_landmark(&z).unwrap()),
-            }
-        }
-    }
+        z.range += true_b0 + true_b2 * z.bearing * z.bearing;
+        (z.range >= 0.5).then_some(z)
+    });
     let (b0, b2) = slam.range_bias().unwrap();
     assert!((b0 - true_b0).abs() < 0.01, "offset {b0}");
     assert!((b2 - true_b2).abs() < 0.05, "curvature {b2}");

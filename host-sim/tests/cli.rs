@@ -1,10 +1,8 @@
 //! The command line as a user meets it.
 
-use std::process::Command;
+mod common;
 
-fn host_sim() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_host-sim"))
-}
+use common::{host_sim, succeeds};
 
 #[test]
 fn missing_datasets_folder_names_path_and_variable() {
@@ -37,17 +35,12 @@ fn sim_writes_every_output() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = dir.path().join("short.toml");
     std::fs::write(&cfg, "[scenario]\nduration_s = 20.0\n").unwrap();
-    let out = host_sim()
-        .args(["sim", "--seed", "3", "--quiet", "--config"])
-        .arg(&cfg)
-        .arg("--out")
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    succeeds(
+        host_sim()
+            .args(["sim", "--seed", "3", "--quiet", "--config"])
+            .arg(&cfg)
+            .arg("--out")
+            .arg(dir.path()),
     );
     for f in [
         "metrics.json",

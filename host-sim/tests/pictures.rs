@@ -1,8 +1,10 @@
 //! The pictures and the animation of a short simulator run, read back: labels where the
 //! axes and legends go, the truth and the estimate both visible, the GIF's frames.
 
+mod common;
+
+use common::{host_sim, succeeds};
 use std::path::Path;
-use std::process::Command;
 
 /// The estimate's colour (vermillion) and the truth's (blue), as docs/guide.md names them.
 const ESTIMATE: [u8; 3] = [213, 94, 0];
@@ -60,27 +62,22 @@ fn sim_pictures_are_labelled_and_the_animation_reads_back() {
     let cfg = dir.path().join("short.toml");
     std::fs::write(&cfg, "[scenario]\nduration_s = 20.0\n").expect("config");
     let gif_path = dir.path().join("slam.gif");
-    let out = Command::new(env!("CARGO_BIN_EXE_host-sim"))
-        .args([
-            "sim",
-            "--seed",
-            "3",
-            "--quiet",
-            "--grid-particles",
-            "32",
-            "--config",
-        ])
-        .arg(&cfg)
-        .arg("--out")
-        .arg(dir.path())
-        .arg("--animate")
-        .arg(&gif_path)
-        .output()
-        .expect("host-sim runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    succeeds(
+        host_sim()
+            .args([
+                "sim",
+                "--seed",
+                "3",
+                "--quiet",
+                "--grid-particles",
+                "32",
+                "--config",
+            ])
+            .arg(&cfg)
+            .arg("--out")
+            .arg(dir.path())
+            .arg("--animate")
+            .arg(&gif_path),
     );
     for name in [
         "map.png",

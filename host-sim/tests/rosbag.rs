@@ -2,6 +2,9 @@
 //! (`export-rosbag`) replays to the same trajectory as the log itself; bad bags are
 //! refused with the file and the topic named.
 
+mod common;
+
+use common::{host_sim, succeeds};
 use host_sim::domain::datasets::dataset_path;
 use host_sim::domain::grid::{GRID_BITMAP, GRID_CELLS, carmen_lidar};
 use host_sim::drivers::grid::{GridRunOptions, carmen_inputs, run_slam};
@@ -12,7 +15,6 @@ use host_sim::output::rosbag::{export, imu_schema, laser_scan_schema, odometry_s
 use microslam::geometry::Pose2;
 use microslam::pf::GridPfConfig;
 use std::path::Path;
-use std::process::Command;
 
 fn intel() -> Vec<LaserMessage> {
     let log = read_log(&dataset_path("intel/intel-raw-part.clf").expect("Intel log")).unwrap();
@@ -257,15 +259,7 @@ fn replay_and_localize_take_a_bag_and_write_an_mcap() {
     let bag = dir.path().join("part.mcap");
     export(&bag, &refs, &carmen_lidar(180), &BagOptions::default()).unwrap();
     let run = |args: &[&str]| {
-        let out = Command::new(env!("CARGO_BIN_EXE_host-sim"))
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        succeeds(host_sim().args(args));
     };
     let dataset = format!("rosbag:{}", bag.display());
     let out = dir.path().join("replay");

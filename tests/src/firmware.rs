@@ -66,35 +66,26 @@ pub fn synthetic_drive() -> Vec<ToDevice> {
         .collect();
     let (v, omega, dt) = (0.5f32, 0.5f32 / 3.0, 0.1f32);
     let (mut x, mut y, mut th) = (3.0f32, 0.0f32, core::f32::consts::FRAC_PI_2);
-    let mut out = Vec::new();
-    let mut seq = 0u32;
-    let mut next = || {
-        seq += 1;
-        seq
-    };
+    let mut out = Messages::default();
     let steps = 760;
     for k in 0..steps {
         let stamp_us = 1_000_000_000 + u64::from(k as u32) * 100_000;
         if k == steps / 2 {
-            out.push(ToDevice::Command {
-                seq: next(),
-                command: WireCommand::Reset { x, y, theta: th },
-            });
+            out.command(WireCommand::Reset { x, y, theta: th });
         }
         // Truth moves; odometry reports it with a bias.
         x += v * dt * (th + omega * dt / 2.0).cos();
         y += v * dt * (th + omega * dt / 2.0).sin();
         th += omega * dt;
         let kf = k as f32;
-        out.push(ToDevice::Odometry {
-            seq: next(),
+        out.odometry(
             stamp_us,
-            odometry: Odometry::Velocity {
+            Odometry::Velocity {
                 v: v * (1.0 + 0.03 * (0.07 * kf).sin()),
                 omega: omega + 0.01 * (0.11 * kf).cos(),
                 dt,
             },
-        });
+        );
         for (id, &(lx, ly)) in landmarks.iter().enumerate() {
             let (dx, dy) = (lx - x, ly - y);
             let range = (dx * dx + dy * dy).sqrt();
@@ -102,8 +93,8 @@ pub fn synthetic_drive() -> Vec<ToDevice> {
             bearing = bearing.sin().atan2(bearing.cos());
             if range < 4.0 && bearing.abs() < 1.05 && (k + id) % 3 == 0 {
                 let j = (k * 13 + id * 7) as f32;
-                out.push(ToDevice::Landmark {
-                    seq: next(),
+                out.0.push(ToDevice::Landmark {
+                    seq: out.seq(),
                     stamp_us: stamp_us + 50_000,
                     id: 100 + id as u32,
                     range: range + 0.05 * (0.37 * j).sin(),
@@ -112,11 +103,7 @@ pub fn synthetic_drive() -> Vec<ToDevice> {
             }
         }
     }
-    out.push(ToDevice::Command {
-        seq: next(),
-        command: WireCommand::ReportStatus,
-    });
-    out
+    out.finish()
 }
 
 /// `bytes` with line noise inserted every `every` frames: a run of junk (no delimiter
@@ -170,21 +157,7 @@ pub const GRID_DRIVE_BEAMS: usize = 90;
 pub fn synthetic_lidar_drive(steps: usize) -> (Vec<ToDevice>, usize) {
     let (v, omega, dt) = (0.3f32, 0.2f32, 0.1f32);
     let (mut x, mut y, mut th) = (1.5f32, 0.0f32, core::f32::consts::FRAC_PI_2);
-    let mut seq = 0u32;
-    let mut next = || {
-        seq += 1;
-        seq
-    };
-    let mut out = vec![
-        ToDevice::Command {
-            seq: next(),
-            command: WireCommand::SelectEstimator(EstimatorKind::Grid),
-        },
-        ToDevice::Command {
-            seq: next(),
-            command: WireCommand::Reset { x, y, theta: th },
-        },
-    ];
+    let mut out = Messages::grid_from(x, y, th);
     let mut scans = 0;
     let increment = core::f32::consts::TAU / GRID_DRIVE_BEAMS as f32;
     for k in 0..steps {
@@ -200,18 +173,13 @@ pub fn synthetic_lidar_drive(steps: usize) -> (Vec<ToDevice>, usize) {
                     }
                 })
                 .collect();
-            for (c, chunk) in ranges.chunks(SCAN_CHUNK_BEAMS).enumerate() {
-                out.push(ToDevice::Scan(ScanChunk {
-                    seq: next(),
-                    stamp_us,
-                    scan_id: scans as u16,
-                    beam_offset: (c * SCAN_CHUNK_BEAMS) as u16,
-                    beam_total: GRID_DRIVE_BEAMS as u16,
-                    angle_min: -core::f32::consts::PI,
-                    angle_increment: increment,
-                    ranges_mm: heapless::Vec::from_slice(chunk).unwrap_or_default(),
-                }));
-            }
+            out.scan(
+                stamp_us,
+                scans as u16,
+                &ranges,
+                -core::f32::consts::PI,
+                increment,
+            );
             scans += 1;
         }
         x += v * dt * (th + omega * dt / 2.0).cos();
@@ -243,17 +211,9 @@ pub fn synthetic_lidar_drive(steps: usize) -> (Vec<ToDevice>, usize) {
                 dt,
             },
         };
-        out.push(ToDevice::Odometry {
-            seq: next(),
-            stamp_us: stamp_us + 50_000,
-            odometry,
-        });
+        out.odometry(stamp_us + 50_000, odometry);
     }
-    out.push(ToDevice::Command {
-        seq: next(),
-        command: WireCommand::ReportStatus,
-    });
-    (out, scans)
+    (out.finish(), scans)
 }
 
 /// The simulator's lidar world (`host_sim::inputs::sim::lidar_world`, seed `seed`) as wire frames
@@ -269,25 +229,7 @@ pub fn lidar_world_messages(laps: u32, seed: u64) -> (Vec<ToDevice>, Vec<[f64; 3
     world.laps = laps;
     let rec = simulate(&world, seed).expect("the office world simulates");
     let start = world.start_pose();
-    let mut seq = 0u32;
-    let mut next = || {
-        seq += 1;
-        seq
-    };
-    let mut out = vec![
-        ToDevice::Command {
-            seq: next(),
-            command: WireCommand::SelectEstimator(EstimatorKind::Grid),
-        },
-        ToDevice::Command {
-            seq: next(),
-            command: WireCommand::Reset {
-                x: start.x as f32,
-                y: start.y as f32,
-                theta: start.theta as f32,
-            },
-        },
-    ];
+    let mut out = Messages::grid_from(start.x as f32, start.y as f32, start.theta as f32);
     let max_mm = world.lidar.max_range_m * 1000.0;
     let mut last = rec.scans.first().map(|s| s.odometry);
     let mut truth = Vec::new();
@@ -298,15 +240,14 @@ pub fn lidar_world_messages(laps: u32, seed: u64) -> (Vec<ToDevice>, Vec<[f64; 3
             let (dx, dy) = (scan.odometry.x - prev.x, scan.odometry.y - prev.y);
             let dth = scan.odometry.theta - prev.theta;
             if k > 0 {
-                out.push(ToDevice::Odometry {
-                    seq: next(),
+                out.odometry(
                     stamp_us,
-                    odometry: Odometry::Increment {
+                    Odometry::Increment {
                         dx: (c * dx + s * dy) as f32,
                         dy: (-s * dx + c * dy) as f32,
                         dtheta: dth.sin().atan2(dth.cos()) as f32,
                     },
-                });
+                );
             }
         }
         last = Some(scan.odometry);
@@ -322,25 +263,16 @@ pub fn lidar_world_messages(laps: u32, seed: u64) -> (Vec<ToDevice>, Vec<[f64; 3
                 }
             })
             .collect();
-        for (c, chunk) in ranges.chunks(SCAN_CHUNK_BEAMS).enumerate() {
-            out.push(ToDevice::Scan(ScanChunk {
-                seq: next(),
-                stamp_us,
-                scan_id: k as u16,
-                beam_offset: (c * SCAN_CHUNK_BEAMS) as u16,
-                beam_total: ranges.len() as u16,
-                angle_min: rec.lidar.first_angle,
-                angle_increment: rec.lidar.angle_increment,
-                ranges_mm: heapless::Vec::from_slice(chunk).unwrap_or_default(),
-            }));
-        }
+        out.scan(
+            stamp_us,
+            k as u16,
+            &ranges,
+            rec.lidar.first_angle,
+            rec.lidar.angle_increment,
+        );
         truth.push([scan.truth.x, scan.truth.y, scan.truth.theta]);
     }
-    out.push(ToDevice::Command {
-        seq: next(),
-        command: WireCommand::ReportStatus,
-    });
-    (out, truth)
+    (out.finish(), truth)
 }
 
 /// The localizer firmware ELF (built with `MICROSLAM_MAP`): `$LOCALIZER_ELF`, else
@@ -370,4 +302,67 @@ pub fn elf_with_corrupt_map(elf: &Path, image: &[u8], out: &Path) -> Option<()> 
     let at = bytes.windows(image.len()).position(|w| w == image)?;
     bytes[at + image.len() / 2] ^= 0x5a;
     std::fs::write(out, bytes).ok()
+}
+
+/// The messages of a drive as they are written, numbered from 1 in order.
+#[derive(Default)]
+struct Messages(Vec<ToDevice>);
+
+impl Messages {
+    /// Select the grid estimator and reset it to `(x, y, theta)`.
+    fn grid_from(x: f32, y: f32, theta: f32) -> Self {
+        let mut m = Self::default();
+        m.command(WireCommand::SelectEstimator(EstimatorKind::Grid));
+        m.command(WireCommand::Reset { x, y, theta });
+        m
+    }
+
+    /// The next message's sequence number.
+    fn seq(&self) -> u32 {
+        self.0.len() as u32 + 1
+    }
+
+    fn command(&mut self, command: WireCommand) {
+        self.0.push(ToDevice::Command {
+            seq: self.seq(),
+            command,
+        });
+    }
+
+    fn odometry(&mut self, stamp_us: u64, odometry: Odometry) {
+        self.0.push(ToDevice::Odometry {
+            seq: self.seq(),
+            stamp_us,
+            odometry,
+        });
+    }
+
+    /// Scan `scan_id` in chunks of [`SCAN_CHUNK_BEAMS`] (0 mm: no return).
+    fn scan(
+        &mut self,
+        stamp_us: u64,
+        scan_id: u16,
+        ranges: &[u16],
+        angle_min: f32,
+        angle_increment: f32,
+    ) {
+        for (c, chunk) in ranges.chunks(SCAN_CHUNK_BEAMS).enumerate() {
+            self.0.push(ToDevice::Scan(ScanChunk {
+                seq: self.seq(),
+                stamp_us,
+                scan_id,
+                beam_offset: (c * SCAN_CHUNK_BEAMS) as u16,
+                beam_total: ranges.len() as u16,
+                angle_min,
+                angle_increment,
+                ranges_mm: heapless::Vec::from_slice(chunk).unwrap_or_default(),
+            }));
+        }
+    }
+
+    /// A status request at the end; the messages.
+    fn finish(mut self) -> Vec<ToDevice> {
+        self.command(WireCommand::ReportStatus);
+        self.0
+    }
 }

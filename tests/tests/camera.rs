@@ -22,13 +22,6 @@ fn centred_camera() -> SimCamera {
     cam
 }
 
-const NO_NOISE: DetectionNoise<f64> = DetectionNoise {
-    u_std: 0.0,
-    v_std: 0.0,
-    depth_std: 0.0,
-    depth_std_per_m2: 0.0,
-};
-
 #[test]
 fn pitched_camera_optical_axis_meets_the_floor_where_trigonometry_says() {
     let cam = centred_camera();
@@ -171,7 +164,10 @@ fn signs_in_rendered_frames_give_true_range_and_ccw_bearing() {
         let mount = cam.camera.mount;
         for sign in &room.signs {
             let (u, v, depth) = detect(&frame, sign.id).expect("sign in view");
-            let got = cam.camera.sighting(u, v, depth, &NO_NOISE).unwrap();
+            let got = cam
+                .camera
+                .sighting(u, v, depth, &DetectionNoise::NONE)
+                .unwrap();
             // Truth: from the camera's planar position to the sign, relative to the
             // camera's planar heading (robot heading + mount yaw), CCW positive.
             let (s, c) = pose.theta.sin_cos();

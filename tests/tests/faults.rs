@@ -3,9 +3,9 @@
 //! corrupted reading, and the accuracy degrades gracefully. Bounds are the measured
 //! figures (docs/reliability.md) plus a small margin.
 
+use host_sim::domain::AssociationMode;
 use host_sim::domain::config::Settings;
 use host_sim::domain::recording::Recording;
-use host_sim::domain::{AssociationMode, Precision};
 use host_sim::inputs::faults::{FaultRates, inject};
 use host_sim::inputs::readers::{self, DatasetSpec};
 use host_sim::metrics::{Metrics, evaluate};
@@ -18,14 +18,7 @@ fn run_with(rates: &str) -> (Metrics, host_sim::inputs::faults::FaultCounts) {
     rec.events = events;
     let settings =
         Settings::load_for("mrclam", None, Some(AssociationMode::Known)).expect("settings");
-    let run = host_sim::drivers::ekf::replay(
-        &rec,
-        &settings,
-        AssociationMode::Known,
-        Precision::F64,
-        None,
-    )
-    .expect("the replay completes whatever was injected");
+    let run = microslam_replay_tests::replay_known_f64(&rec, &settings);
     (evaluate(&rec, &run), injected)
 }
 

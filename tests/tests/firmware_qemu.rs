@@ -6,7 +6,7 @@
 
 use std::time::Duration;
 
-use microslam::wire::{EstimatorKind, StepResult, ToDevice, ToHost};
+use microslam::wire::{EstimatorKind, Status, StepResult, ToDevice, ToHost};
 use microslam_replay_tests::firmware::{
     QemuRun, encode_all, firmware_elf, host_replies, lidar_world_messages, run_in_qemu,
     synthetic_drive, synthetic_lidar_drive, with_line_noise,
@@ -23,6 +23,20 @@ fn bits(reply: &ToHost) -> Vec<u8> {
     }
     let mut buf = [0u8; 256];
     postcard::to_slice(&r, &mut buf).expect("fits").to_vec()
+}
+
+/// The last reply, which answers the drive's closing status request: its sequence
+/// number, the device's counters and its stack peak.
+fn final_status(replies: &[ToHost]) -> (u32, &Status, u32) {
+    match replies.last() {
+        Some(ToHost::Status {
+            seq,
+            status,
+            stack_peak_bytes,
+            ..
+        }) => (*seq, status, *stack_peak_bytes),
+        other => panic!("last reply is not a status: {other:?}"),
+    }
 }
 
 /// `path`, after checking that it was built.
@@ -83,20 +97,12 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_a_synthetic_drive() {
         run.elapsed.as_secs_f64()
     );
     // The last reply answers the status request: device counters and its stack peak.
-    let Some(ToHost::Status {
-        seq,
-        status,
-        stack_peak_bytes,
-        ..
-    }) = run.replies.last()
-    else {
-        panic!("last reply is not a status");
-    };
-    assert_eq!(*seq, messages.last().map(ToDevice::seq).unwrap_or(0));
+    let (seq, status, stack_peak_bytes) = final_status(&run.replies);
+    assert_eq!(seq, messages.last().map(ToDevice::seq).unwrap_or(0));
     assert_eq!(status.frames_bad, noise, "every noise burst counted once");
     assert_eq!(status.frames_ok as usize, messages.len());
     println!("firmware stack peak: {stack_peak_bytes} bytes");
-    assert!(*stack_peak_bytes > 0);
+    assert!(stack_peak_bytes > 0);
 }
 
 /// MRCLAM dataset 6, robot 1 (62 k odometry samples, 1.9 k sightings of 15 landmarks with
@@ -137,14 +143,7 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_mrclam_dataset6() {
     assert_eq!(comparison.max_pose_difference, [0.0; 3]);
     let out = elf.with_extension("mrclam6.tum");
     std::fs::write(&out, host_sim::commands::hil::tum(&run.replies)).expect("trajectory written");
-    let Some(ToHost::Status {
-        status,
-        stack_peak_bytes,
-        ..
-    }) = run.replies.last()
-    else {
-        panic!("last reply is not a status");
-    };
+    let (_, status, stack_peak_bytes) = final_status(&run.replies);
     println!(
         "status: {status:?}, stack peak {stack_peak_bytes} bytes; trajectory in {}",
         out.display()
@@ -193,14 +192,7 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_a_lidar_drive() {
         run.replies.len(),
         run.elapsed.as_secs_f64()
     );
-    let Some(ToHost::Status {
-        status,
-        stack_peak_bytes,
-        ..
-    }) = run.replies.last()
-    else {
-        panic!("last reply is not a status");
-    };
+    let (_, status, stack_peak_bytes) = final_status(&run.replies);
     println!("grid status: {status:?}");
     println!("firmware stack peak with grid: {stack_peak_bytes} bytes");
 }
@@ -246,15 +238,9 @@ fn firmware_in_qemu_equals_host_bit_for_bit_in_the_lidar_world() {
             e.pose[0], e.pose[1], t[0], t[1]
         );
     }
-    if let Some(ToHost::Status {
-        status,
-        stack_peak_bytes,
-        ..
-    }) = run.replies.last()
-    {
-        println!("lidar world status: {status:?}");
-        println!("firmware stack peak with grid: {stack_peak_bytes} bytes");
-    }
+    let (_, status, stack_peak_bytes) = final_status(&run.replies);
+    println!("lidar world status: {status:?}");
+    println!("firmware stack peak with grid: {stack_peak_bytes} bytes");
 }
 
 /// `host-sim hil --dataset-settings`: the dataset's tuned EKF settings go first, as a
@@ -347,12 +333,7 @@ fn localizer_firmware_in_qemu_equals_host_bit_for_bit_on_intel() {
         run.replies.len(),
         run.elapsed.as_secs_f64()
     );
-    let Some(ToHost::Status {
-        stack_peak_bytes, ..
-    }) = run.replies.last()
-    else {
-        panic!("last reply is not a status");
-    };
+    let (_, _, stack_peak_bytes) = final_status(&run.replies);
     println!("firmware stack peak with localizer: {stack_peak_bytes} bytes");
 }
 

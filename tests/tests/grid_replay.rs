@@ -7,8 +7,8 @@
 use host_sim::domain::datasets::dataset_path;
 use host_sim::domain::grid::carmen_lidar;
 use host_sim::domain::grid::{GRID_BITMAP, GRID_CELLS};
-use host_sim::drivers::grid::{GridRunOptions, carmen_inputs, run_localizer, run_slam};
-use host_sim::inputs::readers::carmen::{front_scans, read_log};
+use host_sim::drivers::grid::{GridRun, GridRunOptions, carmen_inputs, run_localizer, run_slam};
+use host_sim::inputs::readers::carmen::{LaserMessage, front_scans, read_log};
 use host_sim::metrics::relations::{self, relation_error};
 use microslam::geometry::Pose2;
 use microslam::grid::GridView;
@@ -26,6 +26,28 @@ fn intel() -> (
     (log, rels)
 }
 
+/// Grid SLAM on the Intel log's `scans` from the origin with `particles` particles,
+/// `config` and the log's 180-beam lidar; the options with the run.
+fn intel_slam(
+    scans: &[&LaserMessage],
+    particles: usize,
+    config: GridPfConfig,
+) -> (GridRunOptions, GridRun) {
+    let options = GridRunOptions {
+        particles,
+        config,
+        lidar: carmen_lidar(180),
+    };
+    let run = run_slam::<GRID_CELLS, GRID_BITMAP>(
+        &carmen_inputs(scans),
+        Pose2::IDENTITY,
+        &options,
+        &|_| {},
+    )
+    .expect("the run completes");
+    (options, run)
+}
+
 #[test]
 fn intel_log_is_read_in_file_order() {
     let (log, rels) = intel();
@@ -41,18 +63,7 @@ fn intel_log_is_read_in_file_order() {
 #[test]
 fn intel_grid_slam_relation_error() {
     let (log, rels) = intel();
-    let options = GridRunOptions {
-        particles: 200,
-        config: GridPfConfig::DEFAULT,
-        lidar: carmen_lidar(180),
-    };
-    let run = run_slam::<GRID_CELLS, GRID_BITMAP>(
-        &carmen_inputs(&front_scans(&log)),
-        Pose2::IDENTITY,
-        &options,
-        &|_| {},
-    )
-    .expect("run");
+    let (options, run) = intel_slam(&front_scans(&log), 200, GridPfConfig::DEFAULT);
     let e = relation_error(&run, &rels);
     println!("P=200, 180 beams: {e:?}");
     assert_eq!(e.used, 1030);
@@ -89,18 +100,7 @@ fn intel_grid_slam_microcontroller_settings() {
     let (log, rels) = intel();
     let mut config = GridPfConfig::MICROCONTROLLER;
     config.beam_decimation = 2;
-    let options = GridRunOptions {
-        particles: 32,
-        config,
-        lidar: carmen_lidar(180),
-    };
-    let run = run_slam::<GRID_CELLS, GRID_BITMAP>(
-        &carmen_inputs(&front_scans(&log)),
-        Pose2::IDENTITY,
-        &options,
-        &|_| {},
-    )
-    .expect("run");
+    let (_, run) = intel_slam(&front_scans(&log), 32, config);
     let e = relation_error(&run, &rels);
     println!("P=32, 90 beams: {e:?}");
     assert_eq!(e.used, 1030);
@@ -112,23 +112,12 @@ fn intel_grid_slam_with_faults_refuses_exactly_what_was_injected() {
     // `host-sim replay --faults all=0.01` on the Intel log: drops, duplicates, swaps,
     // NaN odometry and ranges, range spikes, a stuck lidar, stamps one second back.
     let (log, rels) = intel();
-    let options = GridRunOptions {
-        particles: 200,
-        config: GridPfConfig::DEFAULT,
-        lidar: carmen_lidar(180),
-    };
     let clean = front_scans(&log);
     let rates: host_sim::inputs::faults::FaultRates = "all=0.01".parse().expect("rates");
     let (faulty, injected) = host_sim::inputs::faults::inject_scans(&clean, &rates, 1);
     assert!(injected.total() > 300 && injected.stuck > 0, "{injected:?}");
     let scans: Vec<_> = faulty.iter().collect();
-    let run = run_slam::<GRID_CELLS, GRID_BITMAP>(
-        &carmen_inputs(&scans),
-        Pose2::IDENTITY,
-        &options,
-        &|_| {},
-    )
-    .expect("the run completes");
+    let (_, run) = intel_slam(&scans, 200, GridPfConfig::DEFAULT);
     // The log itself has no NaN: every refusal is an injected fault, and every injected
     // NaN (with the copies made by duplication and the stuck lidar) is refused.
     assert_eq!(run.refused_odometry, injected.nan_odometry, "{injected:?}");

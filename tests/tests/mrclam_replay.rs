@@ -155,14 +155,7 @@ fn self_calibrated_settings_hold_robot3_without_supervision() {
     let mut settings = Settings::load_for("mrclam", None, Some(AssociationMode::Known)).unwrap();
     settings.recovery = host_sim::domain::config::RecoverySettings::default();
     let rec = recording(3);
-    let run = host_sim::drivers::ekf::replay(
-        rec,
-        &settings,
-        AssociationMode::Known,
-        Precision::F64,
-        None,
-    )
-    .unwrap();
+    let run = microslam_replay_tests::replay_known_f64(rec, &settings);
     let m = evaluate(rec, &run);
     assert!(se2(&m.ate_rmse_m) < bound(0.1619), "{m:?}");
     assert!(m.counts.gated < 10, "{:?}", m.counts);
@@ -176,14 +169,7 @@ fn without_supervision_robot3_locks_out() {
     let mut settings = uncalibrated();
     settings.recovery = host_sim::domain::config::RecoverySettings::default();
     let rec = recording(3);
-    let run = host_sim::drivers::ekf::replay(
-        rec,
-        &settings,
-        AssociationMode::Known,
-        Precision::F64,
-        None,
-    )
-    .unwrap();
+    let run = microslam_replay_tests::replay_known_f64(rec, &settings);
     let m = evaluate(rec, &run);
     assert!(se2(&m.ate_rmse_m) > 2.0, "{m:?}");
     assert!(m.counts.gated > 1000, "{:?}", m.counts);
@@ -197,14 +183,7 @@ fn recovery_alone_reacquires_robot3() {
     let mut settings = uncalibrated();
     settings.recovery.huber_sigma = 0.0;
     let rec = recording(3);
-    let run = host_sim::drivers::ekf::replay(
-        rec,
-        &settings,
-        AssociationMode::Known,
-        Precision::F64,
-        None,
-    )
-    .unwrap();
+    let run = microslam_replay_tests::replay_known_f64(rec, &settings);
     let m = evaluate(rec, &run);
     assert_eq!(m.counts.recoveries, 1, "{:?}", m.counts);
     assert!(se2(&m.ate_rmse_m) < bound(0.2045), "{m:?}");

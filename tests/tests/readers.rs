@@ -2,7 +2,7 @@
 //! names the file and the line number.
 
 use host_sim::inputs::readers::{self, DatasetSpec, mrclam};
-use microslam::event::{EventKind, Identity};
+use microslam::event::EventKind;
 use std::path::Path;
 
 fn dataset6() -> std::path::PathBuf {
@@ -18,17 +18,7 @@ fn dataset6_robot1_events_are_time_ordered_and_robots_dropped() {
         .iter()
         .filter(|e| matches!(e.kind, EventKind::Velocity { .. }))
         .count();
-    let sightings: Vec<u32> = rec
-        .events
-        .iter()
-        .filter_map(|e| match e.kind {
-            EventKind::Sighting(s) => match s.identity {
-                Identity::Unique(id) => Some(id),
-                _ => None,
-            },
-            _ => None,
-        })
-        .collect();
+    let sightings: Vec<u32> = rec.sighted_ids().collect();
     // Line counts of the files minus their 4 header lines.
     assert_eq!(odometry, 61_789 - 4);
     // 1942 sightings: 407 of robots (barcodes 14, 41, 32, 23) and 1 of barcode 43,

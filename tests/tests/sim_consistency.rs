@@ -4,7 +4,6 @@
 use host_sim::domain::config::Settings;
 use host_sim::domain::{AssociationMode, Precision};
 use host_sim::metrics::evaluate;
-use microslam::event::{EventKind, Identity};
 use microslam::gate::chi_square_quantile;
 use std::collections::BTreeSet;
 
@@ -20,14 +19,7 @@ fn pose_nees_inside_the_chi_square_band() {
     let mut worst_landmarks = 0.0f64;
     for seed in 1..=RUNS {
         let rec = host_sim::inputs::sim::simulate(&settings, seed).unwrap();
-        let run = host_sim::drivers::ekf::replay(
-            &rec,
-            &settings,
-            AssociationMode::Known,
-            Precision::F64,
-            None,
-        )
-        .unwrap();
+        let run = microslam_replay_tests::replay_known_f64(&rec, &settings);
         let m = evaluate(&rec, &run);
         sum += m.nees_pose_mean.unwrap();
         let landmarks = m.landmark_rmse_m.se2.unwrap();
@@ -61,17 +53,7 @@ fn jcbb_on_the_simulator_finds_every_landmark() {
     }
     let rec = host_sim::inputs::sim::simulate(&settings, 1).unwrap();
     // The landmarks the robot saw: the simulator's ids, which JCBB does not get to use.
-    let seen: BTreeSet<u32> = rec
-        .events
-        .iter()
-        .filter_map(|e| match e.kind {
-            EventKind::Sighting(s) => match s.identity {
-                Identity::Unique(id) => Some(id),
-                _ => None,
-            },
-            _ => None,
-        })
-        .collect();
+    let seen: BTreeSet<u32> = rec.sighted_ids().collect();
     assert!(seen.len() > 5, "{seen:?}");
     let run = host_sim::drivers::ekf::replay(
         &rec,

@@ -75,6 +75,20 @@ fn known_pose_is_found_from_a_simulated_scan() {
 }
 
 /// Runs a localizer over scans `from..to` of `sim` (odometry between them).
+/// A localizer with 64 particles and the default settings on `map`, given no pose: lost,
+/// its global search pending.
+fn lost_on<'m>(map: &'m Grid, layers: MaxPoolLayers<'m>) -> GridLocalizer<'m, 64, 180> {
+    let loc = GridLocalizer::<64, 180>::without_pose(
+        map.view(),
+        GridPfConfig::DEFAULT,
+        layers,
+        RelocalizationConfig::DEFAULT,
+    )
+    .unwrap();
+    assert_eq!(loc.state(), LocalizerState::Lost);
+    loc
+}
+
 fn drive<const P: usize>(loc: &mut GridLocalizer<'_, P, 180>, sim: &Sim, from: usize, to: usize) {
     for i in from..to {
         if i > from {
@@ -91,14 +105,7 @@ fn global_localization_converges_within_ten_scans() {
     let layers = MaxPoolLayers::from_bytes(&layers).unwrap();
     let sim = simulate(7);
     for start in (0..sim.scans.len() - 10).step_by(29) {
-        let mut loc = GridLocalizer::<64, 180>::without_pose(
-            map.view(),
-            GridPfConfig::DEFAULT,
-            layers,
-            RelocalizationConfig::DEFAULT,
-        )
-        .unwrap();
-        assert_eq!(loc.state(), LocalizerState::Lost);
+        let mut loc = lost_on(&map, layers);
         drive(&mut loc, &sim, start, start + 10);
         let (pose, truth) = (loc.pose(), sim.truth[start + 9]);
         std::println!("start {start}: {pose:?} truth {truth:?} {:?}", loc.status());
@@ -222,14 +229,7 @@ fn a_reset_to_a_given_pose_clears_the_lost_state() {
     let (map, layers) = room_map();
     let layers = MaxPoolLayers::from_bytes(&layers).unwrap();
     let sim = simulate(7);
-    let mut loc = GridLocalizer::<64, 180>::without_pose(
-        map.view(),
-        GridPfConfig::DEFAULT,
-        layers,
-        RelocalizationConfig::DEFAULT,
-    )
-    .unwrap();
-    assert_eq!(loc.state(), LocalizerState::Lost);
+    let mut loc = lost_on(&map, layers);
     assert!(loc.status().search_pending);
     // The pose is given: tracking, and the next scan runs no global search.
     loc.reset_around(sim.truth[0], 0.0, 0.0).unwrap();

@@ -178,6 +178,16 @@ pub struct DetectionNoise<T> {
     pub depth_std_per_m2: T,
 }
 
+impl DetectionNoise<f64> {
+    /// A detector without noise: a sighting's geometry alone (simulations, tests).
+    pub const NONE: Self = Self {
+        u_std: 0.0,
+        v_std: 0.0,
+        depth_std: 0.0,
+        depth_std_per_m2: 0.0,
+    };
+}
+
 /// A range-bearing sighting with its covariance, ready for the EKF.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CameraSighting<T: Real> {
@@ -475,19 +485,7 @@ mod tests {
         let (u, v, depth) = cam.robot_to_pixel(&Vector3::new(3.0, 1.0, 0.3)).unwrap();
         assert!(u < cam.intrinsics.cx);
         let seed_theta = libm::atan((u - cam.intrinsics.cx) / cam.intrinsics.fx);
-        let ours = cam
-            .sighting(
-                u,
-                v,
-                depth,
-                &DetectionNoise {
-                    u_std: 0.0,
-                    v_std: 0.0,
-                    depth_std: 0.0,
-                    depth_std_per_m2: 0.0,
-                },
-            )
-            .unwrap();
+        let ours = cam.sighting(u, v, depth, &DetectionNoise::NONE).unwrap();
         assert!(seed_theta < 0.0 && ours.z.bearing > 0.0);
         assert!(
             (seed_theta + ours.z.bearing).abs() < 1e-12,
@@ -504,17 +502,7 @@ mod tests {
             let (u, v, d) = (200.0, 300.0, 2.5);
             let f = |x: &DVector<f64>| {
                 let s = cam
-                    .sighting(
-                        x[0],
-                        x[1],
-                        x[2],
-                        &DetectionNoise {
-                            u_std: 0.0,
-                            v_std: 0.0,
-                            depth_std: 0.0,
-                            depth_std_per_m2: 0.0,
-                        },
-                    )
+                    .sighting(x[0], x[1], x[2], &DetectionNoise::NONE)
                     .unwrap();
                 s.z.to_vector()
             };

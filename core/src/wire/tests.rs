@@ -95,6 +95,19 @@ fn body_of<M: serde::Serialize>(m: &M) -> std::vec::Vec<u8> {
     postcard::to_slice(m, &mut buf).unwrap().to_vec()
 }
 
+/// `body` framed by hand as a sender would, whatever it holds: its CRC appended, COBS
+/// encoded, the delimiter.
+fn framed(body: &[u8]) -> std::vec::Vec<u8> {
+    let mut body = body.to_vec();
+    let crc = crc::Crc::<u16>::new(&crc::CRC_16_IBM_SDLC).checksum(&body);
+    body.extend_from_slice(&crc.to_le_bytes());
+    let mut enc = vec![0u8; body.len() + body.len() / 254 + 2];
+    let n = cobs::encode(&body, &mut enc);
+    enc.truncate(n);
+    enc.push(0);
+    enc
+}
+
 fn frame_of<M: serde::Serialize>(m: &M) -> std::vec::Vec<u8> {
     let mut buf = [0u8; MAX_FRAME_LEN];
     encode_frame(m, &mut buf).unwrap().to_vec()
@@ -206,34 +219,14 @@ fn truncated_oversize_and_unknown_frames_are_counted_by_kind() {
     dec.feed::<ToDevice>(&[0x55; 3 * MAX_FRAME_LEN], |r| out.push(r));
     dec.feed::<ToDevice>(&[0], |r| out.push(r));
     // A well-framed body with a variant this side does not know (tag 200).
-    let mut body = std::vec::Vec::from(&[200u8, 1, 2, 3][..]);
-    let crc = crc::Crc::<u16>::new(&crc::CRC_16_IBM_SDLC).checksum(&body);
-    body.extend_from_slice(&crc.to_le_bytes());
-    let mut enc = vec![0u8; 16];
-    let n = cobs::encode(&body, &mut enc);
-    enc.truncate(n);
-    enc.push(0);
-    dec.feed::<ToDevice>(&enc, |r| out.push(r));
+    dec.feed::<ToDevice>(&framed(&[200u8, 1, 2, 3]), |r| out.push(r));
     // The same message with a trailing byte: also unknown.
     let payload = body_of(&samples()[1]);
     let mut body = payload.to_vec();
     body.push(9);
-    let crc = crc::Crc::<u16>::new(&crc::CRC_16_IBM_SDLC).checksum(&body);
-    body.extend_from_slice(&crc.to_le_bytes());
-    let mut enc = vec![0u8; 64];
-    let n = cobs::encode(&body, &mut enc);
-    enc.truncate(n);
-    enc.push(0);
-    dec.feed::<ToDevice>(&enc, |r| out.push(r));
+    dec.feed::<ToDevice>(&framed(&body), |r| out.push(r));
     // A message whose body ends early but whose CRC is right (a buggy sender).
-    let mut body = payload[..payload.len() - 3].to_vec();
-    let crc = crc::Crc::<u16>::new(&crc::CRC_16_IBM_SDLC).checksum(&body);
-    body.extend_from_slice(&crc.to_le_bytes());
-    let mut enc = vec![0u8; 64];
-    let n = cobs::encode(&body, &mut enc);
-    enc.truncate(n);
-    enc.push(0);
-    dec.feed::<ToDevice>(&enc, |r| out.push(r));
+    dec.feed::<ToDevice>(&framed(&payload[..payload.len() - 3]), |r| out.push(r));
     // And the line recovers.
     dec.feed::<ToDevice>(&good, |r| out.push(r));
     let errs: std::vec::Vec<_> = out.iter().filter_map(|r| r.as_ref().err()).collect();

@@ -1,7 +1,7 @@
 //! A dataset in memory: events in time order and what is known to be true (robot poses,
 //! landmarks), and the interpolation of the true poses at any stamp.
 
-use microslam::event::Event;
+use microslam::event::{Event, EventKind, Identity};
 use microslam::geometry::{Pose2, wrap_near};
 
 /// A time-stamped ground-truth robot pose.
@@ -38,6 +38,20 @@ pub struct Recording {
     pub initial_pose: Option<Pose2<f64>>,
     /// Sightings the reader dropped (of other robots, unknown barcodes).
     pub dropped_sightings: usize,
+}
+
+impl Recording {
+    /// The landmark ids of the sightings that carry one ([`Identity::Unique`]), in event
+    /// order (with repeats).
+    pub fn sighted_ids(&self) -> impl Iterator<Item = u32> + '_ {
+        self.events.iter().filter_map(|e| match e.kind {
+            EventKind::Sighting(s) => match s.identity {
+                Identity::Unique(id) => Some(id),
+                _ => None,
+            },
+            _ => None,
+        })
+    }
 }
 
 /// Ground truth linearly interpolated at `stamp` (heading along the shorter arc), or
