@@ -162,7 +162,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
         session
     }
 
-    /// A session over `ekf` and a grid estimator `grid` (e.g. a [`GridSlam`] on a grid in
+    /// A session over `ekf` and a grid estimator `grid` (e.g. a [`GridSlam`](crate::pf::GridSlam) on a grid in
     /// a `static`); it starts on the EKF, and [`Command::SelectEstimator`] switches.
     pub fn with_grid(
         ekf: &'a mut EkfSlam<f32, N, P>,
