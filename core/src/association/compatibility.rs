@@ -30,11 +30,19 @@ pub struct AssociationConfig<T> {
     /// they differ are [`Pairing::Ambiguous`] and dropped rather than risk a wrong update.
     /// `0` disables it.
     pub ambiguity_margin: T,
+    /// The sightings of one JCBB batch are of distinct landmarks (one camera frame sees
+    /// each landmark at most once): an unpaired sighting whose every landmark within
+    /// [`new_landmark_threshold`](Self::new_landmark_threshold) is paired with *another*
+    /// sighting of the batch is then [`Pairing::New`] instead of ambiguous — the frame
+    /// saw two things where the map holds one. Off, such a sighting is dropped and a
+    /// landmark standing close to another is never added. ICNN ignores it.
+    pub distinct_in_batch: bool,
 }
 
 impl<T: Real> AssociationConfig<T> {
     /// 99 % individual and joint gates, new landmarks beyond the 99.99 % quantile,
-    /// at most 10 000 JCBB nodes.
+    /// at most 10 000 JCBB nodes, no ambiguity margin, sightings of a batch not assumed
+    /// distinct.
     pub fn default_gates() -> Self {
         Self {
             individual_gate: ChiSquareGate::from_threshold(T::lit(chi_square_quantile(0.99, 2))),
@@ -42,6 +50,7 @@ impl<T: Real> AssociationConfig<T> {
             joint_probability: 0.99,
             max_search_nodes: 10_000,
             ambiguity_margin: T::ZERO,
+            distinct_in_batch: false,
         }
     }
 

@@ -150,7 +150,15 @@ impl<T: Real, const B: usize, const K: usize> Jcbb<T, B, K> {
                     .nearest
                     .get(c)
                     .map_or(Pairing::Ambiguous, |c| Pairing::Landmark(c.landmark)),
-                (None, Some(cands)) => cands.unpaired_decision(&self.config),
+                (None, Some(cands)) => match cands.unpaired_decision(&self.config) {
+                    Pairing::Ambiguous
+                        if self.config.distinct_in_batch
+                            && near_ones_taken(slam, z, &search.best, candidates, &self.config) =>
+                    {
+                        Pairing::New
+                    }
+                    other => other,
+                },
                 (_, None) => Pairing::Invalid,
             };
         }
@@ -165,6 +173,27 @@ impl<T: Real, const B: usize, const K: usize> Jcbb<T, B, K> {
             truncated: search.truncated,
         })
     }
+}
+
+/// `true` when every landmark within the new-landmark quantile of `z` is paired, by the
+/// chosen hypothesis `best`, with another sighting of the batch.
+fn near_ones_taken<T: Real, const N: usize, const P: usize, const B: usize, const K: usize>(
+    slam: &EkfSlam<T, N, P>,
+    z: &RangeBearing<T>,
+    best: &[Option<usize>; B],
+    candidates: &[Candidates<T, K>],
+    config: &AssociationConfig<T>,
+) -> bool {
+    let taken = |landmark: usize| {
+        best.iter().zip(candidates).any(|(b, c)| {
+            b.and_then(|b| c.nearest.get(b))
+                .is_some_and(|p| p.landmark == landmark)
+        })
+    };
+    (0..slam.landmark_count()).all(|l| match slam.innovation(l, z) {
+        Ok(i) => i.mahalanobis_squared > config.new_landmark_threshold || taken(l),
+        Err(_) => true,
+    })
 }
 
 /// State of one branch-and-bound search.
@@ -356,6 +385,7 @@ fn lower_inverse<T: Real>(l: &Matrix2<T>) -> Option<Matrix2<T>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::association::compatibility::Candidates;
     use crate::association::icnn::icnn;
     use crate::ekf::{EkfConfig, factor_len, state_dim};
     use crate::geometry::Pose2;
@@ -502,6 +532,52 @@ mod tests {
         let r = jcbb.associate(&empty, &z, &mut out).unwrap();
         assert_eq!(&out[..2], &[Pairing::New, Pairing::New]);
         assert_eq!(r.pairings, 0);
+    }
+
+    /// One frame sees a landmark of the map and, 0.1 m beside it, one the map lacks: at
+    /// 3 m, with 1 cm / 0.01 rad sightings, both sightings are individually compatible
+    /// with the landmark.
+    #[test]
+    fn a_second_sighting_near_a_taken_landmark_is_new_when_distinct_in_batch() {
+        let mut config = EkfConfig::DEFAULT_F64;
+        config.range_std = 0.02;
+        config.bearing_std = 0.01;
+        let mut slam = Slam::new(config);
+        let origin = Pose2::new(0.0, 0.0, 0.0);
+        slam.add_landmark(&sighting(origin, 3.0, 0.0)).unwrap(); // A = 0
+        slam.add_landmark(&sighting(origin, 0.0, 3.0)).unwrap(); // far away
+        let (a, beside) = (sighting(origin, 3.0, 0.0), sighting(origin, 3.0, 0.1));
+        let mut cfg = AssociationConfig::default_gates();
+        let near = Candidates::<f64, 4>::of(&slam, &beside, &cfg.individual_gate);
+        assert_eq!(near.nearest.len(), 1);
+        assert_eq!(near.nearest.first().map(|c| c.landmark), Some(0));
+        let pair = |slam: &Slam, cfg: AssociationConfig<f64>, batch: &[RangeBearing<f64>]| {
+            let mut out = [Pairing::Invalid; 2];
+            Jcbb::<f64, 4, 4>::new(cfg)
+                .associate(slam, batch, &mut out)
+                .unwrap();
+            out
+        };
+        assert_eq!(
+            pair(&slam, cfg, &[a, beside]),
+            [Pairing::Landmark(0), Pairing::Ambiguous]
+        );
+        cfg.distinct_in_batch = true;
+        assert_eq!(
+            pair(&slam, cfg, &[a, beside]),
+            [Pairing::Landmark(0), Pairing::New]
+        );
+        // Alone in its batch, the sighting pairs with A, which nothing else takes.
+        assert_eq!(pair(&slam, cfg, &[beside])[0], Pairing::Landmark(0));
+        // A landmark outside the individual gate of `beside` but inside its new-landmark
+        // quantile, which no sighting of the batch takes: ambiguous again.
+        slam.add_landmark(&sighting(origin, 3.0, 0.247)).unwrap();
+        let c = Candidates::<f64, 4>::of(&slam, &beside, &cfg.individual_gate);
+        assert_eq!(c.nearest.len(), 1);
+        assert_eq!(
+            pair(&slam, cfg, &[a, beside]),
+            [Pairing::Landmark(0), Pairing::Ambiguous]
+        );
     }
 
     #[test]

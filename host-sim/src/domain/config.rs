@@ -117,6 +117,7 @@ pub struct AssociationSettings {
     pub max_search_nodes: u32,
     pub batch_window_s: f64,
     pub ambiguity_margin: f64,
+    pub distinct_in_batch: bool,
 }
 
 /// `[recovery]`: the fields of [`microslam::ekf::health::HealthConfig`].
@@ -362,6 +363,7 @@ impl Settings {
             joint_probability: a.joint_probability,
             max_search_nodes: a.max_search_nodes,
             ambiguity_margin: T::lit(a.ambiguity_margin),
+            distinct_in_batch: a.distinct_in_batch,
         }
     }
 }
