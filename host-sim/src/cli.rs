@@ -253,6 +253,10 @@ pub struct GlobalArgs {
     /// (default: the core's).
     #[arg(long)]
     pub first_pass: Option<f32>,
+    /// Search every heading when the windows find no hypothesis scoring this fraction of
+    /// the beams' total weight; 0: never (default: the core's).
+    #[arg(long)]
+    pub full_turn_below: Option<f32>,
 }
 
 impl From<&GlobalArgs> for GlobalOptions {
@@ -271,6 +275,7 @@ impl From<&GlobalArgs> for GlobalOptions {
             heading_peaks: a.heading_peaks,
             heading_window_deg: a.heading_window,
             first_pass: a.first_pass,
+            full_turn_below: a.full_turn_below,
         }
     }
 }

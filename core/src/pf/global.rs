@@ -32,8 +32,10 @@
 //! within [`GlobalSearchConfig::heading_window`] of the peaks of the scan's wall
 //! directions correlated with the map's ([`super::orientation`]) are searched, best peak
 //! first (each peak `s` as `s` and `s + π`); a scan with too few line-like points searches
-//! every heading. Exact within the windows; a robot whose local walls the correlation
-//! does not pick out is not found.
+//! every heading. Exact within the windows. When the windows find nothing that scores
+//! [`GlobalSearchConfig::full_turn_below`], every heading is searched for a better pose
+//! (with what is left of the node budget): a robot whose local walls the correlation does
+//! not pick out is still found.
 //!
 //! **Hypotheses.** The `N` best candidates that are pairwise apart by more than the
 //! configured separation (a better candidate nearby replaces a worse one), best first.
@@ -98,6 +100,11 @@ pub struct GlobalSearchConfig {
     pub heading_peaks: u8,
     /// Half-width of the heading window around each peak, radians.
     pub heading_window: f32,
+    /// When the heading windows yield no hypothesis scoring at least this fraction of
+    /// the total weight, every heading is searched for a better one (within what is left
+    /// of the node budget); 0: never. A scan whose wall directions the correlation does
+    /// not pick out then still finds its pose, and a good match costs no more.
+    pub full_turn_below: f32,
 }
 
 impl GlobalSearchConfig {
@@ -116,6 +123,7 @@ impl GlobalSearchConfig {
         separation_rad: 0.35,
         heading_peaks: 3,
         heading_window: 0.07,
+        full_turn_below: 0.6,
     };
 
     /// `true` when every setting is finite and in range.
@@ -143,6 +151,8 @@ impl GlobalSearchConfig {
             && usize::from(self.heading_peaks) <= MAX_HEADING_PEAKS
             && self.heading_window.is_finite()
             && self.heading_window >= 0.0
+            && self.full_turn_below.is_finite()
+            && (0.0..=1.0).contains(&self.full_turn_below)
     }
 }
 
@@ -317,6 +327,9 @@ pub struct SearchReport {
     pub min_score: u32,
     /// Passes run (see [`GlobalSearchConfig::first_pass_fraction`]).
     pub passes: u8,
+    /// `true` when the windows found no hypothesis scoring
+    /// [`GlobalSearchConfig::full_turn_below`] and every heading was searched after them.
+    pub full_turn: bool,
     /// `false` when the node budget stopped the search: the hypotheses are the best
     /// found, not proven best.
     pub complete: bool,
@@ -832,6 +845,7 @@ pub fn search_with_walls<const N: usize>(
         total_weight: sel.total,
         min_score,
         passes: 0,
+        full_turn: false,
         complete: true,
     };
     let g = *map.geometry();
@@ -863,144 +877,180 @@ pub fn search_with_walls<const N: usize>(
         .take(n_windows)
         .map(|(lo, hi)| hi - lo + 1)
         .sum();
-    // Passes at decreasing minimum scores: a high one prunes hard and finds a good match
-    // cheaply; a lower one runs only when the higher found nothing.
-    let mut fraction = config.first_pass_fraction.max(config.min_score_fraction);
-    'passes: loop {
-        let pass_min = libm::ceilf(fraction * sel.total as f32) as u32;
-        report.passes += 1;
-        report.min_score = pass_min;
-        let mut thr = threshold(out, pass_min);
-        for &(lo, hi) in windows.get(..n_windows).unwrap_or(&[]) {
-            // The aligned heading intervals of 2^a0 that cover the window (at most two).
-            let a0 = (32 - (hi - lo).leading_zeros()).min(u32::from(all)) as u8;
-            let mut ry = 0;
-            while ry < h {
-                let mut rx = 0;
-                while rx < w {
-                    let (bx, by) = (rx, ry);
-                    rx += size;
-                    if !block_free(map, layers, top, bx, by) {
-                        continue;
-                    }
-                    let mut sp = 0usize;
-                    let mut j0 = (lo >> a0) << a0;
-                    while j0 <= hi && j0 < headings {
-                        if let Some(slot) = stack.get_mut(sp) {
-                            *slot = Node {
-                                x: bx,
-                                y: by,
-                                j0,
-                                bound: sel.total,
-                                a: a0,
-                                k: top,
-                            };
-                            sp += 1;
-                        }
-                        j0 += 1 << a0;
-                    }
-                    // The first interval is visited first.
-                    stack.get_mut(..sp).unwrap_or(&mut []).reverse();
-                    while sp > 0 {
-                        sp -= 1;
-                        let Some(node) = stack.get(sp).copied() else {
-                            break;
-                        };
-                        if node.bound <= thr {
+    // Phase 1 searches the heading windows; phase 2, when they found no good match (see
+    // `full_turn_below`), every heading, for a hypothesis better than phase 1's best.
+    let mut n_windows = n_windows;
+    let mut beaten = 0u32;
+    let mut phase_one_min = u32::MAX;
+    'phases: loop {
+        // Passes at decreasing minimum scores: a high one prunes hard and finds a good match
+        // cheaply; a lower one runs only when the higher found nothing.
+        let mut fraction = config.first_pass_fraction.max(config.min_score_fraction);
+        'passes: loop {
+            // In phase 2 nothing at or below phase 1's best is looked for.
+            let pass_min = (libm::ceilf(fraction * sel.total as f32) as u32).max(beaten + 1);
+            report.passes += 1;
+            report.min_score = pass_min;
+            let mut thr = threshold(out, pass_min);
+            for &(lo, hi) in windows.get(..n_windows).unwrap_or(&[]) {
+                // The aligned heading intervals of 2^a0 that cover the window (at most two).
+                let a0 = (32 - (hi - lo).leading_zeros()).min(u32::from(all)) as u8;
+                let mut ry = 0;
+                while ry < h {
+                    let mut rx = 0;
+                    while rx < w {
+                        let (bx, by) = (rx, ry);
+                        rx += size;
+                        if !block_free(map, layers, top, bx, by) {
                             continue;
                         }
-                        if node.a == 0 && node.k == 0 {
-                            out.offer(
-                                Hypothesis {
-                                    pose: pose_at(&g, node.x, node.y, heading_angle(node.j0, step)),
-                                    score: node.bound,
-                                },
-                                config.separation_m,
-                                config.separation_rad,
-                            );
-                            thr = threshold(out, pass_min);
-                            continue;
-                        }
-                        // Split the headings while their spread moves the far beams' ends by
-                        // more than half the block, else the block.
-                        let split_heading = node.a > 0
-                            && (node.k == 0
-                                || 2 * dilation(rho_max, (1u32 << (node.a - 1)) as f32 * step)
-                                    >= 1 << node.k);
-                        let mut children = [Node::default(); 4];
-                        let mut n = 0;
-                        if split_heading {
-                            let a = node.a - 1;
-                            for j0 in [node.j0, node.j0 + (1 << a)] {
-                                if j0 >= headings || j0 > hi || j0 + (1 << a) <= lo {
-                                    continue;
-                                }
-                                if let Some(c) = children.get_mut(n) {
-                                    *c = Node { j0, a, ..node };
-                                    n += 1;
-                                }
-                            }
-                        } else {
-                            let k = node.k - 1;
-                            let half = 1i32 << k;
-                            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                                let (x, y) = (node.x + dx * half, node.y + dy * half);
-                                if x >= w || y >= h || !block_free(map, layers, k, x, y) {
-                                    continue;
-                                }
-                                if let Some(c) = children.get_mut(n) {
-                                    *c = Node { x, y, k, ..node };
-                                    n += 1;
-                                }
-                            }
-                        }
-                        let mut kept = 0;
-                        for i in 0..n {
-                            let Some(mut c) = children.get(i).copied() else {
-                                break;
-                            };
-                            if report.nodes >= config.node_budget {
-                                report.complete = false;
-                                break 'passes;
-                            }
-                            report.nodes += 1;
-                            if let Some(count) = report.nodes_per_level.get_mut(usize::from(c.k)) {
-                                *count += 1;
-                            }
-                            if c.a == 0 && c.k == 0 {
-                                report.leaves += 1;
-                            }
-                            let cells = end.at(&sel, c.reference(), &mut report);
-                            c.bound = bound(
-                                map, &levels, &dilations, cells, sel.total, thr, c.a, c.k, c.x, c.y,
-                            );
-                            if c.bound > thr
-                                && let Some(slot) = children.get_mut(kept)
-                            {
-                                *slot = c;
-                                kept += 1;
-                            }
-                        }
-                        // Decreasing bound, equal bounds in child order (insertion sort of at
-                        // most four); pushed in reverse so the best is visited first.
-                        let kids = children.get_mut(..kept).unwrap_or(&mut []);
-                        sort_decreasing(kids);
-                        for kid in kids.iter().rev() {
+                        let mut sp = 0usize;
+                        let mut j0 = (lo >> a0) << a0;
+                        while j0 <= hi && j0 < headings {
                             if let Some(slot) = stack.get_mut(sp) {
-                                *slot = *kid;
+                                *slot = Node {
+                                    x: bx,
+                                    y: by,
+                                    j0,
+                                    bound: sel.total,
+                                    a: a0,
+                                    k: top,
+                                };
                                 sp += 1;
                             }
+                            j0 += 1 << a0;
+                        }
+                        // The first interval is visited first.
+                        stack.get_mut(..sp).unwrap_or(&mut []).reverse();
+                        while sp > 0 {
+                            sp -= 1;
+                            let Some(node) = stack.get(sp).copied() else {
+                                break;
+                            };
+                            if node.bound <= thr {
+                                continue;
+                            }
+                            if node.a == 0 && node.k == 0 {
+                                out.offer(
+                                    Hypothesis {
+                                        pose: pose_at(
+                                            &g,
+                                            node.x,
+                                            node.y,
+                                            heading_angle(node.j0, step),
+                                        ),
+                                        score: node.bound,
+                                    },
+                                    config.separation_m,
+                                    config.separation_rad,
+                                );
+                                thr = threshold(out, pass_min);
+                                continue;
+                            }
+                            // Split the headings while their spread moves the far beams' ends by
+                            // more than half the block, else the block.
+                            let split_heading = node.a > 0
+                                && (node.k == 0
+                                    || 2 * dilation(rho_max, (1u32 << (node.a - 1)) as f32 * step)
+                                        >= 1 << node.k);
+                            let mut children = [Node::default(); 4];
+                            let mut n = 0;
+                            if split_heading {
+                                let a = node.a - 1;
+                                for j0 in [node.j0, node.j0 + (1 << a)] {
+                                    if j0 >= headings || j0 > hi || j0 + (1 << a) <= lo {
+                                        continue;
+                                    }
+                                    if let Some(c) = children.get_mut(n) {
+                                        *c = Node { j0, a, ..node };
+                                        n += 1;
+                                    }
+                                }
+                            } else {
+                                let k = node.k - 1;
+                                let half = 1i32 << k;
+                                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                                    let (x, y) = (node.x + dx * half, node.y + dy * half);
+                                    if x >= w || y >= h || !block_free(map, layers, k, x, y) {
+                                        continue;
+                                    }
+                                    if let Some(c) = children.get_mut(n) {
+                                        *c = Node { x, y, k, ..node };
+                                        n += 1;
+                                    }
+                                }
+                            }
+                            let mut kept = 0;
+                            for i in 0..n {
+                                let Some(mut c) = children.get(i).copied() else {
+                                    break;
+                                };
+                                if report.nodes >= config.node_budget {
+                                    report.complete = false;
+                                    break 'phases;
+                                }
+                                report.nodes += 1;
+                                if let Some(count) =
+                                    report.nodes_per_level.get_mut(usize::from(c.k))
+                                {
+                                    *count += 1;
+                                }
+                                if c.a == 0 && c.k == 0 {
+                                    report.leaves += 1;
+                                }
+                                let cells = end.at(&sel, c.reference(), &mut report);
+                                c.bound = bound(
+                                    map, &levels, &dilations, cells, sel.total, thr, c.a, c.k, c.x,
+                                    c.y,
+                                );
+                                if c.bound > thr
+                                    && let Some(slot) = children.get_mut(kept)
+                                {
+                                    *slot = c;
+                                    kept += 1;
+                                }
+                            }
+                            // Decreasing bound, equal bounds in child order (insertion sort of at
+                            // most four); pushed in reverse so the best is visited first.
+                            let kids = children.get_mut(..kept).unwrap_or(&mut []);
+                            sort_decreasing(kids);
+                            for kid in kids.iter().rev() {
+                                if let Some(slot) = stack.get_mut(sp) {
+                                    *slot = *kid;
+                                    sp += 1;
+                                }
+                            }
                         }
                     }
+                    ry += size;
                 }
-                ry += size;
             }
+            if out.best().is_some_and(|b| b.score > beaten)
+                || fraction <= config.min_score_fraction
+                || (report.full_turn && pass_min <= beaten + 1)
+            {
+                break 'passes;
+            }
+            fraction = (fraction - config.pass_step).max(config.min_score_fraction);
         }
-        if !out.is_empty() || fraction <= config.min_score_fraction {
-            break 'passes;
+        let best = out.best().map_or(0, |b| b.score);
+        let good = libm::ceilf(config.full_turn_below * sel.total as f32) as u32;
+        if report.full_turn || n_windows == 1 || config.full_turn_below <= 0.0 || best >= good {
+            break 'phases;
         }
-        fraction = (fraction - config.pass_step).max(config.min_score_fraction);
+        // Every heading, as one window; only a hypothesis above phase 1's best counts
+        // as found (phase 1's are kept and still compete).
+        if let Some(first) = windows.first_mut() {
+            *first = (0, headings.saturating_sub(1));
+        }
+        n_windows = 1;
+        beaten = best;
+        phase_one_min = report.min_score;
+        report.full_turn = true;
+        report.headings_searched = headings;
     }
+    // Phase 1's hypotheses stay when phase 2 finds nothing better.
+    report.min_score = report.min_score.min(phase_one_min);
     out.keep_above(below_relative(config, out.best()).max(report.min_score.saturating_sub(1)));
     Ok(report)
 }
@@ -1089,6 +1139,7 @@ pub fn search_brute_force<const N: usize>(
         total_weight: sel.total,
         min_score,
         passes: 1,
+        full_turn: false,
         complete: true,
     })
 }
@@ -1227,6 +1278,81 @@ mod tests {
         }
         // Branch and bound must skip most of the leaves the brute force scores.
         assert!(pruned * 2 > total, "{pruned} of {total}");
+    }
+
+    /// Windows one peak wide miss the robot's heading on some maps; the full turn after
+    /// them then finds what the brute force finds.
+    #[test]
+    fn a_full_turn_after_the_windows_finds_the_brute_force_best() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(23);
+        let (mut windowed, mut missed) = (0, 0);
+        for trial in 0..60 {
+            let (w, h) = (rng.random_range(24..56), rng.random_range(20..48));
+            let cells = random_map(&mut rng, w, h);
+            let g = GridGeometry::centred(w, h, 0.05);
+            let view = GridView::new(&cells, g, 20).unwrap();
+            let mut buf = vec![0u8; MaxPoolLayers::bytes_for(w, h, 3).unwrap()];
+            let layers = MaxPoolLayers::build(&view, -20, 3, &mut buf).unwrap();
+            let pose = loop {
+                let (x, y) = (rng.random_range(0..w), rng.random_range(0..h));
+                if cells[y * w + x] < -20 {
+                    let (px, py) = g.cell_centre(x as i32, y as i32);
+                    break Pose2::new(px, py, rng.random_range(-3.1..3.1));
+                }
+            };
+            let ranges = ray_cast(&view, &pose);
+            let mut pts = ScanPoints::<60>::new();
+            pts.load(&LidarScan::new(&ranges, LIDAR), 1, 0.0);
+            if pts.as_slice().is_empty() {
+                continue;
+            }
+            let every = GlobalSearchConfig {
+                min_score_fraction: 0.3,
+                ..config()
+            };
+            let narrow = GlobalSearchConfig {
+                heading_peaks: 1,
+                heading_window: 0.01,
+                full_turn_below: 0.0,
+                ..every
+            };
+            let turn = GlobalSearchConfig {
+                full_turn_below: 1.0,
+                ..narrow
+            };
+            let mut brute = Hypotheses::<3>::new();
+            search_brute_force(&view, &layers, pts.as_slice(), &every, &mut brute).unwrap();
+            let mut only = Hypotheses::<3>::new();
+            let r_only = search(&view, &layers, pts.as_slice(), &narrow, &mut only).unwrap();
+            let mut both = Hypotheses::<3>::new();
+            let r_both = search(&view, &layers, pts.as_slice(), &turn, &mut both).unwrap();
+            assert!(!r_only.full_turn && r_both.complete, "trial {trial}");
+            if r_only.heading_windows == 1 {
+                continue; // too few wall lines: every heading searched anyway
+            }
+            windowed += 1;
+            let best = |h: &Hypotheses<3>| h.best().map(|b| b.score);
+            if best(&only) < best(&brute) {
+                missed += 1;
+            }
+            assert_eq!(r_both.full_turn, best(&brute) < Some(r_both.total_weight));
+            assert_eq!(
+                best(&both),
+                best(&brute),
+                "trial {trial}: {both:?} vs {brute:?} {r_both:?} {r_only:?}"
+            );
+            for hyp in both.as_slice() {
+                assert_eq!(
+                    rescore(&view, &layers, pts.as_slice(), &turn, hyp),
+                    hyp.score
+                );
+            }
+        }
+        // The case the fallback exists for arises, on more than a few maps.
+        assert!(
+            windowed >= 10 && missed >= 3,
+            "{windowed} windowed, {missed} missed"
+        );
     }
 
     #[test]

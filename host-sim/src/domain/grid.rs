@@ -261,6 +261,9 @@ pub struct GlobalOptions {
     pub heading_window_deg: Option<f32>,
     /// Minimum score of the first pass, a fraction of the beams' total weight.
     pub first_pass: Option<f32>,
+    /// Score (fraction of the total weight) below which every heading is searched after
+    /// the windows; 0: never.
+    pub full_turn_below: Option<f32>,
 }
 
 impl Default for GlobalOptions {
@@ -279,6 +282,7 @@ impl Default for GlobalOptions {
             heading_peaks: None,
             heading_window_deg: None,
             first_pass: None,
+            full_turn_below: None,
         }
     }
 }

@@ -89,6 +89,15 @@ pub struct SearchSummary {
     pub nodes_per_level: Vec<u32>,
     /// `false` when the node budget stopped it.
     pub complete: bool,
+    /// Passes run (minimum scores tried, highest first).
+    pub passes: u8,
+    /// `true` when every heading was searched after the windows.
+    pub full_turn: bool,
+    /// Minimum score of the last pass, as a fraction of the beams' total weight.
+    pub min_score_fraction: f32,
+    /// Score of the best hypothesis, as a fraction of the beams' total weight (0 when
+    /// none was found).
+    pub best_score_fraction: f32,
     /// Estimated Cortex-M4F instructions.
     pub estimated_m4_instructions: u64,
 }
@@ -106,8 +115,21 @@ impl From<&SearchReport> for SearchSummary {
             rotations: r.rotations,
             nodes_per_level: r.nodes_per_level.to_vec(),
             complete: r.complete,
+            passes: r.passes,
+            full_turn: r.full_turn,
+            min_score_fraction: fraction(r.min_score, r.total_weight),
+            best_score_fraction: 0.0,
             estimated_m4_instructions: r.estimated_instructions(),
         }
+    }
+}
+
+/// `part / total`, 0 when `total` is 0.
+fn fraction(part: u32, total: u32) -> f32 {
+    if total == 0 {
+        0.0
+    } else {
+        part as f32 / total as f32
     }
 }
 
@@ -309,7 +331,13 @@ fn trial_p<const P: usize>(
         let Some(want) = reference.get(i) else { break };
         if searching && !loc.status().search_pending {
             trial.search_wall_s = t0.elapsed().as_secs_f64();
-            trial.search = loc.status().last_search.as_ref().map(SearchSummary::from);
+            trial.search = loc.status().last_search.as_ref().map(|r| SearchSummary {
+                best_score_fraction: loc
+                    .hypotheses()
+                    .first()
+                    .map_or(0.0, |h| fraction(h.score, r.total_weight)),
+                ..SearchSummary::from(r)
+            });
             trial.hypotheses = loc
                 .hypotheses()
                 .len()
@@ -366,6 +394,9 @@ pub fn settings_from(
     }
     if let Some(f) = args.first_pass {
         search.first_pass_fraction = f;
+    }
+    if let Some(f) = args.full_turn_below {
+        search.full_turn_below = f;
     }
     if let Some(h) = args.hypotheses {
         relocalization.hypotheses = h;
