@@ -1177,6 +1177,23 @@ mod tests {
         cells
     }
 
+    /// A random pose at the centre of a free cell of the `w × h` map `cells`.
+    fn free_pose(
+        rng: &mut rand::rngs::StdRng,
+        cells: &[i8],
+        w: usize,
+        h: usize,
+        g: &GridGeometry,
+    ) -> Pose2<f32> {
+        loop {
+            let (x, y) = (rng.random_range(0..w), rng.random_range(0..h));
+            if cells[y * w + x] < -20 {
+                let (px, py) = g.cell_centre(x as i32, y as i32);
+                return Pose2::new(px, py, rng.random_range(-3.1..3.1));
+            }
+        }
+    }
+
     const LIDAR: LidarGeometry = LidarGeometry {
         first_angle: -3.0,
         angle_increment: 6.0 / 60.0,
@@ -1237,13 +1254,7 @@ mod tests {
             let mut buf = vec![0u8; MaxPoolLayers::bytes_for(w, h, levels).unwrap()];
             let layers = MaxPoolLayers::build(&view, -20, levels, &mut buf).unwrap();
             // A scan from a random free cell: its own pose scores all its hits.
-            let pose = loop {
-                let (x, y) = (rng.random_range(0..w), rng.random_range(0..h));
-                if cells[y * w + x] < -20 {
-                    let (px, py) = g.cell_centre(x as i32, y as i32);
-                    break Pose2::new(px, py, rng.random_range(-3.1..3.1));
-                }
-            };
+            let pose = free_pose(&mut rng, &cells, w, h, &g);
             let ranges = ray_cast(&view, &pose);
             let mut pts = ScanPoints::<60>::new();
             pts.load(&LidarScan::new(&ranges, LIDAR), 1, [0.0, 1.0][trial % 2]);
@@ -1293,13 +1304,7 @@ mod tests {
             let view = GridView::new(&cells, g, 20).unwrap();
             let mut buf = vec![0u8; MaxPoolLayers::bytes_for(w, h, 3).unwrap()];
             let layers = MaxPoolLayers::build(&view, -20, 3, &mut buf).unwrap();
-            let pose = loop {
-                let (x, y) = (rng.random_range(0..w), rng.random_range(0..h));
-                if cells[y * w + x] < -20 {
-                    let (px, py) = g.cell_centre(x as i32, y as i32);
-                    break Pose2::new(px, py, rng.random_range(-3.1..3.1));
-                }
-            };
+            let pose = free_pose(&mut rng, &cells, w, h, &g);
             let ranges = ray_cast(&view, &pose);
             let mut pts = ScanPoints::<60>::new();
             pts.load(&LidarScan::new(&ranges, LIDAR), 1, 0.0);
