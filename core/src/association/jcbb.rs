@@ -401,14 +401,19 @@ mod tests {
         )
     }
 
+    /// An empty filter whose sightings are precise (2 cm, 0.01 rad), and its settings.
+    fn precise() -> (Slam, EkfConfig<f64>) {
+        let mut config = EkfConfig::DEFAULT_F64;
+        config.range_std = 0.02;
+        config.bearing_std = 0.01;
+        (Slam::new(config), config)
+    }
+
     /// Two landmarks 0.4 m apart at 3 m, a well-known map and a robot whose heading is
     /// uncertain (σ 0.1 rad) and actually 0.13 rad off: every sighting is shifted the
     /// same way, so the sighting of A lands on B.
     fn planted() -> (Slam, [RangeBearing<f64>; 2]) {
-        let mut config = EkfConfig::DEFAULT_F64;
-        config.range_std = 0.02;
-        config.bearing_std = 0.01;
-        let mut slam = Slam::new(config);
+        let (mut slam, config) = precise();
         let origin = Pose2::new(0.0, 0.0, 0.0);
         slam.add_landmark(&sighting(origin, 3.0, 0.2)).unwrap(); // A = 0
         slam.add_landmark(&sighting(origin, 3.0, -0.2)).unwrap(); // B = 1
@@ -539,10 +544,7 @@ mod tests {
     /// with the landmark.
     #[test]
     fn a_second_sighting_near_a_taken_landmark_is_new_when_distinct_in_batch() {
-        let mut config = EkfConfig::DEFAULT_F64;
-        config.range_std = 0.02;
-        config.bearing_std = 0.01;
-        let mut slam = Slam::new(config);
+        let (mut slam, _) = precise();
         let origin = Pose2::new(0.0, 0.0, 0.0);
         slam.add_landmark(&sighting(origin, 3.0, 0.0)).unwrap(); // A = 0
         slam.add_landmark(&sighting(origin, 0.0, 3.0)).unwrap(); // far away
