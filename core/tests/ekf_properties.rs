@@ -245,7 +245,7 @@ fn factor_product<T: Real>(ekf: &Slam<T>) -> DMatrix<f64> {
     for i in 0..k {
         let (di, row) = view.factor_row(i).unwrap();
         d[i] = di.to_f64();
-        for (j, v) in row.iter().enumerate() {
+        for (j, v) in row.enumerate() {
             l[(i, j)] = v.to_f64();
         }
     }

@@ -20,6 +20,7 @@
 //! The public API keeps the robot-first order `[x, y, θ, x₁, y₁, …]`; [`CovarianceView`]
 //! reads entries of `P` in that order, at O(n) each (`P_ij = Σ_c L_ic D_c L_jc`).
 
+use super::deferred::RowMap;
 use crate::scalar::Real;
 use nalgebra::SMatrix;
 
@@ -171,17 +172,52 @@ pub(crate) fn ldl<T: Real, const R: usize>(a: &SMatrix<T, R, R>) -> Option<([[T;
 pub struct CovarianceView<'a, T: Real> {
     factor: &'a [T],
     dim: usize,
+    /// The map from the stored robot coupling rows to the true ones, when predictions
+    /// are deferred (see `EkfSlam::factor_storage`).
+    robot: Option<RowMap<T>>,
 }
 
 impl<'a, T: Real> CovarianceView<'a, T> {
-    pub(crate) fn new(factor: &'a [T], dim: usize) -> Self {
+    pub(crate) fn new(factor: &'a [T], dim: usize, robot: Option<RowMap<T>>) -> Self {
         // The active factor must be stored whole; otherwise the view is empty.
         let dim = if row_start(dim) <= factor.len() {
             dim
         } else {
             0
         };
-        Self { factor, dim }
+        Self { factor, dim, robot }
+    }
+
+    /// `L_ic` (`c < i`) in the factor's own order, deferred predictions applied.
+    fn l(&self, i: usize, c: usize) -> T {
+        let stored = |r: usize| {
+            strict_row(self.factor, r)
+                .get(c)
+                .copied()
+                .unwrap_or(T::ZERO)
+        };
+        let r0 = self.dim.saturating_sub(3);
+        match &self.robot {
+            Some(map) if i >= r0 && c < r0 => {
+                map.entry(i - r0, c, [stored(r0), stored(r0 + 1), stored(r0 + 2)])
+            }
+            _ => stored(i),
+        }
+    }
+
+    /// Entry `(i, j)` in the factor's own order.
+    fn internal_entry(&self, i: usize, j: usize) -> T {
+        let (hi, lo) = if i >= j { (i, j) } else { (j, i) };
+        if self.robot.is_none() || hi + 3 < self.dim {
+            // Neither row is a robot row, or nothing is deferred: the stored factor.
+            return internal_entry(self.factor, hi, lo);
+        }
+        let mut acc = T::ZERO;
+        for c in 0..lo {
+            acc += self.l(hi, c) * pivot(self.factor, c) * self.l(lo, c);
+        }
+        let l_hi_lo = if hi == lo { T::ONE } else { self.l(hi, lo) };
+        acc + l_hi_lo * pivot(self.factor, lo)
     }
 
     /// Dimension `k = 3 + 2n` of the active block.
@@ -192,7 +228,7 @@ impl<'a, T: Real> CovarianceView<'a, T> {
     /// Entry `(i, j)` (= entry `(j, i)`), `None` outside the active block.
     pub fn get(&self, i: usize, j: usize) -> Option<T> {
         let k = self.dim;
-        (i < k && j < k).then(|| internal_entry(self.factor, internal(i, k), internal(j, k)))
+        (i < k && j < k).then(|| self.internal_entry(internal(i, k), internal(j, k)))
     }
 
     /// The `R × C` block whose top-left entry is `(i, j)`, `None` unless it lies inside
@@ -214,8 +250,8 @@ impl<'a, T: Real> CovarianceView<'a, T> {
 
     /// `Dᵢ` and row `i` of `L` (entries `0..i`) in the factor's own order (landmarks,
     /// then the robot), `None` outside the active block: for diagnostics and tests.
-    pub fn factor_row(&self, i: usize) -> Option<(T, &'a [T])> {
-        (i < self.dim).then(|| (pivot(self.factor, i), strict_row(self.factor, i)))
+    pub fn factor_row(&self, i: usize) -> Option<(T, impl Iterator<Item = T> + '_)> {
+        (i < self.dim).then(|| (pivot(self.factor, i), (0..i).map(move |c| self.l(i, c))))
     }
 }
 
@@ -315,7 +351,7 @@ mod tests {
             packed[row_start(i) + i] = d[i];
         }
         let p = dense(&l, &d);
-        let view = CovarianceView::new(&packed, 5);
+        let view = CovarianceView::new(&packed, 5, None);
         for i in 0..5 {
             for j in 0..5 {
                 let got = view.get(i, j).unwrap();
@@ -326,8 +362,9 @@ mod tests {
         assert_eq!(view.get(5, 0), None);
         assert!(view.block::<2, 2>(4, 4).is_none());
         assert_eq!(view.iter().count(), 25);
-        assert_eq!(view.factor_row(2), Some((0.5, &[-0.2, 0.5][..])));
+        let (d2, row2) = view.factor_row(2).unwrap();
+        assert_eq!((d2, row2.collect::<Vec<_>>()), (0.5, vec![-0.2, 0.5]));
         // A dimension the storage cannot hold gives an empty view.
-        assert_eq!(CovarianceView::new(&packed[..10], 5).dim(), 0);
+        assert_eq!(CovarianceView::new(&packed[..10], 5, None).dim(), 0);
     }
 }

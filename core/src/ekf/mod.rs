@@ -8,10 +8,17 @@
 //!
 //! | step | what it touches | cost |
 //! | --- | --- | --- |
-//! | [`EkfSlam::predict_increment`], [`EkfSlam::predict_velocity`], [`EkfSlam::inflate_pose_covariance`] | robot mean, the robot's three rows of `L` | O(n) |
-//! | [`EkfSlam::update`] | two scalar (Bierman) updates of the whole factor | O(n²) |
-//! | [`EkfSlam::add_landmark`] | two new rows, the robot rows move down | O(n) |
-//! | [`EkfSlam::innovation`], [`EkfSlam::pose_covariance`], one entry of [`EkfSlam::active_covariance`] | reads | O(n) |
+//! | [`EkfSlam::predict_increment`], [`EkfSlam::predict_velocity`], [`EkfSlam::inflate_pose_covariance`] | robot mean, the robot's own 3 × 3 block of `L`; its coupling rows are deferred | O(1) (O(n) for the first after another step) |
+//! | [`EkfSlam::update`] | applies the deferred predictions, then two scalar (Bierman) updates of the whole factor | O(n²) |
+//! | [`EkfSlam::add_landmark`] | applies the deferred predictions; two new rows, the robot rows move down | O(n) |
+//! | [`EkfSlam::innovation`], one entry of [`EkfSlam::active_covariance`] | reads | O(n) |
+//! | [`EkfSlam::pose_covariance`] | reads | O(1) after a prediction, O(n) otherwise |
+//!
+//! A run of predictions keeps the product of their Jacobians (3 × 3) instead of applying
+//! each to the robot's coupling rows of `L` (three rows as long as the state): the next
+//! update or new landmark applies it once, and the readers in between apply it on the fly
+//! (the `deferred` module). A robot driving for a minute between two sightings pays one
+//! O(n) pass, not one per odometry sample.
 //!
 //! # Self-calibration
 //!
@@ -21,8 +28,9 @@
 //! measure `r + b₀ + b₂ β²`). Each takes one two-state *calibration slot* before the
 //! landmarks — in the mean after the pose, in the factor first — so it costs a landmark
 //! slot and no memory; [`EkfSlam::landmark_state`] gives a landmark's place in the public
-//! state. Prediction stays O(n): the robot's rows gain `F_s L_s` in the slot's columns,
-//! left of the robot block, so the factor stays triangular and `D` is computed as before.
+//! state. Prediction stays O(1): the robot's rows gain `F_s L_s` in the slot's columns,
+//! left of the robot block (deferred with the rest of the coupling rows), so the factor
+//! stays triangular and `D` is computed as before.
 //!
 //! Corrections to seed 1: the measurement model is polar on both sides (eq. 12 mixes a
 //! Cartesian prediction with a polar measurement), and all noise is configuration (eq. 9's
@@ -66,9 +74,9 @@
 //!
 //! | landmarks | N | P | bytes |
 //! | --- | --- | --- | --- |
-//! | 16 | 35 | 630 | 2 788 |
-//! | 32 | 67 | 2 278 | 9 508 |
-//! | 64 | 131 | 8 646 | 35 236 |
+//! | 16 | 35 | 630 | 2 968 |
+//! | 32 | 67 | 2 278 | 9 688 |
+//! | 64 | 131 | 8 646 | 35 416 |
 //!
 //! Such a filter belongs in a `static` on a microcontroller: [`EkfSlam::new`] is a
 //! `const fn`, so `static`s are laid out by the linker (`.bss`/`.data`) and never pass
@@ -102,9 +110,11 @@ use crate::motion::{
 };
 use crate::scalar::Real;
 use crate::sensors::range_bearing::{RangeBearing, RangeBearingSensor};
+use deferred::{DeferredMotion, congruence, product, pull_back};
 use nalgebra::{ArrayStorage, Matrix2, Matrix2x3, Matrix3, SVector, Vector2};
 
 pub mod covariance;
+mod deferred;
 pub mod health;
 
 pub use covariance::{CovarianceView, factor_len};
@@ -145,8 +155,8 @@ const BIAS_SLOT: u16 = 2;
 const MAX_CALIBRATION_SLOTS: usize = 2;
 
 /// Bytes an `f32` filter uses beyond its mean and covariance factor (configuration,
-/// counters, the kept robot summary).
-pub const EKF_OVERHEAD_BYTES_F32: usize = 128;
+/// counters, the deferred predictions).
+pub const EKF_OVERHEAD_BYTES_F32: usize = 308;
 
 /// Settings of the landmark EKF: noise, sensor mount and gate.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -347,12 +357,11 @@ pub struct EkfSlam<T: Real, const N: usize, const P: usize> {
     calibration: u16,
     config: EkfConfig<T>,
     counters: EkfCounters,
-    /// The robot summary ([`EkfSlam::robot_summary`]) of the factor as it is, when the
-    /// last write was a prediction (which computes it for the new state): the pose
-    /// covariance of an odometry sample and the next prediction read it instead of each
-    /// computing it again. Every write of the factor goes through
-    /// [`EkfSlam::factor_mut`], which clears it.
-    summary: Option<(Matrix3<T>, T)>,
+    /// The predictions since the last write of the factor whose effect on the robot's
+    /// coupling rows is not applied yet ([`deferred`]): the true rows are
+    /// `A · stored + B`. Every write of the factor but a prediction's goes through
+    /// [`EkfSlam::factor_mut`], which applies and clears it; readers apply it on the fly.
+    deferred: Option<DeferredMotion<T>>,
 }
 
 /// One scalar measurement row: `(index inside the factor, coefficient)` for the five
@@ -388,7 +397,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
                 gated: 0,
                 rejected: 0,
             },
-            summary: None,
+            deferred: None,
         }
     }
 
@@ -402,6 +411,8 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             return Err(EkfError::NonFiniteInput);
         }
         let k = self.active_dim();
+        // Cleared, not applied: nothing of the old factor stays.
+        self.deferred = None;
         if let Some(active) = self.factor_mut().get_mut(..row_start(k)) {
             active.fill(T::ZERO);
         }
@@ -411,7 +422,6 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         self.mean[2] = wrap_angle(pose.theta);
         self.slots = 0;
         self.calibration = 0;
-        self.summary = None;
         self.config = config;
         self.counters = EkfCounters::default();
         Ok(())
@@ -489,6 +499,8 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         {
             return self.reject(EkfError::MapFull);
         }
+        // The coupling rows are read below: apply the deferred predictions first.
+        self.settle();
         let (l, d) = self.robot_block();
         let r0 = 2 * slot;
         // The robot rows' columns 0..r0 (coupling to the earlier calibration slots).
@@ -513,7 +525,6 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         self.mean[3 + r0 + 1] = mean[1];
         self.slots += 1;
         self.calibration |= bit;
-        self.summary = None;
         for (c, row) in coupling.iter().enumerate().take(r0) {
             for (a, v) in row.iter().enumerate() {
                 if let Some(e) = self.factor_mut().get_mut(row_start(r0 + 2 + a) + c) {
@@ -577,7 +588,8 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         Pose2::new(self.mean[0], self.mean[1], self.mean[2])
     }
 
-    /// Covariance of the robot pose, `P_RR` (O(n)).
+    /// Covariance of the robot pose, `P_RR` (O(1) after a prediction, O(n) after any
+    /// other step).
     pub fn pose_covariance(&self) -> Matrix3<T> {
         self.robot_summary().0
     }
@@ -608,7 +620,11 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// The active block of the covariance, as a symmetric view computed from the factor
     /// (no copy; O(n) per entry).
     pub fn active_covariance(&self) -> CovarianceView<'_, T> {
-        CovarianceView::new(&self.factor, self.active_dim())
+        CovarianceView::new(
+            &self.factor,
+            self.active_dim(),
+            self.deferred.map(|run| run.map),
+        )
     }
 
     /// The whole mean, active or not (for tests and diagnostics).
@@ -618,6 +634,9 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
 
     /// The packed factor storage, active or not (for tests and diagnostics): the first
     /// `k (k + 1) / 2` scalars hold the active factor ([`covariance`]), the rest is zero.
+    /// After predictions the robot's coupling rows are stored as they were before them
+    /// (the predictions are applied at the next update or new landmark); read the factor
+    /// through [`EkfSlam::active_covariance`].
     /// Read the covariance through [`EkfSlam::active_covariance`].
     pub fn factor_storage(&self) -> &[T; P] {
         &self.factor
@@ -647,12 +666,13 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     }
 
     /// Writes the robot's own block of the factor (the robot rows' entries in the robot
-    /// columns and their pivots).
+    /// columns and their pivots), which no deferred prediction concerns: the coupling rows
+    /// stay as they are stored.
     fn set_robot_block(&mut self, l: &[[T; 3]; 3], d: &[T; 3]) {
         let r0 = self.active_dim() - 3;
         for a in 0..3 {
             let start = row_start(r0 + a) + r0;
-            if let Some(row) = self.factor_mut().get_mut(start..=start + a) {
+            if let Some(row) = self.factor.get_mut(start..=start + a) {
                 for (b, slot) in row.iter_mut().enumerate() {
                     *slot = if b == a { d[a] } else { l[a][b] };
                 }
@@ -660,56 +680,83 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         }
     }
 
-    /// `P_RR` and the largest |L_rc| of the robot rows over the landmark columns `c < 2n`
-    /// (non-finite when an entry is), in one pass over the robot's three rows. (A plain
-    /// maximum in the loop saves a third of its host instructions but, unrolled, costs the
-    /// firmware 4 KB of flash.)
+    /// `P_RR` and a bound on the largest |L_rc| of the robot rows over the columns left of
+    /// the robot (non-finite when an entry may be): O(1) during a run of predictions,
+    /// otherwise one pass over the robot's three rows.
     fn robot_summary(&self) -> (Matrix3<T>, T) {
-        if let Some(cached) = self.summary {
-            debug_assert!(
-                same_summary(&cached, &self.compute_robot_summary()),
-                "a write of the factor bypassed factor_mut"
-            );
-            return cached;
-        }
-        self.compute_robot_summary()
+        let run = self.deferred.unwrap_or_else(|| self.start_deferral());
+        (run.coupled() + self.own_covariance(), run.largest())
     }
 
-    /// The factor, to write: clears the cached robot summary first.
-    fn factor_mut(&mut self) -> &mut [T; P] {
-        self.summary = None;
-        &mut self.factor
-    }
-
-    /// [`EkfSlam::robot_summary`] computed from the factor.
-    fn compute_robot_summary(&self) -> (Matrix3<T>, T) {
-        let r0 = self.active_dim() - 3;
+    /// `L_rr D_r L_rrᵀ`: the robot's own block's part of `P_RR`.
+    fn own_covariance(&self) -> Matrix3<T> {
         let (lrr, dr) = self.robot_block();
+        congruence(
+            &Matrix3::from_fn(|i, j| lrr[i][j]),
+            &Matrix3::from_diagonal(&dr.into()),
+        )
+    }
+
+    /// A run of deferred predictions starting from the factor as stored (one pass over the
+    /// robot's three rows). (A plain maximum in its loop saves a third of its host
+    /// instructions but, unrolled, costs the firmware 4 KB of flash.)
+    fn start_deferral(&self) -> DeferredMotion<T> {
+        let r0 = self.active_dim() - 3;
         let rows = [0, 1, 2].map(|a| {
             let row = strict_row(&self.factor, r0 + a);
             row.get(..r0).unwrap_or(&[])
         });
-        let mut acc = [T::ZERO; 6];
-        let mut largest = T::ZERO;
         let mut diag = 0;
-        for (c, ((&a, &b), &e)) in rows[0].iter().zip(rows[1]).zip(rows[2]).enumerate() {
+        let pivots = (0..r0).map(move |c| {
             let d = self.factor.get(diag).copied().unwrap_or(T::ZERO);
             diag += c + 2;
-            let (da, db, de) = (d * a, d * b, d * e);
-            acc[0] += da * a;
-            acc[1] += da * b;
-            acc[2] += da * e;
-            acc[3] += db * b;
-            acc[4] += db * e;
-            acc[5] += de * e;
-            largest = max_abs([largest, a, b, e].into_iter());
+            d
+        });
+        DeferredMotion::start(rows, pivots)
+    }
+
+    /// The factor, to write: applies the deferred predictions first. (Inlined: the loops
+    /// of an update and a new landmark call it per row or entry, and after the first call
+    /// it is one test.)
+    #[inline(always)]
+    fn factor_mut(&mut self) -> &mut [T; P] {
+        self.settle();
+        &mut self.factor
+    }
+
+    /// Applies the deferred predictions to the robot's coupling rows (O(n)), so that the
+    /// stored factor is the true one.
+    #[inline(always)]
+    fn settle(&mut self) {
+        if self.deferred.is_some() {
+            self.apply_deferred();
         }
-        let own = Matrix3::from_fn(|i, j| lrr[i][j]);
-        let own = own * Matrix3::from_diagonal(&dr.into()) * own.transpose();
-        let coupled = Matrix3::new(
-            acc[0], acc[1], acc[2], acc[1], acc[3], acc[4], acc[2], acc[4], acc[5],
-        );
-        (coupled + own, largest)
+    }
+
+    /// [`EkfSlam::settle`] when predictions are deferred.
+    #[inline(never)]
+    fn apply_deferred(&mut self) {
+        // The map only (not `take`: the whole run is ten times its size).
+        let Some(map) = self.deferred.as_ref().map(|run| run.map) else {
+            return;
+        };
+        self.deferred = None;
+        let r0 = self.active_dim() - 3;
+        let s0 = row_start(r0);
+        let Some(all) = self.factor.get_mut(s0..row_start(r0 + 3)) else {
+            return;
+        };
+        let (ra, rest) = all.split_at_mut(r0 + 1);
+        let (rb, rc) = rest.split_at_mut(r0 + 2);
+        let rows = ra.iter_mut().zip(rb.iter_mut()).zip(rc.iter_mut()).take(r0);
+        for (c, ((x, y), z)) in rows.enumerate() {
+            [*x, *y, *z] = map.apply([*x, *y, *z]);
+            if c < 2 {
+                *x += map.near(0, c);
+                *y += map.near(1, c);
+                *z += map.near(2, c);
+            }
+        }
     }
 
     /// The range bias' first factor index `bi` and its two rows of `L` (unit diagonal
@@ -729,16 +776,6 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             }
         }
         Some((bi, rows))
-    }
-
-    /// The robot's three rows over the landmark columns `c < 2n` (`L_rm`), mutable.
-    fn robot_coupling_mut(&mut self) -> Option<[&mut [T]; 3]> {
-        let r0 = self.active_dim() - 3;
-        let s0 = row_start(r0);
-        let all = self.factor_mut().get_mut(s0..row_start(r0 + 3))?;
-        let (a, rest) = all.split_at_mut(r0 + 1);
-        let (b, c) = rest.split_at_mut(r0 + 2);
-        Some([a.get_mut(..r0)?, b.get_mut(..r0)?, c.get_mut(..r0)?])
     }
 
     /// Prediction with an odometry increment `(dx, dy, dθ)` in the previous robot frame
@@ -849,8 +886,8 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     }
 
     /// `P' = F P Fᵀ + G diag(q) Gᵀ` with `F`, `G` acting on the robot only, on the factor:
-    /// the robot's coupling rows `L_rm ← S F L_rm`, and its own block re-factored from
-    /// `S [F L_rr | G]` with weights `(D_r, q)`. `S` is the diagonal congruence that
+    /// the robot's coupling rows `L_rm ← S F L_rm` (deferred: [`deferred`]), and its own
+    /// block re-factored from `S [F L_rr | G]` with weights `(D_r, q)`. `S` is the diagonal congruence that
     /// caps the robot's variances (see [`MAX_POSITION_VARIANCE`]); it is the identity
     /// unless a cap is exceeded. Checks everything before writing.
     ///
@@ -865,14 +902,19 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         q: &[T; 3],
         wrt_scale: Option<&[[T; 2]; 3]>,
     ) -> Result<(), EkfError> {
-        let (p_rr, coupling) = self.robot_summary();
+        let run = self.deferred.unwrap_or_else(|| self.start_deferral());
+        let p_rr = run.coupled() + self.own_covariance();
         let mut new_rr =
-            f * p_rr * f.transpose() + g * Matrix3::from_diagonal(&(*q).into()) * g.transpose();
+            congruence(f, &p_rr) + congruence(g, &Matrix3::from_diagonal(&(*q).into()));
         if let Some(fs) = wrt_scale.filter(|_| self.calibration & SCALE_SLOT != 0) {
             // The scale states move the robot too: its variances gain the diagonal of
             // F P_Rs F_sᵀ + F_s P_sR Fᵀ + F_s P_ss F_sᵀ, which the caps and the finiteness
             // check below must see (a long step can make it overflow on its own).
-            for (a, v) in self.scale_motion_variances(f, fs).into_iter().enumerate() {
+            for (a, v) in self
+                .scale_motion_variances(&run, f, fs)
+                .into_iter()
+                .enumerate()
+            {
                 new_rr[(a, a)] += v;
             }
         }
@@ -882,9 +924,9 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             (new_rr[(2, 2)], MAX_HEADING_VARIANCE),
         ]);
         let s = Matrix3::from_diagonal(&scale.into());
-        let (f, g) = (s * f, s * g);
+        let (f, g) = (product(&s, f), product(&s, g));
         let (lrr, dr) = self.robot_block();
-        let flrr = f * Matrix3::from_fn(|i, j| lrr[i][j]);
+        let flrr = product(&f, &Matrix3::from_fn(|i, j| lrr[i][j]));
         let mut w = [[T::ZERO; 6]; 3];
         let mut weights = [T::ZERO; 6];
         for a in 0..3 {
@@ -896,42 +938,30 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             weights[3 + a] = q[a];
         }
         let (l, d) = mwgs(w, &weights);
-        // |F L_rm| ≤ 3 · max|F| · max|L_rm|.
-        let coupling_bound = T::lit(3.0) * max_abs(f.iter().copied()) * coupling;
         // S F_s L_s, rows of the robot over columns 0 and 1.
         let l10 = self.factor.get(1).copied().unwrap_or(T::ZERO);
         let scale_terms = wrt_scale.map(|fs| {
-            [0, 1, 2].map(|a| {
+            Matrix3::from_fn(|a, c| {
                 let (f0, f1) = (scale[a] * fs[a][0], scale[a] * fs[a][1]);
-                [f0 + f1 * l10, f1]
+                match c {
+                    0 => f0 + f1 * l10,
+                    1 => f1,
+                    _ => T::ZERO,
+                }
             })
         });
-        let scale_ok = scale_terms.is_none_or(|t| t.iter().flatten().all(|v| v.finite()));
+        let scale_ok = scale_terms.is_none_or(|t| t.iter().all(|v| v.finite()));
+        let with_scale = scale_terms.filter(|_| self.calibration & SCALE_SLOT != 0);
+        let next = run.then(&f, with_scale.as_ref());
         if !new_rr.iter().all(|v| v.finite())
             || !all_finite(&l, &d)
-            || !coupling_bound.finite()
+            || !next.is_finite()
             || !scale_ok
         {
             return Err(EkfError::NumericalFailure);
         }
-        let with_scale = scale_terms.filter(|_| self.calibration & SCALE_SLOT != 0);
-        if let Some([ra, rb, rc]) = self.robot_coupling_mut() {
-            for ((a, b), c) in ra.iter_mut().zip(rb.iter_mut()).zip(rc.iter_mut()) {
-                let (x, y, z) = (*a, *b, *c);
-                *a = f[(0, 0)] * x + f[(0, 1)] * y + f[(0, 2)] * z;
-                *b = f[(1, 0)] * x + f[(1, 1)] * y + f[(1, 2)] * z;
-                *c = f[(2, 0)] * x + f[(2, 1)] * y + f[(2, 2)] * z;
-            }
-            if let Some(t) = with_scale {
-                for (row, added) in [ra, rb, rc].into_iter().zip(t) {
-                    for (slot, v) in row.iter_mut().zip(added) {
-                        *slot += v;
-                    }
-                }
-            }
-        }
         self.set_robot_block(&l, &d);
-        self.summary = Some(self.compute_robot_summary());
+        self.deferred = Some(next);
         Ok(())
     }
 
@@ -941,15 +971,28 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// `P_Rs` and `P_ss` read from the scale columns of the factor (O(1)). The caps and
     /// the finiteness check need the diagonal only: a covariance's off-diagonal entries
     /// are bounded by its diagonal.
-    fn scale_motion_variances(&self, f: &Matrix3<T>, fs: &[[T; 2]; 3]) -> [T; 3] {
+    fn scale_motion_variances(
+        &self,
+        run: &DeferredMotion<T>,
+        f: &Matrix3<T>,
+        fs: &[[T; 2]; 3],
+    ) -> [T; 3] {
         let r0 = self.active_dim() - 3;
         let (d0, d1) = (pivot(&self.factor, 0), pivot(&self.factor, 1));
         let l10 = self.factor.get(1).copied().unwrap_or(T::ZERO);
+        // The robot rows' columns 0 and 1, with the deferred predictions applied.
+        let stored = |c: usize| {
+            [0, 1, 2].map(|b| {
+                strict_row(&self.factor, r0 + b)
+                    .get(c)
+                    .copied()
+                    .unwrap_or(T::ZERO)
+            })
+        };
+        let (col0, col1) = (run.map.column(0, stored(0)), run.map.column(1, stored(1)));
         // P_Rs row b: (L_b0 D₀, L_b0 D₀ l₁₀ + L_b1 D₁).
         let prs = [0, 1, 2].map(|b| {
-            let row = strict_row(&self.factor, r0 + b);
-            let l0 = row.first().copied().unwrap_or(T::ZERO);
-            let l1 = row.get(1).copied().unwrap_or(T::ZERO);
+            let (l0, l1) = (col0[b], col1[b]);
             [l0 * d0, l0 * d0 * l10 + l1 * d1]
         });
         [0, 1, 2].map(|a| {
@@ -991,16 +1034,41 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         })
     }
 
-    /// `f = Lᵀ hᵀ` over the first `f.len()` states, for a sparse row `h`.
+    /// `f = Lᵀ hᵀ` over the first `f.len()` states, for a sparse row `h`. With deferred
+    /// predictions the robot's coefficients `h_r` act on the stored coupling rows as
+    /// `Aᵀ h_r` and on columns 0 and 1 as `Bᵀ h_r` ([`deferred`]).
     fn project(&self, h: &SparseRow<T>, f: &mut [T]) {
         f.fill(T::ZERO);
+        let r0 = self.active_dim() - 3;
+        let deferred = self.deferred.as_ref().map(|run| run.map);
+        let mut robot = [T::ZERO; 3];
         for &(s, hs) in h {
-            for (fc, &l) in f.iter_mut().zip(strict_row(&self.factor, s)) {
-                *fc += hs * l;
+            if deferred.is_some()
+                && let Some(v) = robot.get_mut(s.wrapping_sub(r0))
+            {
+                *v += hs;
+                continue;
             }
+            add_scaled(f, strict_row(&self.factor, s), hs);
             if let Some(fs) = f.get_mut(s) {
                 *fs += hs;
             }
+        }
+        let Some(map) = deferred else {
+            return;
+        };
+        let (on_stored, on_near) = pull_back(&map, robot);
+        for (b, (&hr, &hs)) in robot.iter().zip(on_stored.iter()).enumerate() {
+            let row = strict_row(&self.factor, r0 + b);
+            let (coupling, own) = row.split_at(r0.min(row.len()));
+            add_scaled(f, coupling, hs);
+            add_scaled(f.get_mut(r0..).unwrap_or(&mut []), own, hr);
+            if let Some(fs) = f.get_mut(r0 + b) {
+                *fs += hr;
+            }
+        }
+        if r0 >= 2 {
+            add_scaled(f, &on_near, T::ONE);
         }
     }
 
@@ -1517,7 +1585,6 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         self.mean.fixed_rows_mut::<2>(k).copy_from(&g.landmark);
         let index = self.landmark_count();
         self.slots = self.slots.saturating_add(1);
-        self.summary = None;
         Ok(index)
     }
 }
@@ -1623,23 +1690,137 @@ fn max_abs<T: Real>(values: impl Iterator<Item = T>) -> T {
     })
 }
 
+/// `f += a · row` over the shorter of the two (not inlined on a microcontroller: one copy
+/// in the firmware's flash for every row a projection adds).
+#[cfg_attr(target_os = "none", inline(never))]
+fn add_scaled<T: Real>(f: &mut [T], row: &[T], a: T) {
+    for (fc, &l) in f.iter_mut().zip(row) {
+        *fc += a * l;
+    }
+}
+
 /// `x > 0`, false for NaN.
 fn is_positive<T: Real>(x: T) -> bool {
     x > T::ZERO
-}
-
-/// Two robot summaries are the same numbers (NaN equal to NaN): the check that a cached
-/// summary is the one its factor gives.
-fn same_summary<T: Real>(a: &(Matrix3<T>, T), b: &(Matrix3<T>, T)) -> bool {
-    #[allow(clippy::eq_op)]
-    let same = |x: T, y: T| x == y || (x != x && y != y);
-    a.0.iter().zip(b.0.iter()).all(|(&x, &y)| same(x, y)) && same(a.1, b.1)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use covariance::internal;
+
+    type Slam = EkfSlam<f64, { state_dim(6) }, { factor_len(6) }>;
+
+    /// A filter with both calibration slots and three landmarks, after some updates.
+    fn calibrated_with_landmarks() -> Slam {
+        let mut slam = Slam::new(EkfConfig::DEFAULT_F64);
+        slam.estimate_odometry_scale(0.05, 0.04).unwrap();
+        slam.estimate_range_bias(0.1, 0.3).unwrap();
+        for (i, z) in [(2.0, 0.4), (3.0, -0.7), (1.5, 1.2)]
+            .into_iter()
+            .enumerate()
+        {
+            slam.predict_velocity(0.4, 0.3, 0.5).unwrap();
+            slam.add_landmark(&RangeBearing::new(z.0, z.1)).unwrap();
+            slam.predict_velocity(0.3, -0.2, 0.5).unwrap();
+            slam.update(i, &RangeBearing::new(z.0 - 0.1, z.1 + 0.05))
+                .unwrap();
+        }
+        slam
+    }
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() <= 1e-12 * (1.0 + a.abs().max(b.abs()))
+    }
+
+    /// Predictions deferred ([`deferred`]) and predictions applied one by one give the
+    /// same covariance, innovations and update: every reader of a deferred filter sees
+    /// the true factor.
+    #[test]
+    fn deferred_predictions_read_and_update_like_applied_ones() {
+        let mut deferred = calibrated_with_landmarks();
+        let mut applied = deferred.clone();
+        for k in 0..40 {
+            let (v, w) = (0.2 + 0.01 * f64::from(k), 0.3 - 0.02 * f64::from(k));
+            deferred.predict_velocity(v, w, 0.1).unwrap();
+            applied.predict_velocity(v, w, 0.1).unwrap();
+            applied.settle();
+        }
+        deferred
+            .inflate_pose_covariance(&Matrix3::from_diagonal_element(0.01))
+            .unwrap();
+        applied
+            .inflate_pose_covariance(&Matrix3::from_diagonal_element(0.01))
+            .unwrap();
+        applied.settle();
+        assert!(deferred.deferred.is_some() && applied.deferred.is_none());
+        // The stored robot rows differ; what the filter shows does not.
+        assert_ne!(deferred.factor_storage(), applied.factor_storage());
+        let (pd, pa) = (deferred.active_covariance(), applied.active_covariance());
+        // Two calibration slots, three landmarks.
+        assert_eq!(pd.dim(), 13);
+        for i in 0..13 {
+            for j in 0..13 {
+                let (a, b) = (pd.get(i, j).unwrap(), pa.get(i, j).unwrap());
+                assert!(close(a, b), "({i}, {j}): {a} vs {b}");
+            }
+            let (da, ra) = pd.factor_row(i).unwrap();
+            let (db, rb) = pa.factor_row(i).unwrap();
+            assert_eq!(da, db);
+            assert!(ra.zip(rb).all(|(a, b)| close(a, b)), "factor row {i}");
+        }
+        let (cd, ca) = (deferred.pose_covariance(), applied.pose_covariance());
+        assert!(
+            cd.iter().zip(ca.iter()).all(|(a, b)| close(*a, *b)),
+            "{cd} vs {ca}"
+        );
+        // A sighting near the predicted one, so that the gate accepts it.
+        let guess = RangeBearing::new(2.0, 0.0);
+        let nu = applied.innovation(1, &guess).unwrap().nu;
+        let z = RangeBearing::new(2.0 - nu[0] + 0.05, -nu[1] - 0.02);
+        let (id, ia) = (
+            deferred.innovation(1, &z).unwrap(),
+            applied.innovation(1, &z).unwrap(),
+        );
+        assert!(close(id.mahalanobis_squared, ia.mahalanobis_squared));
+        assert!(id.s.iter().zip(ia.s.iter()).all(|(a, b)| close(*a, *b)));
+        // The update applies the deferred predictions, then both filters agree.
+        let accepted = |o: UpdateOutcome<f64>| matches!(o, UpdateOutcome::Accepted { .. });
+        assert!(accepted(deferred.update(1, &z).unwrap()));
+        assert!(accepted(applied.update(1, &z).unwrap()));
+        assert!(deferred.deferred.is_none());
+        for (a, b) in deferred
+            .factor_storage()
+            .iter()
+            .zip(applied.factor_storage())
+        {
+            assert!(close(*a, *b), "{a} vs {b}");
+        }
+        for (a, b) in deferred.active_mean().iter().zip(applied.active_mean()) {
+            assert!(close(*a, *b), "{a} vs {b}");
+        }
+    }
+
+    /// A new landmark after deferred predictions moves the true robot rows.
+    #[test]
+    fn a_new_landmark_applies_the_deferred_predictions() {
+        let mut deferred = calibrated_with_landmarks();
+        let mut applied = deferred.clone();
+        for _ in 0..10 {
+            deferred.predict_velocity(0.5, 0.2, 0.1).unwrap();
+            applied.predict_velocity(0.5, 0.2, 0.1).unwrap();
+            applied.settle();
+        }
+        let z = RangeBearing::new(2.5, -0.3);
+        assert_eq!(deferred.add_landmark(&z), applied.add_landmark(&z));
+        for (a, b) in deferred
+            .factor_storage()
+            .iter()
+            .zip(applied.factor_storage())
+        {
+            assert!(close(*a, *b), "{a} vs {b}");
+        }
+    }
 
     #[test]
     fn public_and_internal_indices_are_inverse() {
