@@ -618,7 +618,9 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     }
 
     /// The active block of the covariance, as a symmetric view computed from the factor
-    /// (no copy; O(n) per entry).
+    /// (no copy; O(n) per entry). After predictions, an entry in the robot's rows applies
+    /// the deferred predictions as it reads them (a few times slower):
+    /// [`EkfSlam::flush_predictions`] first when reading many.
     pub fn active_covariance(&self) -> CovarianceView<'_, T> {
         CovarianceView::new(
             &self.factor,
@@ -713,6 +715,15 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             d
         });
         DeferredMotion::start(rows, pivots)
+    }
+
+    /// Applies the predictions made since the last update or new landmark to the stored
+    /// factor now (O(n), once). The next update or new landmark does it anyway; call it
+    /// before reading many entries of [`EkfSlam::active_covariance`] (a JCBB batch),
+    /// whose reads otherwise apply the deferred predictions to every robot entry they
+    /// compute. Nothing the filter shows changes.
+    pub fn flush_predictions(&mut self) {
+        self.settle();
     }
 
     /// The factor, to write: applies the deferred predictions first. (Inlined: the loops
@@ -1744,7 +1755,7 @@ mod tests {
             let (v, w) = (0.2 + 0.01 * f64::from(k), 0.3 - 0.02 * f64::from(k));
             deferred.predict_velocity(v, w, 0.1).unwrap();
             applied.predict_velocity(v, w, 0.1).unwrap();
-            applied.settle();
+            applied.flush_predictions();
         }
         deferred
             .inflate_pose_covariance(&Matrix3::from_diagonal_element(0.01))
@@ -1752,7 +1763,7 @@ mod tests {
         applied
             .inflate_pose_covariance(&Matrix3::from_diagonal_element(0.01))
             .unwrap();
-        applied.settle();
+        applied.flush_predictions();
         assert!(deferred.deferred.is_some() && applied.deferred.is_none());
         // The stored robot rows differ; what the filter shows does not.
         assert_ne!(deferred.factor_storage(), applied.factor_storage());
@@ -1809,7 +1820,7 @@ mod tests {
         for _ in 0..10 {
             deferred.predict_velocity(0.5, 0.2, 0.1).unwrap();
             applied.predict_velocity(0.5, 0.2, 0.1).unwrap();
-            applied.settle();
+            applied.flush_predictions();
         }
         let z = RangeBearing::new(2.5, -0.3);
         assert_eq!(deferred.add_landmark(&z), applied.add_landmark(&z));

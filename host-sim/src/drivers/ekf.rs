@@ -498,6 +498,9 @@ impl<T: Real> Replayer<T> {
                 }
             }
             AssociationMode::Icnn => {
+                // The association reads the covariance many times: apply the deferred
+                // predictions once first (the update after it would do it anyway).
+                self.slam.flush_predictions();
                 let config = *self.jcbb.config();
                 for &(z, truth) in batch {
                     let pairing = icnn(&self.slam, &z, &config);
@@ -505,6 +508,7 @@ impl<T: Real> Replayer<T> {
                 }
             }
             AssociationMode::Jcbb => {
+                self.slam.flush_predictions();
                 for chunk in batch.chunks(MAX_BATCH) {
                     let mut zs = [RangeBearing::new(T::ZERO, T::ZERO); MAX_BATCH];
                     for (slot, (z, _)) in zs.iter_mut().zip(chunk) {
