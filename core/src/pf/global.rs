@@ -651,9 +651,21 @@ fn leaf_score(map: &GridView<'_>, cells: &[(i32, i32, u32)], x: i32, y: i32) -> 
 }
 
 /// `true` when the robot may stand somewhere in the level-`k` block at `(x, y)`.
+///
+/// At level 0 that is a free cell. A map kept as its occupied-cell bitmap alone (a map
+/// image in flash: [`GridView::from_occupancy_bits`], no log-odds) cannot tell a free
+/// cell from an unknown one; there a candidate is a cell that is not occupied in a
+/// 2 × 2 block of level 1 holding a free cell, the finest free information the layers
+/// carry (without it no leaf would ever be a candidate, and the search on a device
+/// could never find a pose).
 fn block_free(map: &GridView<'_>, layers: &MaxPoolLayers<'_>, k: u8, x: i32, y: i32) -> bool {
-    if k == 0 {
+    if k == 0 && !map.cells().is_empty() {
         return map.log_odds(x, y).is_some_and(|v| v < layers.free_below());
+    }
+    if k == 0 {
+        return map.geometry().contains(x, y)
+            && !map.is_occupied(x, y)
+            && layers.any_free(1, (x >> 1) as usize, (y >> 1) as usize);
     }
     x >= 0 && y >= 0 && layers.any_free(k, (x >> k) as usize, (y >> k) as usize)
 }

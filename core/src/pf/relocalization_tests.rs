@@ -74,6 +74,53 @@ fn known_pose_is_found_from_a_simulated_scan() {
     std::println!("most nodes {worst_nodes}");
 }
 
+/// The same search on the map's occupied-cell bitmap alone (what a map image in flash
+/// holds: no log-odds, so level 0 cannot tell free from unknown and takes the cells that
+/// are not occupied in a free 2 × 2 block of level 1): the same poses are found.
+#[test]
+fn known_pose_is_found_on_the_occupied_bitmap_alone() {
+    let (map, layers) = room_map();
+    let view = map.view();
+    let g = *view.geometry();
+    let mut bits = std::vec![0u8; crate::grid::occupancy_bytes(g.width, g.height)];
+    crate::grid::fill_occupancy_bits(
+        view.cells(),
+        g.width,
+        g.height,
+        view.occupied_above(),
+        &mut bits,
+    )
+    .unwrap();
+    let bitmap_only = GridView::from_occupancy_bits(&bits, g, view.occupied_above()).unwrap();
+    assert!(bitmap_only.cells().is_empty());
+    let layers = MaxPoolLayers::from_bytes(&layers).unwrap();
+    let sim = simulate(7);
+    for k in (0..sim.scans.len()).step_by(37) {
+        let mut pts = ScanPoints::<180>::new();
+        pts.load(&LidarScan::new(&sim.scans[k], LIDAR), 1, 1.0);
+        let config = GlobalSearchConfig {
+            node_budget: u32::MAX,
+            max_beams: 60,
+            ..GlobalSearchConfig::DEFAULT
+        };
+        let (mut found, mut with_cells) = (Hypotheses::<4>::new(), Hypotheses::<4>::new());
+        let r = global::search(&bitmap_only, &layers, pts.as_slice(), &config, &mut found).unwrap();
+        global::search(&view, &layers, pts.as_slice(), &config, &mut with_cells).unwrap();
+        let best = found.best().expect("a hypothesis on the bitmap alone");
+        std::println!(
+            "scan {k}: {best:?}, {} nodes; with the cells {:?}",
+            r.nodes,
+            with_cells.best()
+        );
+        assert!(
+            close(&best.pose, &sim.truth[k], 0.1, 0.05),
+            "scan {k}: {best:?} vs {:?}",
+            sim.truth[k]
+        );
+        assert!(r.complete);
+    }
+}
+
 /// Runs a localizer over scans `from..to` of `sim` (odometry between them).
 /// A localizer with 64 particles and the default settings on `map`, given no pose: lost,
 /// its global search pending.
