@@ -74,6 +74,14 @@ cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/localizer.elf"
 # cost_grid with the map: the localizer's step on the Intel map (scans ray-cast in it).
 cp "$TARGET_DIR/$TARGET/$PROFILE/cost_grid" "$OUT/cost_grid_map.elf"
 export LOCALIZER_ELF="$OUT/localizer.elf" LOCALIZER_MAP="$MAP_DIR/map.yaml"
+# The same firmware with the map of the simulator's office (a `host-sim sim` grid-SLAM
+# run, made here): the relocalization test in the simulated office runs on it (QEMU only).
+step "build: localizer firmware with the simulated office's map in flash (qemu)"
+OFFICE_DIR="$OUT/office-sim"
+"$TARGET_DIR/release/host-sim" -q sim --no-plots --out "$OFFICE_DIR"
+MICROSLAM_MAP="$OFFICE_DIR/grid/slam/map.yaml" cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --bin firmware-example
+cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/localizer-office.elf"
+export OFFICE_LOCALIZER_ELF="$OUT/localizer-office.elf" OFFICE_LOCALIZER_MAP="$OFFICE_DIR/grid/slam/map.yaml"
 # ---- end localizer firmware ----
 
 measured="$OUT/measured.txt"

@@ -216,6 +216,19 @@ pub fn synthetic_lidar_drive(steps: usize) -> (Vec<ToDevice>, usize) {
     (out.finish(), scans)
 }
 
+/// The simulator's office world with `laps` laps, its lidar moved to the robot's centre
+/// (the wire carries no mount pose), recorded with noise seed `seed`.
+pub fn office_recording(
+    laps: u32,
+    seed: u64,
+) -> host_sim::inputs::sim::lidar_world::LidarRecording {
+    use host_sim::inputs::sim::lidar_world::{LidarWorld, simulate};
+    let mut world = LidarWorld::office();
+    world.lidar.mount = [0.0; 3];
+    world.laps = laps;
+    simulate(&world, seed).expect("the office world simulates")
+}
+
 /// The simulator's lidar world (`host_sim::inputs::sim::lidar_world`, seed `seed`) as wire frames
 /// for the grid estimator: select the grid, reset to the start pose, then for every sweep
 /// the odometry increment since the previous sweep (in the previous odometry frame) and the
@@ -223,55 +236,31 @@ pub fn synthetic_lidar_drive(steps: usize) -> (Vec<ToDevice>, usize) {
 /// request at the end. The lidar is moved to the robot's centre (the wire carries no mount
 /// pose) and `laps` set. Returns the messages and the sweeps' true poses.
 pub fn lidar_world_messages(laps: u32, seed: u64) -> (Vec<ToDevice>, Vec<[f64; 3]>) {
-    use host_sim::inputs::sim::lidar_world::{LidarWorld, simulate};
-    let mut world = LidarWorld::office();
-    world.lidar.mount = [0.0; 3];
-    world.laps = laps;
-    let rec = simulate(&world, seed).expect("the office world simulates");
-    let start = world.start_pose();
+    let rec = office_recording(laps, seed);
+    let start = rec.world.start_pose();
     let mut out = Messages::grid_from(start.x as f32, start.y as f32, start.theta as f32);
-    let max_mm = world.lidar.max_range_m * 1000.0;
-    let mut last = rec.scans.first().map(|s| s.odometry);
-    let mut truth = Vec::new();
-    for (k, scan) in rec.scans.iter().enumerate() {
-        let stamp_us = (scan.stamp * 1e6) as u64;
-        if let Some(prev) = last {
-            let (c, s) = (prev.theta.cos(), prev.theta.sin());
-            let (dx, dy) = (scan.odometry.x - prev.x, scan.odometry.y - prev.y);
-            let dth = scan.odometry.theta - prev.theta;
-            if k > 0 {
-                out.odometry(
-                    stamp_us,
-                    Odometry::Increment {
-                        dx: (c * dx + s * dy) as f32,
-                        dy: (-s * dx + c * dy) as f32,
-                        dtheta: dth.sin().atan2(dth.cos()) as f32,
-                    },
-                );
-            }
-        }
-        last = Some(scan.odometry);
-        let ranges: Vec<u16> = scan
-            .ranges
-            .iter()
-            .map(|&r| {
-                let mm = f64::from(r) * 1000.0;
-                if mm >= max_mm || mm <= 0.0 {
-                    0
-                } else {
-                    mm.round() as u16
-                }
-            })
-            .collect();
-        out.scan(
-            stamp_us,
-            k as u16,
-            &ranges,
-            rec.lidar.first_angle,
-            rec.lidar.angle_increment,
-        );
-        truth.push([scan.truth.x, scan.truth.y, scan.truth.theta]);
-    }
+    let truth = out.sweeps(&rec, &rec.scans);
+    (out.finish(), truth)
+}
+
+/// A relocalization in the office world for the localizer firmware: select the
+/// localizer, reset it at the map's origin (a pose the robot is not at), ask it to
+/// `Relocalize`, then the sweeps `sweeps` of `rec` as [`lidar_world_messages`] sends them
+/// (no odometry before the first) and a status request. Returns the messages and the
+/// sweeps' true poses.
+pub fn office_relocalization_messages(
+    rec: &host_sim::inputs::sim::lidar_world::LidarRecording,
+    sweeps: std::ops::Range<usize>,
+) -> (Vec<ToDevice>, Vec<[f64; 3]>) {
+    let mut out = Messages::default();
+    out.command(WireCommand::SelectEstimator(EstimatorKind::Localizer));
+    out.command(WireCommand::Reset {
+        x: 0.0,
+        y: 0.0,
+        theta: 0.0,
+    });
+    out.command(WireCommand::Relocalize);
+    let truth = out.sweeps(rec, rec.scans.get(sweeps).unwrap_or(&[]));
     (out.finish(), truth)
 }
 
@@ -290,6 +279,26 @@ pub fn localizer_elf() -> PathBuf {
 pub fn localizer_map() -> PathBuf {
     std::env::var_os("LOCALIZER_MAP").map_or_else(
         || workspace_root().join("target/firmware-elf/intel-map/map.yaml"),
+        PathBuf::from,
+    )
+}
+
+/// The localizer firmware built with the office map (`MICROSLAM_MAP` = the map of a
+/// `host-sim sim` grid-SLAM run of the simulator's office): `$OFFICE_LOCALIZER_ELF`, else
+/// `target/firmware-elf/localizer-office.elf` (where `.ci/firmware.sh` puts it).
+pub fn office_localizer_elf() -> PathBuf {
+    std::env::var_os("OFFICE_LOCALIZER_ELF").map_or_else(
+        || workspace_root().join("target/firmware-elf/localizer-office.elf"),
+        PathBuf::from,
+    )
+}
+
+/// The map [`office_localizer_elf`] was built with: `$OFFICE_LOCALIZER_MAP`, else
+/// `target/firmware-elf/office-sim/grid/slam/map.yaml` (the `host-sim sim` run that
+/// `.ci/firmware.sh` makes).
+pub fn office_localizer_map() -> PathBuf {
+    std::env::var_os("OFFICE_LOCALIZER_MAP").map_or_else(
+        || workspace_root().join("target/firmware-elf/office-sim/grid/slam/map.yaml"),
         PathBuf::from,
     )
 }
@@ -358,6 +367,57 @@ impl Messages {
                 ranges_mm: heapless::Vec::from_slice(chunk).unwrap_or_default(),
             }));
         }
+    }
+
+    /// `scans` of `rec`, each after the odometry increment since the previous one (in the
+    /// previous odometry frame; none before the first) and in chunks (readings at or
+    /// beyond the maximum range as 0 mm: no return). Returns their true poses.
+    fn sweeps(
+        &mut self,
+        rec: &host_sim::inputs::sim::lidar_world::LidarRecording,
+        scans: &[host_sim::inputs::sim::lidar_world::SimScan],
+    ) -> Vec<[f64; 3]> {
+        let max_mm = rec.world.lidar.max_range_m * 1000.0;
+        let mut last = None;
+        let mut truth = Vec::with_capacity(scans.len());
+        for (k, scan) in scans.iter().enumerate() {
+            let stamp_us = (scan.stamp * 1e6) as u64;
+            if let Some(prev) = last.replace(scan.odometry) {
+                let prev: microslam::geometry::Pose2<f64> = prev;
+                let (c, s) = (prev.theta.cos(), prev.theta.sin());
+                let (dx, dy) = (scan.odometry.x - prev.x, scan.odometry.y - prev.y);
+                let dth = scan.odometry.theta - prev.theta;
+                self.odometry(
+                    stamp_us,
+                    Odometry::Increment {
+                        dx: (c * dx + s * dy) as f32,
+                        dy: (-s * dx + c * dy) as f32,
+                        dtheta: dth.sin().atan2(dth.cos()) as f32,
+                    },
+                );
+            }
+            let ranges: Vec<u16> = scan
+                .ranges
+                .iter()
+                .map(|&r| {
+                    let mm = f64::from(r) * 1000.0;
+                    if mm >= max_mm || mm <= 0.0 {
+                        0
+                    } else {
+                        mm.round() as u16
+                    }
+                })
+                .collect();
+            self.scan(
+                stamp_us,
+                k as u16,
+                &ranges,
+                rec.lidar.first_angle,
+                rec.lidar.angle_increment,
+            );
+            truth.push([scan.truth.x, scan.truth.y, scan.truth.theta]);
+        }
+        truth
     }
 
     /// A status request at the end; the messages.

@@ -403,16 +403,17 @@ fn localizer_requests_are_refused_without_a_valid_map() {
 /// four starts of the Intel log, the device is reset to a wrong pose (the map's origin),
 /// asked to `Relocalize`, and fed the next 10 scans; every scan until a search succeeds
 /// runs the search over the whole map (the device's node budget, the map's 5 levels) and
-/// every reply equals the host's bit for bit. Whether the search seeded the particles is
-/// printed, not asserted: with the device's budget it does not on these starts (see
-/// `docs/global-localization.md`).
+/// every reply equals the host's bit for bit. A start is found when the estimate after
+/// the tenth scan is within 0.3 m / 10° of the reference (the same firmware session
+/// tracked on the host from the log's first pose): three of the four are, as measured
+/// (see `docs/global-localization.md`).
 #[test]
 #[ignore = "needs qemu-system-arm, the localizer ELF, its map and the datasets: run by .ci/firmware.sh"]
 fn localizer_firmware_relocalizes_like_the_host_on_intel() {
     use host_sim::drivers::hil_localizer::{
         host_localizer_replies, localizer_messages, map_image_of,
     };
-    use microslam::wire::{Command as WireCommand, TrackingState};
+    use microslam::wire::Command as WireCommand;
     use microslam_replay_tests::firmware::{localizer_elf, localizer_map};
     let (elf, map) = (localizer_elf(), localizer_map());
     assert!(
@@ -430,10 +431,21 @@ fn localizer_firmware_relocalizes_like_the_host_on_intel() {
     let log = host_sim::inputs::readers::carmen::read_log(&log_path).expect("Intel log reads");
     let scans = host_sim::inputs::readers::carmen::front_scans(&log);
     let image = map_image_of(&map).expect("the map converts");
+    // The reference: the firmware's localizer tracked from the log's first pose (the
+    // map's origin) on the host, read after each scan.
+    let starts = [1155usize, 3390, 3675, 2676];
+    let end = starts.iter().max().expect("starts") + 10;
+    let (track, last_chunks) =
+        localizer_messages(&scans[..end], microslam::geometry::Pose2::IDENTITY);
+    let tracked = host_localizer_replies(&encode_all(&track), &image).expect("host reference");
+    let pose_after = |replies: &[ToHost], i: usize| match replies.get(i) {
+        Some(ToHost::Localization { estimate, .. }) => estimate.pose,
+        other => panic!("reply {i} is not a localization: {other:?}"),
+    };
     let mut relocalized = Vec::new();
-    for start in [1155usize, 3390, 3675, 2676] {
+    for start in starts {
         let part = &scans[start..start + 10];
-        let (mut messages, _) = localizer_messages(part, microslam::geometry::Pose2::IDENTITY);
+        let (mut messages, chunks) = localizer_messages(part, microslam::geometry::Pose2::IDENTITY);
         messages.insert(
             2,
             ToDevice::Command {
@@ -467,8 +479,115 @@ fn localizer_firmware_relocalizes_like_the_host_on_intel() {
             })
             .collect();
         let last = reports.last().expect("localizations");
-        println!("start {start}: last report {last:?}");
-        relocalized.push(last.relocalizations > 0 && last.state != TrackingState::Lost);
+        // The Relocalize command sits before the scans: each scan's last chunk moved by one.
+        let got = pose_after(&run.replies, chunks[9] + 1);
+        let want = pose_after(&tracked, last_chunks[start + 9]);
+        let d = (got[0] - want[0]).hypot(got[1] - want[1]);
+        let dth = (got[2] - want[2])
+            .sin()
+            .atan2((got[2] - want[2]).cos())
+            .to_degrees();
+        let found = d <= 0.3 && dth.abs() <= 10.0;
+        println!("start {start}: last report {last:?}; {d:.3} m, {dth:.2}° from the reference");
+        relocalized.push(found);
     }
-    println!("relocalized within 10 scans: {relocalized:?}");
+    println!("relocalized within 10 scans (0.3 m / 10° of the reference): {relocalized:?}");
+    // Measured: 1155 is not found (the windows' best pose is elsewhere), the other three
+    // are (as in `host-sim localize --global --bitmap-only` with the device's settings).
+    assert_eq!(
+        relocalized,
+        [false, true, true, true],
+        "Intel starts found through QEMU"
+    );
+}
+
+/// Global localization in the simulator's office through QEMU: the localizer firmware
+/// built with the map of a `host-sim sim` grid-SLAM run of the office (noise seed 1, made
+/// by `.ci/firmware.sh`), asked to `Relocalize` at a start sweep of another recording of
+/// the office (noise seed 7) and fed 10 sweeps, at 20 starts spread over the lap. The
+/// host runs the firmware's session on the same bytes for all 20; QEMU runs the first
+/// [`OFFICE_QEMU_STARTS`] and every reply equals the host's bit for bit. A start
+/// succeeds when the estimate after the tenth sweep is within 0.3 m / 10° of the truth
+/// (the bar); the count is a floor from the measurement (20 of 20 on the host,
+/// all QEMU starts).
+#[test]
+#[ignore = "needs qemu-system-arm, the office localizer ELF and its map: run by .ci/firmware.sh"]
+fn localizer_firmware_relocalizes_like_the_host_in_the_office() {
+    use host_sim::drivers::hil_localizer::{host_localizer_replies, map_image_of};
+    use microslam::wire::TrackingState;
+    use microslam_replay_tests::firmware::{
+        office_localizer_elf, office_localizer_map, office_recording,
+        office_relocalization_messages,
+    };
+    const STARTS: usize = 20;
+    const SWEEPS: usize = 10;
+    const OFFICE_QEMU_STARTS: usize = 4;
+    let (elf, map) = (office_localizer_elf(), office_localizer_map());
+    for path in [&elf, &map] {
+        assert!(
+            path.exists(),
+            "{} missing: run .ci/firmware.sh",
+            path.display()
+        );
+    }
+    let image = map_image_of(&map).expect("the office map converts");
+    let rec = office_recording(1, 7);
+    let last_start = rec.scans.len() - SWEEPS;
+    let (mut host_ok, mut qemu_ok) = (0, 0);
+    for k in 0..STARTS {
+        let start = k * last_start / STARTS;
+        let (messages, truth) = office_relocalization_messages(&rec, start..start + SWEEPS);
+        let bytes = encode_all(&messages);
+        let expected = host_localizer_replies(&bytes, &image).expect("host reference");
+        assert_eq!(expected.len(), messages.len(), "one reply per message");
+        let (pose, report) = expected
+            .iter()
+            .rev()
+            .find_map(|r| match r {
+                ToHost::Localization {
+                    estimate,
+                    localizer,
+                } => Some((estimate.pose, *localizer)),
+                _ => None,
+            })
+            .expect("localizations");
+        let t = truth.last().expect("sweeps");
+        let d = (f64::from(pose[0]) - t[0]).hypot(f64::from(pose[1]) - t[1]);
+        let dth = (f64::from(pose[2]) - t[2])
+            .sin()
+            .atan2((f64::from(pose[2]) - t[2]).cos());
+        let found = d <= 0.3 && dth.abs().to_degrees() <= 10.0;
+        host_ok += usize::from(found);
+        println!(
+            "office start {start}: host {} ({d:.3} m, {:.2}°, {report:?})",
+            if found { "found" } else { "not found" },
+            dth.to_degrees()
+        );
+        if k < OFFICE_QEMU_STARTS {
+            let run = run_in_qemu(&elf, bytes, expected.len(), Duration::from_secs(600));
+            assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
+            assert_eq!(run.replies.len(), expected.len(), "every message answered");
+            for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
+                assert_eq!(
+                    bits(got),
+                    bits(want),
+                    "office start {start}, reply {i} differs:\n{got:?}\n{want:?}"
+                );
+            }
+            println!(
+                "office start {start}: QEMU equal to the host, {} replies in {:.2} s",
+                run.replies.len(),
+                run.elapsed.as_secs_f64()
+            );
+            qemu_ok += usize::from(found && report.state != TrackingState::Lost);
+        }
+    }
+    println!(
+        "office relocalization: host {host_ok} / {STARTS}, QEMU {qemu_ok} / {OFFICE_QEMU_STARTS}"
+    );
+    assert!(host_ok >= 20, "host: {host_ok} of {STARTS} starts found");
+    assert!(
+        qemu_ok >= 4,
+        "QEMU: {qemu_ok} of {OFFICE_QEMU_STARTS} starts found"
+    );
 }
