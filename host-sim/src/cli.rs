@@ -257,6 +257,12 @@ pub struct GlobalArgs {
     /// the beams' total weight; 0: never (default: the core's).
     #[arg(long)]
     pub full_turn_below: Option<f32>,
+    /// Run the reference and the trials on the map's occupied-cell bitmap alone, as the
+    /// firmware holds it (a map image carries no log-odds: its search takes the cells
+    /// that are not occupied in a free 2 × 2 block as free); the layers are made from
+    /// the cells as `host-sim export-map` makes them.
+    #[arg(long)]
+    pub bitmap_only: bool,
 }
 
 impl From<&GlobalArgs> for GlobalOptions {
@@ -276,6 +282,7 @@ impl From<&GlobalArgs> for GlobalOptions {
             heading_window_deg: a.heading_window,
             first_pass: a.first_pass,
             full_turn_below: a.full_turn_below,
+            bitmap_only: a.bitmap_only,
         }
     }
 }

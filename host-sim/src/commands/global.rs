@@ -58,6 +58,24 @@ pub fn localize_cli(
     )
 }
 
+/// The occupied-cell bitmap of `view` (its own, or made from its cells).
+fn occupancy_bits(view: &GridView<'_>) -> Result<Vec<u8>> {
+    if let Some(bits) = view.occupancy_bits() {
+        return Ok(bits.to_vec());
+    }
+    let g = view.geometry();
+    let mut bits = vec![0u8; microslam::grid::occupancy_bytes(g.width, g.height)];
+    microslam::grid::fill_occupancy_bits(
+        view.cells(),
+        g.width,
+        g.height,
+        view.occupied_above(),
+        &mut bits,
+    )
+    .map_err(|e| anyhow!("occupancy bits: {e:?}"))?;
+    Ok(bits)
+}
+
 /// Builds the layers, runs the reference and the trials, writes `out/metrics.json`.
 #[allow(clippy::too_many_arguments)]
 pub fn run_and_write(
@@ -71,6 +89,17 @@ pub fn run_and_write(
     started: Instant,
 ) -> Result<()> {
     let layers = build_layers(view, &settings.config, settings.levels)?;
+    // The firmware's view of a map image: the occupied bits alone.
+    let bits;
+    let bitmap_view;
+    let view = if settings.bitmap_only {
+        bits = occupancy_bits(view)?;
+        bitmap_view = GridView::from_occupancy_bits(&bits, *view.geometry(), view.occupied_above())
+            .map_err(|e| anyhow!("bitmap view: {e:?}"))?;
+        &bitmap_view
+    } else {
+        view
+    };
     let reference = reference_run(frames, view, &layers, start, settings)?;
     let pb = scan_progress_bar(settings.trials, quiet);
     let trials = run_trials(frames, view, &layers, &reference.poses, settings, &|i| {
@@ -83,6 +112,7 @@ pub fn run_and_write(
         "dataset": name,
         "map_cells": [g.width, g.height],
         "scans": frames.len(),
+        "bitmap_only": settings.bitmap_only,
         "wall_time_s": started.elapsed().as_secs_f64(),
         "global": global,
     });

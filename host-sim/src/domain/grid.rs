@@ -264,6 +264,8 @@ pub struct GlobalOptions {
     /// Score (fraction of the total weight) below which every heading is searched after
     /// the windows; 0: never.
     pub full_turn_below: Option<f32>,
+    /// Run on the map's occupied-cell bitmap alone, as the firmware does.
+    pub bitmap_only: bool,
 }
 
 impl Default for GlobalOptions {
@@ -283,6 +285,7 @@ impl Default for GlobalOptions {
             heading_window_deg: None,
             first_pass: None,
             full_turn_below: None,
+            bitmap_only: false,
         }
     }
 }

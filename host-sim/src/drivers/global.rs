@@ -41,6 +41,8 @@ pub struct TrialSettings {
     pub relocalization: RelocalizationConfig,
     /// Lidar geometry of the recording.
     pub lidar: LidarGeometry,
+    /// Run on the map's occupied-cell bitmap alone (the firmware's view of a map image).
+    pub bitmap_only: bool,
 }
 
 /// One trial.
@@ -418,5 +420,6 @@ pub fn settings_from(
         config,
         relocalization,
         lidar,
+        bitmap_only: args.bitmap_only,
     })
 }
