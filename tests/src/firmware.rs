@@ -264,32 +264,31 @@ pub fn office_relocalization_messages(
     (out.finish(), truth)
 }
 
+/// `$var` when it is set, else `default` under the workspace root.
+fn path_from_env(var: &str, default: &str) -> PathBuf {
+    std::env::var_os(var).map_or_else(|| workspace_root().join(default), PathBuf::from)
+}
+
 /// The localizer firmware ELF (built with `MICROSLAM_MAP`): `$LOCALIZER_ELF`, else
 /// `target/firmware-elf/localizer.elf` (where `.ci/firmware.sh` puts it).
 pub fn localizer_elf() -> PathBuf {
-    std::env::var_os("LOCALIZER_ELF").map_or_else(
-        || workspace_root().join("target/firmware-elf/localizer.elf"),
-        PathBuf::from,
-    )
+    path_from_env("LOCALIZER_ELF", "target/firmware-elf/localizer.elf")
 }
 
 /// The map the localizer firmware was built with: `$LOCALIZER_MAP`, else
 /// `target/firmware-elf/intel-map/map.yaml` (the map of the host grid-SLAM run on the
 /// Intel log that `.ci/firmware.sh` makes).
 pub fn localizer_map() -> PathBuf {
-    std::env::var_os("LOCALIZER_MAP").map_or_else(
-        || workspace_root().join("target/firmware-elf/intel-map/map.yaml"),
-        PathBuf::from,
-    )
+    path_from_env("LOCALIZER_MAP", "target/firmware-elf/intel-map/map.yaml")
 }
 
 /// The localizer firmware built with the office map (`MICROSLAM_MAP` = the map of a
 /// `host-sim sim` grid-SLAM run of the simulator's office): `$OFFICE_LOCALIZER_ELF`, else
 /// `target/firmware-elf/localizer-office.elf` (where `.ci/firmware.sh` puts it).
 pub fn office_localizer_elf() -> PathBuf {
-    std::env::var_os("OFFICE_LOCALIZER_ELF").map_or_else(
-        || workspace_root().join("target/firmware-elf/localizer-office.elf"),
-        PathBuf::from,
+    path_from_env(
+        "OFFICE_LOCALIZER_ELF",
+        "target/firmware-elf/localizer-office.elf",
     )
 }
 
@@ -297,9 +296,9 @@ pub fn office_localizer_elf() -> PathBuf {
 /// `target/firmware-elf/office-sim/grid/slam/map.yaml` (the `host-sim sim` run that
 /// `.ci/firmware.sh` makes).
 pub fn office_localizer_map() -> PathBuf {
-    std::env::var_os("OFFICE_LOCALIZER_MAP").map_or_else(
-        || workspace_root().join("target/firmware-elf/office-sim/grid/slam/map.yaml"),
-        PathBuf::from,
+    path_from_env(
+        "OFFICE_LOCALIZER_MAP",
+        "target/firmware-elf/office-sim/grid/slam/map.yaml",
     )
 }
 

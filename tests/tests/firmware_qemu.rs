@@ -455,21 +455,13 @@ fn localizer_firmware_relocalizes_like_the_host_on_intel() {
         );
         let bytes = encode_all(&messages);
         let expected = host_localizer_replies(&bytes, &image).expect("host reference");
-        let run = run_in_qemu(&elf, bytes, expected.len(), Duration::from_secs(600));
+        println!("relocalization at scan {start}:");
+        let run = run_equal_to_host(&elf, bytes, &expected, Duration::from_secs(600));
         println!(
-            "relocalization at scan {start}: {} replies in {:.2} s",
+            "  {} replies equal to the host's in {:.2} s",
             run.replies.len(),
             run.elapsed.as_secs_f64()
         );
-        assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
-        assert_eq!(run.replies.len(), expected.len(), "every message answered");
-        for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
-            assert_eq!(
-                bits(got),
-                bits(want),
-                "start {start}, reply {i} differs:\n{got:?}\n{want:?}"
-            );
-        }
         let reports: Vec<_> = run
             .replies
             .iter()
@@ -564,16 +556,7 @@ fn localizer_firmware_relocalizes_like_the_host_in_the_office() {
             dth.to_degrees()
         );
         if k < OFFICE_QEMU_STARTS {
-            let run = run_in_qemu(&elf, bytes, expected.len(), Duration::from_secs(600));
-            assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
-            assert_eq!(run.replies.len(), expected.len(), "every message answered");
-            for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
-                assert_eq!(
-                    bits(got),
-                    bits(want),
-                    "office start {start}, reply {i} differs:\n{got:?}\n{want:?}"
-                );
-            }
+            let run = run_equal_to_host(&elf, bytes, &expected, Duration::from_secs(600));
             println!(
                 "office start {start}: QEMU equal to the host, {} replies in {:.2} s",
                 run.replies.len(),
