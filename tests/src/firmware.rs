@@ -382,7 +382,6 @@ impl Messages {
         for (k, scan) in scans.iter().enumerate() {
             let stamp_us = (scan.stamp * 1e6) as u64;
             if let Some(prev) = last.replace(scan.odometry) {
-                let prev: microslam::geometry::Pose2<f64> = prev;
                 let (c, s) = (prev.theta.cos(), prev.theta.sin());
                 let (dx, dy) = (scan.odometry.x - prev.x, scan.odometry.y - prev.y);
                 let dth = scan.odometry.theta - prev.theta;
