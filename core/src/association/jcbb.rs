@@ -118,6 +118,7 @@ impl<T: Real, const B: usize, const K: usize> Jcbb<T, B, K> {
         let mut search = Search::<T, B, K> {
             covariance: slam.active_covariance(),
             first_landmark: slam.landmark_state(0),
+            bias_state: slam.range_bias_state(),
             candidates,
             thresholds: &self.joint_thresholds,
             pairs: [(0, 0); B],
@@ -201,6 +202,9 @@ struct Search<'a, T: Real, const B: usize, const K: usize> {
     covariance: CovarianceView<'a, T>,
     /// Public state index of landmark 0's x ([`EkfSlam::landmark_state`]).
     first_landmark: usize,
+    /// Public state index of the range bias, when it is estimated
+    /// ([`EkfSlam::range_bias_state`]).
+    bias_state: Option<usize>,
     candidates: &'a [Candidates<T, K>],
     thresholds: &'a [T; B],
     /// The current hypothesis: (sighting, candidate index) for each of `depth` pairings.
@@ -322,11 +326,24 @@ impl<T: Real, const B: usize, const K: usize> Search<'_, T, B, K> {
             let ja = self.first_landmark + 2 * old.landmark;
             let p_ja_r = p.block::<2, 3>(ja, 0)?;
             let p_ja_jk = p.block::<2, 2>(ja, jk)?;
-            // C[a][k] = H_a P H_kᵀ, H nonzero on the robot and the landmark columns.
-            let c_ak = hr_a * p_rr * hr_k.transpose()
+            // C[a][k] = H_a P H_kᵀ, H nonzero on the robot and the landmark columns and,
+            // when the range bias is estimated, on the bias' columns.
+            let mut c_ak = hr_a * p_rr * hr_k.transpose()
                 + hr_a * p_r_jk * hl_k.transpose()
                 + hl_a * p_ja_r * hr_k.transpose()
                 + hl_a * p_ja_jk * hl_k.transpose();
+            if let Some(bs) = self.bias_state {
+                let (hb_a, hb_k) = (old.innovation.jacobian_bias, new.innovation.jacobian_bias);
+                let p_rb = p.block::<3, 2>(0, bs)?;
+                let p_ja_b = p.block::<2, 2>(ja, bs)?;
+                let p_b_jk = p.block::<2, 2>(bs, jk)?;
+                let p_bb = p.block::<2, 2>(bs, bs)?;
+                c_ak += hr_a * p_rb * hb_k.transpose()
+                    + hb_a * p_rb.transpose() * hr_k.transpose()
+                    + hl_a * p_ja_b * hb_k.transpose()
+                    + hb_a * p_b_jk * hl_k.transpose()
+                    + hb_a * p_bb * hb_k.transpose();
+            }
             let row_k = self.factor.get(k)?;
             let row_a = self.factor.get(a)?;
             let mut acc = c_ak.transpose();
@@ -462,13 +479,13 @@ mod tests {
         );
     }
 
-    #[test]
-    fn joint_nis_matches_a_dense_computation() {
-        let (slam, z) = planted();
+    /// The joint NIS JCBB reports for pairing sighting `i` with landmark `i` (i = 0, 1)
+    /// against `νᵀ C⁻¹ ν` with a dense `C = H P Hᵀ + R` over the whole active state.
+    fn assert_joint_nis_is_dense(slam: &Slam, z: &[RangeBearing<f64>; 2]) {
         let jcbb = Jcbb::<f64, 4, 4>::new(AssociationConfig::default_gates());
         let mut out = [Pairing::Invalid; 2];
-        let r = jcbb.associate(&slam, &z, &mut out).unwrap();
-        // Dense C = H P Hᵀ + R over the active state, and ν, with nalgebra's inverse.
+        let r = jcbb.associate(slam, z, &mut out).unwrap();
+        assert_eq!(out, [Pairing::Landmark(0), Pairing::Landmark(1)]);
         let k = slam.active_dim();
         let cov = slam.active_covariance();
         let p = nalgebra::DMatrix::from_fn(k, k, |i, j| cov.get(i, j).unwrap());
@@ -476,12 +493,16 @@ mod tests {
         let mut nu = nalgebra::DVector::<f64>::zeros(4);
         for (s, lm) in [(0usize, 0usize), (1, 1)] {
             let inn = slam.innovation(lm, &z[s]).unwrap();
+            let lj = slam.landmark_state(lm);
             for r in 0..2 {
                 for c in 0..3 {
                     h[(2 * s + r, c)] = inn.jacobian_robot[(r, c)];
                 }
                 for c in 0..2 {
-                    h[(2 * s + r, 3 + 2 * lm + c)] = inn.jacobian_landmark[(r, c)];
+                    h[(2 * s + r, lj + c)] = inn.jacobian_landmark[(r, c)];
+                    if let Some(bj) = slam.range_bias_state() {
+                        h[(2 * s + r, bj + c)] = inn.jacobian_bias[(r, c)];
+                    }
                 }
                 nu[2 * s + r] = inn.nu[r];
             }
@@ -501,6 +522,33 @@ mod tests {
             "{} vs {dense}",
             r.joint_nis
         );
+    }
+
+    #[test]
+    fn joint_nis_matches_a_dense_computation() {
+        let (slam, z) = planted();
+        assert_joint_nis_is_dense(&slam, &z);
+    }
+
+    #[test]
+    fn joint_nis_matches_a_dense_computation_with_the_calibration_states() {
+        // The planted map, with the odometry scale and the range bias estimated: the two
+        // sightings are also correlated through the bias' states.
+        let (mut slam, config) = precise();
+        slam.estimate_odometry_scale(0.05, 0.05).unwrap();
+        slam.estimate_range_bias(0.2, 2.0).unwrap();
+        let origin = Pose2::new(0.0, 0.0, 0.0);
+        slam.add_landmark(&sighting(origin, 3.0, 0.2)).unwrap();
+        slam.add_landmark(&sighting(origin, 3.0, -0.2)).unwrap();
+        let mut noisy = config;
+        noisy.increment_noise.rotation_std = 0.05;
+        slam.set_config(noisy).unwrap();
+        slam.predict_increment(&Pose2::new(0.0, 0.0, 0.0)).unwrap();
+        slam.set_config(config).unwrap();
+        assert_eq!(slam.range_bias_state(), Some(5));
+        let truth = Pose2::new(0.02, -0.01, 0.03);
+        let z = [sighting(truth, 3.0, 0.2), sighting(truth, 3.0, -0.2)];
+        assert_joint_nis_is_dense(&slam, &z);
     }
 
     #[test]

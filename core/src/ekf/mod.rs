@@ -325,6 +325,9 @@ pub struct Innovation<T: Real> {
     pub jacobian_robot: Matrix2x3<T>,
     /// ∂h/∂landmark at the current estimate.
     pub jacobian_landmark: Matrix2<T>,
+    /// ∂h/∂(b₀, b₂), the range bias' states (`[[1, β²], [0, 0]]`), when they are estimated
+    /// ([`EkfSlam::estimate_range_bias`], at [`EkfSlam::range_bias_state`]); zero when not.
+    pub jacobian_bias: Matrix2<T>,
 }
 
 /// Landmark EKF-SLAM over `f32` or `f64` with state dimension `N = 3 + 2·L` and a
@@ -550,6 +553,12 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// there is no slot.
     pub fn estimate_range_bias(&mut self, offset_std: T, curvature_std: T) -> Result<(), EkfError> {
         self.add_calibration_slot(BIAS_SLOT, [T::ZERO, T::ZERO], [offset_std, curvature_std])
+    }
+
+    /// Index of the range bias' `b₀` in the public state order (as
+    /// [`EkfSlam::landmark_state`]; `b₂` follows), when it is estimated.
+    pub fn range_bias_state(&self) -> Option<usize> {
+        self.bias_slot().map(|s| 3 + 2 * s)
     }
 
     /// The estimated range bias `(b₀, b₂)`, or `None` when it is not estimated
@@ -1162,6 +1171,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             mahalanobis_squared: d2,
             jacobian_robot: hr,
             jacobian_landmark: hl,
+            jacobian_bias: Matrix2::new(hb[0], hb[1], T::ZERO, T::ZERO),
         })
     }
 
