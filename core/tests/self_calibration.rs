@@ -196,6 +196,32 @@ fn the_bias_follows_the_scale_slot_and_is_refused_twice() {
     alone.estimate_range_bias(0.1, 0.5).unwrap();
     assert_eq!(alone.landmark_state(0), 5);
     assert_eq!(alone.odometry_scale(), None);
+    assert_eq!(alone.range_bias_state(), Some(3));
+    assert_eq!(slam.range_bias_state(), Some(5));
+}
+
+#[test]
+fn the_bias_may_start_from_a_prior_mean() {
+    let mut slam = calibrated();
+    assert_eq!(
+        slam.estimate_range_bias_from((f64::NAN, 0.0), 0.1, 0.5),
+        Err(EkfError::NonFiniteInput)
+    );
+    assert_eq!(slam.range_bias(), None, "a refused prior changes nothing");
+    slam.estimate_range_bias_from((0.17, -1.7), 0.1, 0.5)
+        .unwrap();
+    assert_eq!(slam.range_bias(), Some((0.17, -1.7)));
+    let p = dense(&slam);
+    assert!((p[(5, 5)] - 0.01).abs() < 1e-15 && (p[(6, 6)] - 0.25).abs() < 1e-15);
+    // From the robot at (0.5, −0.2) heading 0.3 rad, a landmark sighted at bearing
+    // 0.3 rad and range 3 m is placed at the corrected range 3 − 0.17 + 1.7 · 0.09 =
+    // 2.983 m, in the direction 0.6 rad.
+    let z = RangeBearing::new(3.0, 0.3);
+    slam.add_landmark(&z).unwrap();
+    let l = slam.landmark(0).unwrap();
+    let r = 3.0 - 0.17 + 1.7 * 0.09;
+    let (x, y) = (0.5 + r * 0.6f64.cos(), -0.2 + r * 0.6f64.sin());
+    assert!((l.x - x).abs() < 1e-12 && (l.y - y).abs() < 1e-12, "{l:?}");
 }
 
 /// Adding a landmark, a sighting's innovation and an update with the range bias as

@@ -552,7 +552,22 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// [`EkfError::MapFull`] when a landmark exists, the bias is already estimated or
     /// there is no slot.
     pub fn estimate_range_bias(&mut self, offset_std: T, curvature_std: T) -> Result<(), EkfError> {
-        self.add_calibration_slot(BIAS_SLOT, [T::ZERO, T::ZERO], [offset_std, curvature_std])
+        self.estimate_range_bias_from((T::ZERO, T::ZERO), offset_std, curvature_std)
+    }
+
+    /// [`EkfSlam::estimate_range_bias`] starting from a prior mean `(b₀, b₂)` instead of
+    /// zero, e.g. a calibration made beforehand on a recording with known landmarks. A
+    /// non-finite mean is refused with [`EkfError::NonFiniteInput`] (state unchanged).
+    pub fn estimate_range_bias_from(
+        &mut self,
+        mean: (T, T),
+        offset_std: T,
+        curvature_std: T,
+    ) -> Result<(), EkfError> {
+        if !(mean.0.finite() && mean.1.finite()) {
+            return self.reject(EkfError::NonFiniteInput);
+        }
+        self.add_calibration_slot(BIAS_SLOT, [mean.0, mean.1], [offset_std, curvature_std])
     }
 
     /// Index of the range bias' `b₀` in the public state order (as

@@ -121,6 +121,13 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
         let family = args.dataset.family();
         let tuned =
             crate::domain::config::Settings::load_for(family, args.config.as_deref(), None)?;
+        if tuned.sighting.has_bias_mean() {
+            bail!(
+                "the wire protocol's EkfSettings carries the calibration priors' standard \
+                 deviations, not a range bias mean: set range_bias_offset_mean and \
+                 range_bias_curvature_mean to 0 for --dataset-settings"
+            );
+        }
         Some(
             EkfSettings::from_config(&tuned.ekf_config::<f32>())
                 .with_calibration(tuned.calibration_priors()),

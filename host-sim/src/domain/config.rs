@@ -96,12 +96,24 @@ pub struct SightingSettings {
     /// a state (0: not estimated; with `range_bias_offset_std`).
     #[serde(default)]
     pub range_bias_curvature_std: f64,
+    /// Prior mean of `b₀` (m) when the range bias is estimated: a calibration made
+    /// beforehand (default 0).
+    #[serde(default)]
+    pub range_bias_offset_mean: f64,
+    /// Prior mean of `b₂` (m/rad²) when the range bias is estimated (default 0).
+    #[serde(default)]
+    pub range_bias_curvature_mean: f64,
 }
 
 impl SightingSettings {
     /// `true` when the range bias is estimated (either prior is positive).
     pub fn estimates_bias(&self) -> bool {
         self.range_bias_offset_std > 0.0 || self.range_bias_curvature_std > 0.0
+    }
+
+    /// `true` when the range bias' prior mean is not zero.
+    pub fn has_bias_mean(&self) -> bool {
+        self.range_bias_offset_mean != 0.0 || self.range_bias_curvature_mean != 0.0
     }
 }
 
@@ -257,6 +269,15 @@ impl Settings {
         ];
         if non_negative.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
             bail!("noise figures, ranges and windows must be finite and non-negative");
+        }
+        if !(s.range_bias_offset_mean.is_finite() && s.range_bias_curvature_mean.is_finite()) {
+            bail!("sighting.range_bias_offset_mean and range_bias_curvature_mean must be finite");
+        }
+        if s.has_bias_mean() && !s.estimates_bias() {
+            bail!(
+                "sighting.range_bias_offset_mean / range_bias_curvature_mean need \
+                 range_bias_offset_std or range_bias_curvature_std > 0 (the bias is a state)"
+            );
         }
         if !(o.max_speed_mps > 0.0 && o.max_turn_rate_radps > 0.0) {
             bail!("max_speed_mps and max_turn_rate_radps must be positive");
@@ -479,5 +500,31 @@ mod tests {
         let icnn = Settings::load_for("mrclam", Some(&p), None).unwrap();
         assert_eq!(icnn.association.mode, AssociationMode::Icnn);
         assert_eq!(icnn.sighting, builtin_jcbb.sighting);
+    }
+
+    #[test]
+    fn a_range_bias_mean_needs_the_bias_as_a_state() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.toml");
+        std::fs::write(
+            &p,
+            "[sighting]\nrange_bias_offset_mean = 0.17\nrange_bias_curvature_mean = -1.7\n",
+        )
+        .unwrap();
+        let s = Settings::load("mrclam", Some(&p)).unwrap();
+        assert_eq!(s.sighting.range_bias_offset_mean, 0.17);
+        assert_eq!(s.sighting.range_bias_curvature_mean, -1.7);
+        assert!(s.sighting.has_bias_mean());
+        // Without a prior standard deviation the bias is no state: refused, not ignored.
+        std::fs::write(
+            &p,
+            "[sighting]\nrange_bias_offset_std = 0.0\nrange_bias_curvature_std = 0.0\n\
+             range_bias_offset_mean = 0.17\n",
+        )
+        .unwrap();
+        let e = Settings::load("mrclam", Some(&p)).unwrap_err();
+        assert!(format!("{e:#}").contains("range_bias_offset_mean"), "{e:#}");
+        std::fs::write(&p, "[sighting]\nrange_bias_curvature_mean = nan\n").unwrap();
+        assert!(Settings::load("mrclam", Some(&p)).is_err());
     }
 }

@@ -245,7 +245,11 @@ impl<T: Real> Replayer<T> {
         }
         let sg = &settings.sighting;
         if sg.estimates_bias()
-            && let Err(e) = slam.estimate_range_bias(
+            && let Err(e) = slam.estimate_range_bias_from(
+                (
+                    lit(sg.range_bias_offset_mean),
+                    lit(sg.range_bias_curvature_mean),
+                ),
                 lit(sg.range_bias_offset_std),
                 lit(sg.range_bias_curvature_std),
             )
