@@ -47,7 +47,7 @@
 //! - `std`: build against the standard library (host tools). Off by default.
 //! - `defmt`: `defmt::Format` for public types and log lines through defmt.
 //! - `wire`: `microslam::wire`, the serial-line messages (serde + postcard, COBS, CRC-16).
-//! - `map-image`: [`grid::map_image`], a map as a versioned, CRC-32-checked image for flash.
+//! - `map-image`: `grid::map_image`, a map as a versioned, CRC-32-checked image for flash.
 //! - `libm-force`: use libm for float math even with `std`, so host and target agree
 //!   bit for bit.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]

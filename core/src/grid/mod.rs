@@ -16,9 +16,9 @@
 //! - [`MaxPoolLayers`]: max-pooled copies of a map (any occupied cell in each `2^k × 2^k`
 //!   window) and its free blocks, in one byte image for flash or RAM: the bounds of the
 //!   global search ([`crate::pf::global`]).
-//! - [`map_image`] (feature `map-image`): a map as one versioned, checksummed binary image
+//! - `map_image` (feature `map-image`): a map as one versioned, checksummed binary image
 //!   for flash, read in place.
-//! - [`ros_map`] (feature `std`): reading a ROS `map_server` map (`map.yaml` + PGM).
+//! - `ros_map` (feature `std`): reading a ROS `map_server` map (`map.yaml` + PGM).
 
 mod bresenham;
 pub mod layers;

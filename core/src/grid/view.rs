@@ -59,7 +59,7 @@ impl<'a> GridView<'a> {
     }
 
     /// A view made of the occupied-cell bitmap alone (no log-odds cells): what a map in
-    /// flash carries ([`super::MapImage`]), an eighth of the bytes of the cells. Cell
+    /// flash carries (`MapImage`, feature `map-image`), an eighth of the bytes of the cells. Cell
     /// `(x, y)` is occupied when bit `x % 8` of byte `y · ⌈width/8⌉ + x / 8` is set;
     /// [`GridView::log_odds`] answers `None` and [`GridView::cells`] is empty. Scores
     /// against it equal the scores against the cells the bitmap was computed from. A
