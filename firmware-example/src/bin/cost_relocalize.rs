@@ -1,10 +1,12 @@
 //! Instructions per global relocalization under QEMU `-icount shift=6` (see
 //! `firmware_example::cost`): a localizer with no pose (P = 64, 90 beams,
 //! `RelocalizationConfig::DEFAULT`) on a 256 × 256 map of 5 cm cells — the 6 m × 6 m room
-//! with a pillar of `cost_grid`, in flash as log-odds cells — takes one scan, which runs
-//! the global search over the whole map (branch and bound over 6 max-pooled levels built
-//! at start-up into RAM) and seeds the particles. A separate binary from `cost_grid`: its
-//! 52 KB of layers and `cost_grid`'s 72 KB grid do not fit 128 KB of RAM together.
+//! with a pillar of `cost_grid` — takes one scan, which runs the global search over the
+//! whole map (branch and bound over 6 max-pooled levels) and seeds the particles. The
+//! localizer reads the map as the localizer firmware does: its occupied-cell bitmap and
+//! the layers (a map image, `GridView::from_occupancy_bits`), no log-odds cells; both are
+//! built at start-up into RAM from the cells in flash. A separate binary from `cost_grid`:
+//! its 52 KB of layers and `cost_grid`'s 72 KB grid do not fit 128 KB of RAM together.
 //!
 //! Then the worst case of the node budget: the same scan searched with every minimum
 //! score at 0, so nothing is pruned by score and the budget stops the search.
@@ -23,7 +25,9 @@ use cortex_m_rt::{entry, exception};
 use firmware_example::board::{self, Serial};
 use firmware_example::cost::{BEAMS, LIDAR, room_range};
 use microslam::geometry::Pose2;
-use microslam::grid::{GridGeometry, GridView, MaxPoolLayers};
+use microslam::grid::{
+    GridGeometry, GridView, MaxPoolLayers, fill_occupancy_bits, occupancy_bytes,
+};
 use microslam::pf::global::GlobalSearchConfig;
 use microslam::pf::{GridLocalizer, GridPfConfig, RelocalizationConfig};
 use microslam::sensors::lidar::LidarScan;
@@ -78,6 +82,10 @@ static MAP: [i8; CELLS * CELLS] = room_map();
 /// The max-pooled layers, built at start-up.
 static LAYERS: ConstStaticCell<[u8; LAYER_BYTES]> = ConstStaticCell::new([0; LAYER_BYTES]);
 
+/// The occupied-cell bitmap, built at start-up (8 KB).
+static BITS: ConstStaticCell<[u8; occupancy_bytes(CELLS, CELLS)]> =
+    ConstStaticCell::new([0; occupancy_bytes(CELLS, CELLS)]);
+
 static WRAPS: AtomicU32 = AtomicU32::new(0);
 
 #[exception]
@@ -118,6 +126,16 @@ fn run(out: &mut Serial) -> core::fmt::Result {
     let Some(layers) = layers else {
         return writeln!(out, "error layers");
     };
+    // The map image the localizer firmware holds: the bitmap and the layers, no cells.
+    let bits = BITS.take();
+    let occupied_above = CONFIG.log_odds.occupied_above;
+    if fill_occupancy_bits(&MAP, CELLS, CELLS, occupied_above, bits).is_err() {
+        return writeln!(out, "error bitmap");
+    }
+    let bits: &'static [u8] = bits;
+    let Ok(image) = GridView::from_occupancy_bits(bits, geometry, occupied_above) else {
+        return writeln!(out, "error bitmap view");
+    };
     let truth = Pose2::new(-1.3, 1.1, 2.0);
     let mut ranges = [0.0f32; BEAMS];
     for (i, r) in ranges.iter_mut().enumerate() {
@@ -125,7 +143,7 @@ fn run(out: &mut Serial) -> core::fmt::Result {
         *r = room_range(truth.x, truth.y, a);
     }
     let Ok(mut loc) = GridLocalizer::<PARTICLES, BEAMS>::without_pose(
-        map,
+        image,
         CONFIG,
         layers,
         RelocalizationConfig::DEFAULT,
@@ -143,7 +161,7 @@ fn run(out: &mut Serial) -> core::fmt::Result {
     let err = libm::hypotf(step.pose.x - truth.x, step.pose.y - truth.y);
     writeln!(
         out,
-        "relocalize cells={} levels={} particles={} beams={} instructions={} layers_build={} nodes={} headings={} complete={} relocalizations={} error_mm={}",
+        "relocalize cells={} levels={} particles={} beams={} instructions={} layers_build={} nodes={} headings={} complete={} relocalizations={} error_mm={} view=bitmap",
         CELLS,
         LEVELS,
         PARTICLES,
@@ -168,7 +186,7 @@ fn run(out: &mut Serial) -> core::fmt::Result {
         ..RelocalizationConfig::DEFAULT
     };
     let Ok(mut loc) =
-        GridLocalizer::<PARTICLES, BEAMS>::without_pose(map, CONFIG, layers, exhaustive)
+        GridLocalizer::<PARTICLES, BEAMS>::without_pose(image, CONFIG, layers, exhaustive)
     else {
         return writeln!(out, "error localizer");
     };
@@ -180,7 +198,7 @@ fn run(out: &mut Serial) -> core::fmt::Result {
     let search = loc.status().last_search;
     writeln!(
         out,
-        "relocalize_budget cells={} nodes={} budget={} complete={} instructions={}",
+        "relocalize_budget cells={} nodes={} budget={} complete={} instructions={} view=bitmap",
         CELLS,
         search.map_or(0, |s| s.nodes),
         exhaustive.search.node_budget,
