@@ -18,8 +18,10 @@ pub fn workspace_root() -> PathBuf {
         .unwrap_or_default()
 }
 
-/// The firmware ELF: `$FIRMWARE_ELF`, else the `firmware` profile build in the target
-/// directory (`$CARGO_TARGET_DIR`, default `<workspace>/target`; `.ci/firmware.sh` builds it).
+/// The firmware ELF: `$FIRMWARE_ELF`, else `firmware-elf/qemu.elf` in the target directory
+/// (`$CARGO_TARGET_DIR`, default `<workspace>/target`), where `.ci/firmware.sh` puts the
+/// QEMU firmware. (Not cargo's own `firmware` profile output: the localizer firmware is
+/// built there too, and whichever was built last would be taken.)
 pub fn firmware_elf() -> PathBuf {
     firmware_elf_from(
         std::env::var_os("FIRMWARE_ELF"),
@@ -39,9 +41,7 @@ pub fn firmware_elf_from(
     let target = target_dir
         .filter(|v| !v.is_empty())
         .map_or_else(|| PathBuf::from("target"), PathBuf::from);
-    workspace_root()
-        .join(target)
-        .join("thumbv7em-none-eabihf/firmware/firmware-example")
+    workspace_root().join(target).join("firmware-elf/qemu.elf")
 }
 
 pub use host_sim::drivers::hil::{LinkRun as QemuRun, encode_all, host_replies};

@@ -58,7 +58,7 @@ fn cargo_run_in_firmware_example_picks_the_firmware() {
 #[test]
 fn the_firmware_elf_is_found_in_cargo_target_dir() {
     let root = workspace_root();
-    let built = "thumbv7em-none-eabihf/firmware/firmware-example";
+    let built = "firmware-elf/qemu.elf";
     assert_eq!(
         firmware_elf_from(None, None),
         root.join("target").join(built)
