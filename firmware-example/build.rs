@@ -7,7 +7,9 @@
 //! localizer instead of the grid SLAM. Without the variable `map.bin` is empty and the
 //! firmware refuses localizer requests (`Refusal::NoMap`). The image carries the map's
 //! max-pooled layers for the global search: `MICROSLAM_MAP_LEVELS` levels (default 5,
-//! 0 for none).
+//! 0 for none). `$OUT_DIR/map_rows.rs` holds the length of the map bitmap's rows
+//! (`⌈width / 8⌉` bytes, 0 without a map), so that the localizer's shift search is
+//! compiled for it (`GridLocalizer::with_bitmap_row_bytes`).
 use microslam::grid::map_image::{DEFAULT_LAYER_LEVELS, encode_map_image_with_layers};
 use microslam::grid::ros_map::RosMap;
 use microslam::pf::GridPfConfig;
@@ -39,6 +41,7 @@ fn main() {
 fn embed_map(out: &std::path::Path) {
     println!("cargo:rerun-if-env-changed=MICROSLAM_MAP");
     println!("cargo:rustc-check-cfg=cfg(microslam_map)");
+    let mut row_bytes = 0;
     let image = match env::var_os("MICROSLAM_MAP").filter(|v| !v.is_empty()) {
         None => Vec::new(),
         Some(yaml) => {
@@ -71,6 +74,7 @@ fn embed_map(out: &std::path::Path) {
             )
             .unwrap_or_else(|e| panic!("MICROSLAM_MAP: {}: {e}", yaml.display()));
             println!("cargo:rustc-cfg=microslam_map");
+            row_bytes = map.geometry.width.div_ceil(8);
             println!(
                 "cargo:warning=map {} embedded: {} x {} cells, {} layer levels, {} bytes",
                 yaml.display(),
@@ -83,4 +87,9 @@ fn embed_map(out: &std::path::Path) {
         }
     };
     fs::write(out.join("map.bin"), image).expect("write map.bin");
+    let rows = format!(
+        "/// Bytes of a row of the embedded map's occupied-cell bitmap (0: no map).\n\
+         pub const MAP_ROW_BYTES: usize = {row_bytes};\n"
+    );
+    fs::write(out.join("map_rows.rs"), rows).expect("write map_rows.rs");
 }

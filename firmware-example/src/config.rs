@@ -8,3 +8,5 @@ pub use microslam::profile::*;
 /// firmware was built without a map. Checked at boot with
 /// [`microslam::grid::MapImage::parse`].
 pub static MAP_IMAGE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/map.bin"));
+
+include!(concat!(env!("OUT_DIR"), "/map_rows.rs"));

@@ -76,7 +76,7 @@ mod grid {
 mod grid {
     use super::*;
     use firmware_example::config::{
-        LOCALIZER_CONFIG, LOCALIZER_PARTICLES, Localizer, MAP_IMAGE, RELOCALIZATION,
+        LOCALIZER_CONFIG, LOCALIZER_PARTICLES, Localizer, MAP_IMAGE, MAP_ROW_BYTES, RELOCALIZATION,
     };
     use microslam::geometry::Pose2;
     use microslam::grid::{MapImage, MapImageError};
@@ -99,10 +99,15 @@ mod grid {
                     image.len_bytes(),
                     image.checksum()
                 );
+                // The shift search compiled for this map's bitmap rows (build.rs).
                 let Ok(localizer) =
                     Localizer::new(image.view(), LOCALIZER_CONFIG, Pose2::new(0.0, 0.0, 0.0))
+                        .and_then(|l| l.with_bitmap_row_bytes::<MAP_ROW_BYTES>())
                 else {
-                    defmt::error!("localizer configuration invalid");
+                    defmt::error!(
+                        "localizer configuration invalid, or map rows not {}",
+                        MAP_ROW_BYTES
+                    );
                     board::halt(4)
                 };
                 // With the map's layers it can search the whole map (Relocalize, lost).

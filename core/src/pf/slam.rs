@@ -1,6 +1,8 @@
 //! The seed's grid SLAM: one shared occupancy grid, written by the best particle.
 
-use super::correlation::{ScanPoints, search_window, search_window_sparse};
+use super::correlation::{
+    ScanPoints, search_window, search_window_sparse, search_window_sparse_rows,
+};
 use super::filter::ShiftSearch;
 use super::{GridPfConfig, ParticleFilter, PfError};
 use crate::geometry::Pose2;
@@ -183,13 +185,7 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const B
         if self.scans == 0 {
             report.pose = self.filter.best_pose();
         } else {
-            // A grid with a bitmap needs only the sparse search (and so does not carry
-            // the byte-wise one: `BITMAP` is a constant).
-            let search: ShiftSearch = if BITMAP > 0 {
-                search_window_sparse
-            } else {
-                search_window
-            };
+            let search: ShiftSearch = const { shift_search::<W, BITMAP>() };
             let u = self.filter.update_with_prior(
                 &self.map.view(),
                 self.points.as_slice(),
@@ -212,5 +208,22 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const B
         self.pose = report.pose;
         self.scans = self.scans.saturating_add(1);
         Ok(report)
+    }
+}
+
+/// The shift search of a grid `W` cells wide, chosen when the program is built, so that
+/// a build carries only the one it uses: without a bitmap the byte-wise search; with one
+/// the sparse search, with the bitmap's row offsets as constants for grids 256, 512 and
+/// 1024 cells wide (the firmware's and the host's grids;
+/// [`search_window_sparse_rows`]), else reading them from the map.
+const fn shift_search<const W: usize, const BITMAP: usize>() -> ShiftSearch {
+    if BITMAP == 0 {
+        return search_window;
+    }
+    match W.div_ceil(8) {
+        32 => search_window_sparse_rows::<32>,
+        64 => search_window_sparse_rows::<64>,
+        128 => search_window_sparse_rows::<128>,
+        _ => search_window_sparse,
     }
 }

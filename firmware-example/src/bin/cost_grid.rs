@@ -129,7 +129,11 @@ mod room {
         ticks: &mut Ticks,
         map: GridView<'_>,
     ) -> core::fmt::Result {
-        let Ok(mut loc) = GridLocalizer::<P, BEAMS>::new(map, CONFIG, START) else {
+        // The room's 256-cell rows: 32 bytes of bitmap (as a firmware with a map of this
+        // size in flash compiles it).
+        let Ok(mut loc) = GridLocalizer::<P, BEAMS>::new(map, CONFIG, START)
+            .and_then(|l| l.with_bitmap_row_bytes::<{ occupancy_bytes(256, 1) }>())
+        else {
             return writeln!(out, "error localizer p={P} new");
         };
         drive(out, ticks, "localizer", P, &mut loc, START, scan_at)
@@ -177,7 +181,9 @@ mod flash_map {
         map: GridView<'_>,
     ) -> core::fmt::Result {
         let start = Pose2::new(0.0, 0.0, 0.0);
-        let Ok(mut loc) = GridLocalizer::<P, BEAMS>::new(map, CONFIG, start) else {
+        let Ok(mut loc) = GridLocalizer::<P, BEAMS>::new(map, CONFIG, start)
+            .and_then(|l| l.with_bitmap_row_bytes::<{ firmware_example::config::MAP_ROW_BYTES }>())
+        else {
             return writeln!(out, "error localizer_map p={P} new");
         };
         let cast = |pose: &Pose2<f32>, ranges: &mut [f32; BEAMS]| {

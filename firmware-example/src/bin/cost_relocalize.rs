@@ -142,12 +142,14 @@ fn run(out: &mut Serial) -> core::fmt::Result {
         let a = truth.theta + LIDAR.beam_angle(i);
         *r = room_range(truth.x, truth.y, a);
     }
-    let Ok(mut loc) = GridLocalizer::<PARTICLES, BEAMS>::without_pose(
+    // As the localizer firmware: the shift search compiled for the map's bitmap rows.
+    let Ok(Ok(mut loc)) = GridLocalizer::<PARTICLES, BEAMS>::without_pose(
         image,
         CONFIG,
         layers,
         RelocalizationConfig::DEFAULT,
-    ) else {
+    )
+    .map(|l| l.with_bitmap_row_bytes::<{ occupancy_bytes(CELLS, 1) }>()) else {
         return writeln!(out, "error localizer");
     };
     let scan = LidarScan::new(&ranges, LIDAR);
@@ -185,8 +187,9 @@ fn run(out: &mut Serial) -> core::fmt::Result {
         },
         ..RelocalizationConfig::DEFAULT
     };
-    let Ok(mut loc) =
+    let Ok(Ok(mut loc)) =
         GridLocalizer::<PARTICLES, BEAMS>::without_pose(image, CONFIG, layers, exhaustive)
+            .map(|l| l.with_bitmap_row_bytes::<{ occupancy_bytes(CELLS, 1) }>())
     else {
         return writeln!(out, "error localizer");
     };
