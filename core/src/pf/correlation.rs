@@ -360,16 +360,12 @@ pub fn search_window_sparse(
     half_width: u8,
     scores: &mut [u32; MAX_SHIFTS],
 ) -> ShiftScore {
-    let hw = half_width.min(MAX_SHIFT_WINDOW);
-    let bits = map.occupancy_bits();
-    // The seed's 9 × 9 window (every preset's) gets its own constant-size copy.
-    if hw == 4 {
-        search_sparse::<9, 0>(map, bits, pose, points, 9, scores)
+    // The seed's 9 × 9 window (every preset's) gets its own constant-size copy; the
+    // other sizes share one.
+    if half_width.min(MAX_SHIFT_WINDOW) == 4 {
+        search_sparse::<9, 0>(map, map.occupancy_bits(), pose, points, 9, scores)
     } else {
-        let n = 2 * usize::from(hw) + 1;
-        search_sparse::<{ 2 * MAX_SHIFT_WINDOW as usize + 1 }, 0>(
-            map, bits, pose, points, n, scores,
-        )
+        search_window_sparse_rows::<0>(map, pose, points, half_width, scores)
     }
 }
 
@@ -378,7 +374,8 @@ pub fn search_window_sparse(
 /// then constants — no bounds check per row, the offsets inside the load instructions:
 /// on the Cortex-M4F about a sixth fewer instructions per grid step, on the host about a
 /// tenth less time (see `docs/speed.md`). Same scores. Another window size, or a map of
-/// another width, takes the general sparse path (correct, slower).
+/// another width, takes the general sparse path for any window size (correct, slower);
+/// `S = 0` is that path alone.
 ///
 /// A build uses only the copies it names: [`crate::pf::GridSlam`] takes this for its
 /// grid of compile-time width, [`crate::pf::GridLocalizer::with_bitmap_row_bytes`] for a
@@ -668,6 +665,32 @@ mod tests {
         );
     }
 
+    /// Asserts that `search` over `maps.0` (with a bitmap) gives the brute force's scores
+    /// over `maps.1` and its best shift, for windows of half-width 2, 4 and 7.
+    fn assert_as_brute_force(
+        search: crate::pf::filter::ShiftSearch,
+        maps: (&GridView<'_>, &GridView<'_>),
+        pose: &Pose2<f32>,
+        points: &[ScanPoint],
+        label: &str,
+    ) {
+        for k in [2u8, 4, 7] {
+            let n = (2 * k as usize + 1).pow(2);
+            let (mut a, mut b) = ([0u32; MAX_SHIFTS], [0u32; MAX_SHIFTS]);
+            let fast = search(maps.0, pose, points, k, &mut a);
+            let slow = search_window_brute_force(maps.1, pose, points, k, &mut b);
+            assert_eq!(a[..n], b[..n], "{label}, k {k}");
+            assert_eq!(fast, slow, "{label}, k {k}");
+        }
+    }
+
+    /// The occupied-cell bitmap of `cells` (threshold 20, as the tests' views).
+    fn occupied_bits(cells: &[i8], g: &GridGeometry) -> Vec<u8> {
+        let mut bits = vec![0u8; crate::grid::occupancy_bytes(g.width, g.height)];
+        crate::grid::fill_occupancy_bits(cells, g.width, g.height, 20, &mut bits).unwrap();
+        bits
+    }
+
     fn random_map(seed: u64, w: usize, h: usize, density: f64) -> (Vec<i8>, GridGeometry) {
         let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
         let cells = (0..w * h)
@@ -715,8 +738,7 @@ mod tests {
             assert_eq!(fast, slow, "trial {trial}");
             assert!(fast.score > 0 || trial % 8 == 0);
             // The same search over the occupied-cell bitmap (the sparse path).
-            let mut bits = vec![0u8; crate::grid::occupancy_bytes(g.width, g.height)];
-            crate::grid::fill_occupancy_bits(&cells, g.width, g.height, 20, &mut bits).unwrap();
+            let bits = occupied_bits(&cells, &g);
             let with_bits = view.with_occupancy_bits(&bits).unwrap();
             let mut c = [0u32; MAX_SHIFTS];
             let sparse = search_window(&with_bits, &pose, pts.as_slice(), k, &mut c);
@@ -739,8 +761,7 @@ mod tests {
         for trial in 0..20 {
             let (cells, g) = random_map(100 + trial, 80, 64, 0.2);
             let view = GridView::new(&cells, g, 20).unwrap();
-            let mut bits = vec![0u8; crate::grid::occupancy_bytes(g.width, g.height)];
-            crate::grid::fill_occupancy_bits(&cells, g.width, g.height, 20, &mut bits).unwrap();
+            let bits = occupied_bits(&cells, &g);
             let with_bits = view.with_occupancy_bits(&bits).unwrap();
             let ranges: Vec<f32> = (0..200)
                 .map(|i| 0.3 + 0.6 * (i / 25) as f32 / 8.0 + rng.random_range(0.0..0.01))
@@ -772,27 +793,21 @@ mod tests {
                 shared > 50,
                 "trial {trial}: only {shared} neighbours share a cell"
             );
-            for k in [2u8, 4, 7] {
-                let n = (2 * k as usize + 1).pow(2);
-                let (mut a, mut b) = ([0u32; MAX_SHIFTS], [0u32; MAX_SHIFTS]);
-                let sparse = search_window_sparse(&with_bits, &pose, pts.as_slice(), k, &mut a);
-                let slow = search_window_brute_force(&view, &pose, pts.as_slice(), k, &mut b);
-                assert_eq!(a[..n], b[..n], "trial {trial}, k {k}");
-                assert_eq!(sparse, slow, "trial {trial}, k {k}");
-            }
+            let label = format!("trial {trial}");
+            let search = search_window_sparse;
+            assert_as_brute_force(search, (&with_bits, &view), &pose, pts.as_slice(), &label);
         }
     }
 
     #[test]
     fn searches_with_constant_row_offsets_score_as_the_brute_force() {
         // 256 and 1024 cells wide (32 and 128 bytes a bitmap row: the copies with constant
-        // row offsets), next to 248 and 1016 (31 and 127: the fallback), every window.
+        // row offsets), next to 248 and 1016 (31 and 127: the fallback).
         let mut rng = rand::rngs::StdRng::seed_from_u64(5);
         for (trial, width) in [256usize, 1024, 248, 1016, 250].into_iter().enumerate() {
             let (cells, g) = random_map(200 + trial as u64, width, 40, 0.15);
             let view = GridView::new(&cells, g, 20).unwrap();
-            let mut bits = vec![0u8; crate::grid::occupancy_bytes(g.width, g.height)];
-            crate::grid::fill_occupancy_bits(&cells, g.width, g.height, 20, &mut bits).unwrap();
+            let bits = occupied_bits(&cells, &g);
             let with_bits = view.with_occupancy_bits(&bits).unwrap();
             let ranges: Vec<f32> = (0..90).map(|_| rng.random_range(0.05..1.5)).collect();
             let mut pts = ScanPoints::<90>::new();
@@ -809,19 +824,11 @@ mod tests {
                     rng.random_range(-1.2..1.2),
                     rng.random_range(-4.0..4.0),
                 );
-                for k in [4u8, 4, 2, 7] {
-                    let n = (2 * k as usize + 1).pow(2);
-                    let (mut a, mut b, mut c) =
-                        ([0u32; MAX_SHIFTS], [0u32; MAX_SHIFTS], [0u32; MAX_SHIFTS]);
-                    let pts = pts.as_slice();
-                    let s32 = search_window_sparse_rows::<32>(&with_bits, &pose, pts, k, &mut a);
-                    let s128 = search_window_sparse_rows::<128>(&with_bits, &pose, pts, k, &mut c);
-                    let slow = search_window_brute_force(&view, &pose, pts, k, &mut b);
-                    assert_eq!(a[..n], b[..n], "32, width {width}, k {k}, pose {pose:?}");
-                    assert_eq!(s32, slow, "32, width {width}, k {k}, pose {pose:?}");
-                    assert_eq!(c[..n], b[..n], "128, width {width}, k {k}, pose {pose:?}");
-                    assert_eq!(s128, slow, "128, width {width}, k {k}, pose {pose:?}");
-                }
+                let label = format!("width {width}, pose {pose:?}");
+                let maps = (&with_bits, &view);
+                let pts = pts.as_slice();
+                assert_as_brute_force(search_window_sparse_rows::<32>, maps, &pose, pts, &label);
+                assert_as_brute_force(search_window_sparse_rows::<128>, maps, &pose, pts, &label);
             }
         }
     }
