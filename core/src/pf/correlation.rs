@@ -517,17 +517,13 @@ fn search_sparse<const R: usize, const S: usize>(
         // with the sum (wrapping additions commute: the same scores). On the M4F, one
         // point at a time, the test costs more than it saves at 90 beams (6 % merged).
         let mut grid = [(0f32, 0f32); END_POINT_CHUNK];
-        let mut corners = [(0i32, 0i32); END_POINT_CHUNK + 1];
+        let mut corners = [(0i32, 0i32); END_POINT_CHUNK];
         for chunk in points.chunks(END_POINT_CHUNK) {
             for (p, g) in chunk.iter().zip(grid.iter_mut()) {
                 *g = end_grid(map, pose, sin, cos, p);
             }
             for (&(u, v), c) in grid.iter().zip(corners.iter_mut()) {
                 *c = corner(u, v);
-            }
-            // No successor past the chunk's last point.
-            if let Some(c) = corners.get_mut(chunk.len()) {
-                *c = (i32::MIN, i32::MIN);
             }
             let mut carried = 0u32;
             for (i, ((p, &(u, v)), &(x0, y0))) in chunk
@@ -537,7 +533,8 @@ fn search_sparse<const R: usize, const S: usize>(
                 .enumerate()
             {
                 let weight = carried.wrapping_add(p.weight);
-                if corners.get(i + 1) == Some(&(x0, y0)) && inside(x0, y0) {
+                let successor = corners.get(i + 1).filter(|_| i + 1 < chunk.len());
+                if successor == Some(&(x0, y0)) && inside(x0, y0) {
                     carried = weight;
                 } else {
                     carried = 0;
