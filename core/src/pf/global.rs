@@ -45,8 +45,14 @@
 //! (≈ 30 instructions per beam). [`SearchReport`] counts both; the node budget stops the
 //! search (the best found so far is returned, [`SearchReport::complete`] is `false`).
 //!
-//! No allocation: the end cells of at most [`MAX_SEARCH_BEAMS`] beams (12 bytes each) and
-//! the depth-first stack live on the stack (≈ 1.8 KB in all).
+//! **Slices.** [`GlobalSearch`] runs the same search in slices of node evaluations, paused
+//! and resumed where it stopped (the depth-first stack and the node being expanded are
+//! kept): a robot spends a node budget per scan on one search over several scans
+//! ([`super::RelocalizationConfig::search_scans`]).
+//!
+//! No allocation: a search's state (the selected beams and the depth-first stack, ≈ 4.5 KB
+//! at [`MAX_SEARCH_BEAMS`]) lives in a [`GlobalSearch`]; a slice adds the end cells and
+//! the tabled dilations (≈ 3.5 KB of stack).
 
 use super::correlation::ScanPoint;
 use crate::geometry::{Pose2, wrap_angle};
@@ -222,6 +228,15 @@ impl<const N: usize> Hypotheses<N> {
         self.len = 0;
     }
 
+    /// Moves every hypothesis by `motion` (a pose in the frame of the hypothesis: the
+    /// robot's motion since the scan the hypotheses are for).
+    pub fn move_by(&mut self, motion: &Pose2<f32>) {
+        let len = self.len;
+        for h in self.items.iter_mut().take(len) {
+            h.pose = h.pose.compose(motion);
+        }
+    }
+
     /// Lowest score that still enters: the `N`-th best when full, else 0.
     fn floor(&self) -> u32 {
         if self.len >= N {
@@ -373,8 +388,10 @@ impl fmt::Display for GlobalError {
 impl core::error::Error for GlobalError {}
 
 /// Beams chosen for the search, robot frame.
+#[derive(Clone)]
 struct Selected {
-    points: [ScanPoint; MAX_SEARCH_BEAMS],
+    /// Each beam's weight ([`ScanPoint::weight`]).
+    weights: [u32; MAX_SEARCH_BEAMS],
     /// Distance of each point from the robot origin, in cells.
     rho_cells: [f32; MAX_SEARCH_BEAMS],
     /// Each point divided by the cell size (cells, robot frame).
@@ -384,9 +401,10 @@ struct Selected {
     total: u32,
 }
 
-fn select(points: &[ScanPoint], config: &GlobalSearchConfig) -> Selected {
+/// The beams the search uses, for cells of `resolution` metres.
+fn select(points: &[ScanPoint], config: &GlobalSearchConfig, resolution: f32) -> Selected {
     let mut s = Selected {
-        points: [ScanPoint::default(); MAX_SEARCH_BEAMS],
+        weights: [0; MAX_SEARCH_BEAMS],
         rho_cells: [0.0; MAX_SEARCH_BEAMS],
         scaled: [(0.0, 0.0); MAX_SEARCH_BEAMS],
         len: 0,
@@ -401,8 +419,14 @@ fn select(points: &[ScanPoint], config: &GlobalSearchConfig) -> Selected {
     }
     let step = n.div_ceil(cap);
     for p in points.iter().filter(usable).step_by(step) {
-        if let Some(slot) = s.points.get_mut(s.len) {
-            *slot = *p;
+        if let (Some(w), Some(rho), Some(scaled)) = (
+            s.weights.get_mut(s.len),
+            s.rho_cells.get_mut(s.len),
+            s.scaled.get_mut(s.len),
+        ) {
+            *w = p.weight;
+            *rho = libm::hypotf(p.x, p.y) / resolution;
+            *scaled = (p.x / resolution, p.y / resolution);
             s.len += 1;
             s.extent = s.extent.max(p.range);
             s.total = s.total.saturating_add(p.weight);
@@ -458,14 +482,14 @@ fn end_cells(
     (sin, cos): (f32, f32),
     out: &mut [(i32, i32, u32); MAX_SEARCH_BEAMS],
 ) {
-    for ((slot, p), (u, v)) in out
+    for ((slot, w), (u, v)) in out
         .iter_mut()
-        .zip(sel.points.iter().take(sel.len))
+        .zip(sel.weights.iter().take(sel.len))
         .zip(sel.scaled.iter())
     {
         let cx = floor_i32(0.5 + (cos * u - sin * v));
         let cy = floor_i32(0.5 + (sin * u + cos * v));
-        *slot = (cx, cy, p.weight);
+        *slot = (cx, cy, *w);
     }
 }
 
@@ -705,19 +729,10 @@ fn prepare(
     if !layers.matches(map) {
         return Err(GlobalError::LayersMismatch);
     }
-    let mut sel = select(points, config);
+    let res = map.geometry().resolution;
+    let sel = select(points, config, res);
     if sel.len == 0 || sel.total == 0 {
         return Err(GlobalError::EmptyScan);
-    }
-    let res = map.geometry().resolution;
-    for ((rho, scaled), p) in sel
-        .rho_cells
-        .iter_mut()
-        .zip(sel.scaled.iter_mut())
-        .zip(sel.points.iter().take(sel.len))
-    {
-        *rho = libm::hypotf(p.x, p.y) / res;
-        *scaled = (p.x / res, p.y / res);
     }
     let wanted = if config.heading_step > 0.0 {
         config.heading_step
@@ -840,231 +855,475 @@ pub fn search_with_walls<const N: usize>(
     config: &GlobalSearchConfig,
     out: &mut Hypotheses<N>,
 ) -> Result<SearchReport, GlobalError> {
-    let (sel, step, headings) = prepare(map, layers, points, config)?;
     out.clear();
-    let min_score = libm::ceilf(config.min_score_fraction * sel.total as f32) as u32;
-    let mut report = SearchReport {
-        beams: sel.len as u16,
-        extent_m: sel.extent,
-        heading_step: step,
-        headings,
-        heading_windows: 1,
-        headings_searched: headings,
-        nodes: 0,
-        leaves: 0,
-        rotations: 0,
-        nodes_per_level: [0; crate::grid::layers::MAX_LEVELS as usize + 1],
-        total_weight: sel.total,
-        min_score,
-        passes: 0,
-        full_turn: false,
-        complete: true,
-    };
-    let g = *map.geometry();
-    let (w, h) = (g.width as i32, g.height as i32);
-    let top = layers.levels();
-    let size = 1i32 << top;
-    // All headings in one interval of 2^A at the root.
-    let all = (32 - headings.saturating_sub(1).leading_zeros()) as u8;
-    let rho_max = sel
-        .rho_cells
-        .iter()
-        .take(sel.len)
-        .copied()
-        .fold(0.0f32, f32::max);
-    let mut end = EndCells::new(step);
-    let mut stack = [Node::default(); STACK];
-    let levels = Levels::new(layers);
-    let dilations = Dilations::new(&sel, step);
-    let threshold = |out: &Hypotheses<N>, pass_min: u32| {
-        below_relative(config, out.best())
-            .max(pass_min.saturating_sub(1))
-            .max(out.floor())
-    };
-    let mut windows = [(0u32, 0u32); MAX_WINDOWS];
-    let n_windows = heading_windows(map, walls, points, config, step, headings, &mut windows);
-    report.heading_windows = n_windows as u8;
-    report.headings_searched = windows
-        .iter()
-        .take(n_windows)
-        .map(|(lo, hi)| hi - lo + 1)
-        .sum();
-    // Phase 1 searches the heading windows; phase 2, when they found no good match (see
-    // `full_turn_below`), every heading, for a hypothesis better than phase 1's best.
-    let mut n_windows = n_windows;
-    let mut beaten = 0u32;
-    let mut phase_one_min = u32::MAX;
-    'phases: loop {
-        // Passes at decreasing minimum scores: a high one prunes hard and finds a good match
-        // cheaply; a lower one runs only when the higher found nothing.
-        let mut fraction = config.first_pass_fraction.max(config.min_score_fraction);
-        'passes: loop {
-            // In phase 2 nothing at or below phase 1's best is looked for.
-            let pass_min = (libm::ceilf(fraction * sel.total as f32) as u32).max(beaten + 1);
-            report.passes += 1;
-            report.min_score = pass_min;
-            let mut thr = threshold(out, pass_min);
-            for &(lo, hi) in windows.get(..n_windows).unwrap_or(&[]) {
-                // The aligned heading intervals of 2^a0 that cover the window (at most two).
-                let a0 = (32 - (hi - lo).leading_zeros()).min(u32::from(all)) as u8;
-                let mut ry = 0;
-                while ry < h {
-                    let mut rx = 0;
-                    while rx < w {
-                        let (bx, by) = (rx, ry);
-                        rx += size;
-                        if !block_free(map, layers, top, bx, by) {
-                            continue;
-                        }
-                        let mut sp = 0usize;
-                        let mut j0 = (lo >> a0) << a0;
-                        while j0 <= hi && j0 < headings {
-                            if let Some(slot) = stack.get_mut(sp) {
-                                *slot = Node {
-                                    x: bx,
-                                    y: by,
-                                    j0,
-                                    bound: sel.total,
-                                    a: a0,
-                                    k: top,
-                                };
-                                sp += 1;
-                            }
-                            j0 += 1 << a0;
-                        }
-                        // The first interval is visited first.
-                        stack.get_mut(..sp).unwrap_or(&mut []).reverse();
-                        while sp > 0 {
-                            sp -= 1;
-                            let Some(node) = stack.get(sp).copied() else {
-                                break;
-                            };
-                            if node.bound <= thr {
-                                continue;
-                            }
-                            if node.a == 0 && node.k == 0 {
-                                out.offer(
-                                    Hypothesis {
-                                        pose: pose_at(
-                                            &g,
-                                            node.x,
-                                            node.y,
-                                            heading_angle(node.j0, step),
-                                        ),
-                                        score: node.bound,
-                                    },
-                                    config.separation_m,
-                                    config.separation_rad,
-                                );
-                                thr = threshold(out, pass_min);
-                                continue;
-                            }
-                            // Split the headings while their spread moves the far beams' ends by
-                            // more than half the block, else the block.
-                            let split_heading = node.a > 0
-                                && (node.k == 0
-                                    || 2 * dilation(rho_max, (1u32 << (node.a - 1)) as f32 * step)
-                                        >= 1 << node.k);
-                            let mut children = [Node::default(); 4];
-                            let mut n = 0;
-                            if split_heading {
-                                let a = node.a - 1;
-                                for j0 in [node.j0, node.j0 + (1 << a)] {
-                                    if j0 >= headings || j0 > hi || j0 + (1 << a) <= lo {
-                                        continue;
-                                    }
-                                    if let Some(c) = children.get_mut(n) {
-                                        *c = Node { j0, a, ..node };
-                                        n += 1;
-                                    }
-                                }
-                            } else {
-                                let k = node.k - 1;
-                                let half = 1i32 << k;
-                                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                                    let (x, y) = (node.x + dx * half, node.y + dy * half);
-                                    if x >= w || y >= h || !block_free(map, layers, k, x, y) {
-                                        continue;
-                                    }
-                                    if let Some(c) = children.get_mut(n) {
-                                        *c = Node { x, y, k, ..node };
-                                        n += 1;
-                                    }
-                                }
-                            }
-                            let mut kept = 0;
-                            for i in 0..n {
-                                let Some(mut c) = children.get(i).copied() else {
-                                    break;
-                                };
-                                if report.nodes >= config.node_budget {
-                                    report.complete = false;
-                                    break 'phases;
-                                }
-                                report.nodes += 1;
-                                if let Some(count) =
-                                    report.nodes_per_level.get_mut(usize::from(c.k))
-                                {
-                                    *count += 1;
-                                }
-                                if c.a == 0 && c.k == 0 {
-                                    report.leaves += 1;
-                                }
-                                let cells = end.at(&sel, c.reference(), &mut report);
-                                c.bound = bound(
-                                    map, &levels, &dilations, cells, sel.total, thr, c.a, c.k, c.x,
-                                    c.y,
-                                );
-                                if c.bound > thr
-                                    && let Some(slot) = children.get_mut(kept)
-                                {
-                                    *slot = c;
-                                    kept += 1;
-                                }
-                            }
-                            // Decreasing bound, equal bounds in child order (insertion sort of at
-                            // most four); pushed in reverse so the best is visited first.
-                            let kids = children.get_mut(..kept).unwrap_or(&mut []);
-                            sort_decreasing(kids);
-                            for kid in kids.iter().rev() {
-                                if let Some(slot) = stack.get_mut(sp) {
-                                    *slot = *kid;
-                                    sp += 1;
-                                }
-                            }
-                        }
-                    }
-                    ry += size;
-                }
-            }
-            if out.best().is_some_and(|b| b.score > beaten)
-                || fraction <= config.min_score_fraction
-                || (report.full_turn && pass_min <= beaten + 1)
-            {
-                break 'passes;
-            }
-            fraction = (fraction - config.pass_step).max(config.min_score_fraction);
+    let mut run = GlobalSearch::<N>::start(map, layers, walls, points, config)?;
+    run.resume(map, layers, config.node_budget)?;
+    run.conclude();
+    *out = run.hypotheses;
+    Ok(run.report)
+}
+
+/// The children of a node being evaluated: kept across a pause of the search (see
+/// [`GlobalSearch::resume`]), so that a search run in slices visits exactly the nodes of
+/// one run with the same number of node evaluations.
+#[derive(Clone, Copy, Default)]
+struct Expansion {
+    children: [Node; 4],
+    /// Children made.
+    made: u8,
+    /// Children evaluated.
+    evaluated: u8,
+    /// Children kept (their bound is above the threshold), at the front of `children`.
+    kept: u8,
+}
+
+/// What one slice of the search reads and does not keep: the occupied levels, the
+/// tabled dilations and the end cells of the heading last computed (rebuilt per slice).
+struct Slice<'a> {
+    levels: Levels<'a>,
+    dilations: Dilations,
+    end: EndCells,
+}
+
+/// A global search that runs in slices of node evaluations: the search of
+/// [`search_with_walls`], paused when a slice's nodes are spent and resumed where it
+/// stopped. A robot that cannot spend a whole search on one scan (a microcontroller
+/// between two scans) runs a slice per scan; the hypotheses are poses of the robot when
+/// the search's scan was taken. Split in any way, the slices visit the same nodes in the
+/// same order as one run with their sum as its [`GlobalSearchConfig::node_budget`], and
+/// find the same hypotheses.
+///
+/// About 5.6 KB (the selected beams and the depth-first stack); a slice adds about
+/// 3.5 KB of stack. Every slice must be given the map and layers the search started on.
+#[derive(Clone)]
+pub struct GlobalSearch<const N: usize> {
+    config: GlobalSearchConfig,
+    sel: Selected,
+    step: f32,
+    headings: u32,
+    width: i32,
+    height: i32,
+    /// Farthest selected beam, cells.
+    rho_max: f32,
+    windows: [(u32, u32); MAX_WINDOWS],
+    n_windows: usize,
+    /// The pass's minimum score as a fraction of the total weight.
+    fraction: f32,
+    /// The pass's minimum score.
+    pass_min: u32,
+    /// Pruning threshold: a node must bound above it.
+    thr: u32,
+    /// Phase 1's best score once the full turn runs (only better counts then).
+    beaten: u32,
+    phase_one_min: u32,
+    /// Cursor: the heading window and the next top-level block of the pass.
+    window: usize,
+    rx: i32,
+    ry: i32,
+    stack: [Node; STACK],
+    sp: usize,
+    pending: Option<Expansion>,
+    hypotheses: Hypotheses<N>,
+    report: SearchReport,
+    done: bool,
+}
+
+impl<const N: usize> GlobalSearch<N> {
+    /// Prepares a search for the scan `points` (robot frame) in `map` bounded by
+    /// `layers` (made from it), with the map's wall directions when known (see
+    /// [`search_with_walls`]). Nothing is searched yet: see [`GlobalSearch::resume`].
+    pub fn start(
+        map: &GridView<'_>,
+        layers: &MaxPoolLayers<'_>,
+        walls: Option<&super::orientation::DirectionHistogram>,
+        points: &[ScanPoint],
+        config: &GlobalSearchConfig,
+    ) -> Result<Self, GlobalError> {
+        let (sel, step, headings) = prepare(map, layers, points, config)?;
+        let min_score = libm::ceilf(config.min_score_fraction * sel.total as f32) as u32;
+        let mut report = SearchReport {
+            beams: sel.len as u16,
+            extent_m: sel.extent,
+            heading_step: step,
+            headings,
+            heading_windows: 1,
+            headings_searched: headings,
+            nodes: 0,
+            leaves: 0,
+            rotations: 0,
+            nodes_per_level: [0; crate::grid::layers::MAX_LEVELS as usize + 1],
+            total_weight: sel.total,
+            min_score,
+            passes: 0,
+            full_turn: false,
+            // Until the search is over.
+            complete: false,
+        };
+        let rho_max = sel
+            .rho_cells
+            .iter()
+            .take(sel.len)
+            .copied()
+            .fold(0.0f32, f32::max);
+        let mut windows = [(0u32, 0u32); MAX_WINDOWS];
+        let n_windows = heading_windows(map, walls, points, config, step, headings, &mut windows);
+        report.heading_windows = n_windows as u8;
+        report.headings_searched = windows
+            .iter()
+            .take(n_windows)
+            .map(|(lo, hi)| hi - lo + 1)
+            .sum();
+        let g = map.geometry();
+        let mut run = Self {
+            config: *config,
+            sel,
+            step,
+            headings,
+            width: g.width as i32,
+            height: g.height as i32,
+            rho_max,
+            windows,
+            n_windows,
+            fraction: config.first_pass_fraction.max(config.min_score_fraction),
+            pass_min: 0,
+            thr: 0,
+            beaten: 0,
+            phase_one_min: u32::MAX,
+            window: 0,
+            rx: 0,
+            ry: 0,
+            stack: [Node::default(); STACK],
+            sp: 0,
+            pending: None,
+            hypotheses: Hypotheses::new(),
+            report,
+            done: false,
+        };
+        run.start_pass();
+        Ok(run)
+    }
+
+    /// Runs the search for at most `nodes` more node evaluations; `Ok(true)` when it is
+    /// over (then [`GlobalSearchReport::complete`](SearchReport::complete) holds unless
+    /// [`GlobalSearch::conclude`] stopped it before), `Ok(false)` when the slice's nodes
+    /// are spent. Refused when `layers` do not belong to `map` or `map` is not the size
+    /// of the one the search started on.
+    pub fn resume(
+        &mut self,
+        map: &GridView<'_>,
+        layers: &MaxPoolLayers<'_>,
+        nodes: u32,
+    ) -> Result<bool, GlobalError> {
+        if self.done {
+            return Ok(true);
         }
-        let best = out.best().map_or(0, |b| b.score);
-        let good = libm::ceilf(config.full_turn_below * sel.total as f32) as u32;
-        if report.full_turn || n_windows == 1 || config.full_turn_below <= 0.0 || best >= good {
-            break 'phases;
+        let g = *map.geometry();
+        if !layers.matches(map) || g.width as i32 != self.width || g.height as i32 != self.height {
+            return Err(GlobalError::LayersMismatch);
+        }
+        let limit = self.report.nodes.saturating_add(nodes);
+        let top = layers.levels();
+        let mut slice = Slice {
+            levels: Levels::new(layers),
+            dilations: Dilations::new(&self.sel, self.step),
+            end: EndCells::new(self.step),
+        };
+        loop {
+            if let Some(mut e) = self.pending.take() {
+                if !self.evaluate(map, &mut slice, &mut e, limit) {
+                    self.pending = Some(e);
+                    return Ok(false);
+                }
+                self.push_kept(&mut e);
+            }
+            while self.sp > 0 {
+                self.sp -= 1;
+                let Some(node) = self.stack.get(self.sp).copied() else {
+                    break;
+                };
+                if node.bound <= self.thr {
+                    continue;
+                }
+                if node.a == 0 && node.k == 0 {
+                    self.hypotheses.offer(
+                        Hypothesis {
+                            pose: pose_at(&g, node.x, node.y, heading_angle(node.j0, self.step)),
+                            score: node.bound,
+                        },
+                        self.config.separation_m,
+                        self.config.separation_rad,
+                    );
+                    self.thr = self.threshold();
+                    continue;
+                }
+                let mut e = self.children(map, layers, &node);
+                if !self.evaluate(map, &mut slice, &mut e, limit) {
+                    self.pending = Some(e);
+                    return Ok(false);
+                }
+                self.push_kept(&mut e);
+            }
+            if !self.next_root(map, layers, top) {
+                self.finish(true);
+                return Ok(true);
+            }
+        }
+    }
+
+    /// Stops the search where it is (when not over): the hypotheses are then the best
+    /// found so far and [`SearchReport::complete`] is `false`.
+    pub fn conclude(&mut self) {
+        if !self.done {
+            self.finish(false);
+        }
+    }
+
+    /// `true` when the search is over (finished or concluded).
+    pub fn is_done(&self) -> bool {
+        self.done
+    }
+
+    /// What the search did so far ([`SearchReport::complete`] is `false` until it is
+    /// over).
+    pub fn report(&self) -> &SearchReport {
+        &self.report
+    }
+
+    /// The hypotheses, best first: final once the search is over, the best found so far
+    /// before (not yet filtered by [`GlobalSearchConfig::relative_score`]).
+    pub fn hypotheses(&self) -> &Hypotheses<N> {
+        &self.hypotheses
+    }
+
+    /// The pruning threshold: the pass's minimum score, the best score × the relative
+    /// score, and the `N`-th best when `N` hypotheses are held.
+    fn threshold(&self) -> u32 {
+        below_relative(&self.config, self.hypotheses.best())
+            .max(self.pass_min.saturating_sub(1))
+            .max(self.hypotheses.floor())
+    }
+
+    /// Starts a pass at the current minimum-score fraction, from the first window's first
+    /// block.
+    fn start_pass(&mut self) {
+        // In phase 2 nothing at or below phase 1's best is looked for.
+        self.pass_min = (libm::ceilf(self.fraction * self.sel.total as f32) as u32)
+            .max(self.beaten.saturating_add(1));
+        self.report.passes = self.report.passes.saturating_add(1);
+        self.report.min_score = self.pass_min;
+        self.thr = self.threshold();
+        self.window = 0;
+        self.rx = 0;
+        self.ry = 0;
+    }
+
+    /// After a pass: the next pass (a lower minimum score when this one found nothing),
+    /// or phase 2 (every heading, when the windows found no good match, see
+    /// [`GlobalSearchConfig::full_turn_below`]); `false` when the search is over.
+    fn next_pass(&mut self) -> bool {
+        let c = self.config;
+        let beaten = self.beaten;
+        let pass_over = self.hypotheses.best().is_some_and(|b| b.score > beaten)
+            || self.fraction <= c.min_score_fraction
+            || (self.report.full_turn && self.pass_min <= beaten.saturating_add(1));
+        if !pass_over {
+            self.fraction = (self.fraction - c.pass_step).max(c.min_score_fraction);
+            self.start_pass();
+            return true;
+        }
+        let best = self.hypotheses.best().map_or(0, |b| b.score);
+        let good = libm::ceilf(c.full_turn_below * self.sel.total as f32) as u32;
+        if self.report.full_turn || self.n_windows == 1 || c.full_turn_below <= 0.0 || best >= good
+        {
+            return false;
         }
         // Every heading, as one window; only a hypothesis above phase 1's best counts
         // as found (phase 1's are kept and still compete).
-        if let Some(first) = windows.first_mut() {
-            *first = (0, headings.saturating_sub(1));
+        if let Some(first) = self.windows.first_mut() {
+            *first = (0, self.headings.saturating_sub(1));
         }
-        n_windows = 1;
-        beaten = best;
-        phase_one_min = report.min_score;
-        report.full_turn = true;
-        report.headings_searched = headings;
+        self.n_windows = 1;
+        self.beaten = best;
+        self.phase_one_min = self.report.min_score;
+        self.report.full_turn = true;
+        self.report.headings_searched = self.headings;
+        self.fraction = c.first_pass_fraction.max(c.min_score_fraction);
+        self.start_pass();
+        true
     }
-    // Phase 1's hypotheses stay when phase 2 finds nothing better.
-    report.min_score = report.min_score.min(phase_one_min);
-    out.keep_above(below_relative(config, out.best()).max(report.min_score.saturating_sub(1)));
-    Ok(report)
+
+    /// Moves the cursor to the next top-level block with a free cell (in row order, then
+    /// the next window, then the next pass) and pushes its roots: every aligned heading
+    /// interval covering the window, the first visited first. `false` when the search is
+    /// over.
+    fn next_root(&mut self, map: &GridView<'_>, layers: &MaxPoolLayers<'_>, top: u8) -> bool {
+        let size = 1i32 << top;
+        // All headings in one interval of 2^all at the root.
+        let all = (32 - self.headings.saturating_sub(1).leading_zeros()) as u8;
+        if self.width <= 0 || self.height <= 0 {
+            return false;
+        }
+        loop {
+            let Some(&(lo, hi)) = self
+                .windows
+                .get(..self.n_windows)
+                .and_then(|w| w.get(self.window))
+            else {
+                if !self.next_pass() {
+                    return false;
+                }
+                continue;
+            };
+            if self.ry >= self.height {
+                self.window += 1;
+                self.rx = 0;
+                self.ry = 0;
+                continue;
+            }
+            let (bx, by) = (self.rx, self.ry);
+            self.rx += size;
+            if self.rx >= self.width {
+                self.rx = 0;
+                self.ry += size;
+            }
+            if !block_free(map, layers, top, bx, by) {
+                continue;
+            }
+            // The aligned heading intervals of 2^a0 that cover the window (at most two).
+            let a0 = (32 - (hi - lo).leading_zeros()).min(u32::from(all)) as u8;
+            let mut sp = 0usize;
+            let mut j0 = (lo >> a0) << a0;
+            while j0 <= hi && j0 < self.headings {
+                if let Some(slot) = self.stack.get_mut(sp) {
+                    *slot = Node {
+                        x: bx,
+                        y: by,
+                        j0,
+                        bound: self.sel.total,
+                        a: a0,
+                        k: top,
+                    };
+                    sp += 1;
+                }
+                j0 += 1 << a0;
+            }
+            // The first interval is visited first.
+            self.stack.get_mut(..sp).unwrap_or(&mut []).reverse();
+            self.sp = sp;
+            return true;
+        }
+    }
+
+    /// The children of `node`: its two heading halves while their spread moves the far
+    /// beams' ends by more than half the block, else its four sub-blocks with a free cell.
+    fn children(&self, map: &GridView<'_>, layers: &MaxPoolLayers<'_>, node: &Node) -> Expansion {
+        let mut e = Expansion::default();
+        let split_heading = node.a > 0
+            && (node.k == 0
+                || 2 * dilation(self.rho_max, (1u32 << (node.a - 1)) as f32 * self.step)
+                    >= 1 << node.k);
+        let mut n = 0;
+        if split_heading {
+            // The window the node was pushed for (the cursor leaves it only once the
+            // stack is empty).
+            let (lo, hi) = self.windows.get(self.window).copied().unwrap_or((0, 0));
+            let a = node.a - 1;
+            for j0 in [node.j0, node.j0 + (1 << a)] {
+                if j0 >= self.headings || j0 > hi || j0 + (1 << a) <= lo {
+                    continue;
+                }
+                if let Some(c) = e.children.get_mut(n) {
+                    *c = Node { j0, a, ..*node };
+                    n += 1;
+                }
+            }
+        } else {
+            let k = node.k - 1;
+            let half = 1i32 << k;
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let (x, y) = (node.x + dx * half, node.y + dy * half);
+                if x >= self.width || y >= self.height || !block_free(map, layers, k, x, y) {
+                    continue;
+                }
+                if let Some(c) = e.children.get_mut(n) {
+                    *c = Node { x, y, k, ..*node };
+                    n += 1;
+                }
+            }
+        }
+        e.made = n as u8;
+        e
+    }
+
+    /// Evaluates the children of `e` not evaluated yet, keeping those whose bound is
+    /// above the threshold; `false` when the slice's nodes ran out first (`limit`).
+    fn evaluate(
+        &mut self,
+        map: &GridView<'_>,
+        slice: &mut Slice<'_>,
+        e: &mut Expansion,
+        limit: u32,
+    ) -> bool {
+        while e.evaluated < e.made {
+            let Some(mut c) = e.children.get(usize::from(e.evaluated)).copied() else {
+                break;
+            };
+            if self.report.nodes >= limit {
+                return false;
+            }
+            self.report.nodes += 1;
+            if let Some(count) = self.report.nodes_per_level.get_mut(usize::from(c.k)) {
+                *count += 1;
+            }
+            if c.a == 0 && c.k == 0 {
+                self.report.leaves += 1;
+            }
+            let cells = slice.end.at(&self.sel, c.reference(), &mut self.report);
+            c.bound = bound(
+                map,
+                &slice.levels,
+                &slice.dilations,
+                cells,
+                self.sel.total,
+                self.thr,
+                c.a,
+                c.k,
+                c.x,
+                c.y,
+            );
+            if c.bound > self.thr
+                && let Some(slot) = e.children.get_mut(usize::from(e.kept))
+            {
+                *slot = c;
+                e.kept += 1;
+            }
+            e.evaluated += 1;
+        }
+        true
+    }
+
+    /// Pushes the kept children, best bound on top (equal bounds in child order).
+    fn push_kept(&mut self, e: &mut Expansion) {
+        let kids = e.children.get_mut(..usize::from(e.kept)).unwrap_or(&mut []);
+        sort_decreasing(kids);
+        for kid in kids.iter().rev() {
+            if let Some(slot) = self.stack.get_mut(self.sp) {
+                *slot = *kid;
+                self.sp += 1;
+            }
+        }
+    }
+
+    /// The search is over: phase 1's hypotheses stay when phase 2 finds nothing better;
+    /// those below the relative score or the last pass's minimum go.
+    fn finish(&mut self, complete: bool) {
+        self.report.complete = complete;
+        self.report.min_score = self.report.min_score.min(self.phase_one_min);
+        let keep = below_relative(&self.config, self.hypotheses.best())
+            .max(self.report.min_score.saturating_sub(1));
+        self.hypotheses.keep_above(keep);
+        self.done = true;
+    }
 }
 
 /// The highest score below [`GlobalSearchConfig::relative_score`] × the best score.
@@ -1301,6 +1560,144 @@ mod tests {
         }
         // Branch and bound must skip most of the leaves the brute force scores.
         assert!(pruned * 2 > total, "{pruned} of {total}");
+    }
+
+    /// A random map of `w × h` cells, its layers (`levels`, as bytes) and a scan ray-cast
+    /// from a random free cell of it.
+    fn random_scene(
+        rng: &mut rand::rngs::StdRng,
+        w: usize,
+        h: usize,
+        levels: u8,
+    ) -> (Vec<i8>, GridGeometry, Vec<u8>, ScanPoints<60>) {
+        let cells = random_map(rng, w, h);
+        let g = GridGeometry::centred(w, h, 0.05);
+        let view = GridView::new(&cells, g, 20).unwrap();
+        let mut buf = vec![0u8; MaxPoolLayers::bytes_for(w, h, levels).unwrap()];
+        MaxPoolLayers::build(&view, -20, levels, &mut buf).unwrap();
+        let pose = free_pose(rng, &cells, w, h, &g);
+        let ranges = ray_cast(&view, &pose);
+        let mut pts = ScanPoints::<60>::new();
+        pts.load(&LidarScan::new(&ranges, LIDAR), 1, 0.0);
+        (cells, g, buf, pts)
+    }
+
+    /// A search run in slices of random sizes finds what one run with their sum as its
+    /// budget finds, node for node: complete searches, searches the budget stops, with
+    /// and without heading windows and the full turn after them.
+    #[test]
+    fn slices_find_what_one_search_finds() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(31);
+        let (mut stopped, mut sliced) = (0, 0);
+        for trial in 0..40 {
+            let (w, h) = (rng.random_range(20..56), rng.random_range(16..48));
+            let levels = rng.random_range(1..=5);
+            let (cells, g, buf, pts) = random_scene(&mut rng, w, h, levels);
+            let view = GridView::new(&cells, g, 20).unwrap();
+            let layers = MaxPoolLayers::from_bytes(&buf).unwrap();
+            if pts.as_slice().is_empty() {
+                continue;
+            }
+            let c = match trial % 3 {
+                0 => config(),
+                1 => GlobalSearchConfig {
+                    min_score_fraction: 0.3,
+                    heading_peaks: 1,
+                    heading_window: 0.01,
+                    full_turn_below: 1.0,
+                    ..config()
+                },
+                _ => GlobalSearchConfig {
+                    min_score_fraction: 0.6,
+                    heading_peaks: 2,
+                    heading_window: 0.05,
+                    full_turn_below: 0.9,
+                    ..config()
+                },
+            };
+            let mut whole = Hypotheses::<3>::new();
+            let all = search(&view, &layers, pts.as_slice(), &c, &mut whole).unwrap();
+            assert!(all.complete);
+            // A budget that stops the search, or one that lets it finish.
+            let budget = if trial % 4 == 3 {
+                all.nodes + 3
+            } else {
+                rng.random_range(1..=all.nodes.max(1))
+            };
+            let c = GlobalSearchConfig {
+                node_budget: budget,
+                ..c
+            };
+            let mut one = Hypotheses::<3>::new();
+            let r_one = search(&view, &layers, pts.as_slice(), &c, &mut one).unwrap();
+            let mut run =
+                GlobalSearch::<3>::start(&view, &layers, None, pts.as_slice(), &c).unwrap();
+            let mut left = budget;
+            let mut slices = 0;
+            while left > 0 && !run.is_done() {
+                let n = rng.random_range(1..=40).min(left);
+                let over = run.resume(&view, &layers, n).unwrap();
+                assert_eq!(over, run.is_done());
+                left -= n;
+                slices += 1;
+            }
+            run.conclude();
+            let r_run = *run.report();
+            stopped += usize::from(!r_one.complete);
+            sliced += usize::from(slices > 1);
+            assert_eq!(run.hypotheses().as_slice(), one.as_slice(), "trial {trial}");
+            assert_eq!(
+                (
+                    r_run.nodes,
+                    r_run.leaves,
+                    r_run.nodes_per_level,
+                    r_run.passes
+                ),
+                (
+                    r_one.nodes,
+                    r_one.leaves,
+                    r_one.nodes_per_level,
+                    r_one.passes
+                ),
+                "trial {trial}"
+            );
+            assert_eq!(
+                (r_run.complete, r_run.full_turn, r_run.min_score),
+                (r_one.complete, r_one.full_turn, r_one.min_score),
+                "trial {trial}"
+            );
+            // Resuming a search that is over does nothing.
+            assert_eq!(run.resume(&view, &layers, 100), Ok(true));
+            assert_eq!(run.report().nodes, r_one.nodes);
+        }
+        assert!(
+            stopped >= 10 && sliced >= 20,
+            "{stopped} stopped, {sliced} sliced"
+        );
+    }
+
+    /// A slice is refused on a map of another size or with layers of another map.
+    #[test]
+    fn a_slice_on_another_map_is_refused() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let (cells, g, buf, pts) = random_scene(&mut rng, 32, 24, 3);
+        let view = GridView::new(&cells, g, 20).unwrap();
+        let layers = MaxPoolLayers::from_bytes(&buf).unwrap();
+        let mut run =
+            GlobalSearch::<3>::start(&view, &layers, None, pts.as_slice(), &config()).unwrap();
+        let (other_cells, other_g, other_buf, _) = random_scene(&mut rng, 40, 24, 3);
+        let other = GridView::new(&other_cells, other_g, 20).unwrap();
+        let other_layers = MaxPoolLayers::from_bytes(&other_buf).unwrap();
+        assert_eq!(
+            run.resume(&other, &other_layers, 10),
+            Err(GlobalError::LayersMismatch)
+        );
+        assert_eq!(
+            run.resume(&view, &other_layers, 10),
+            Err(GlobalError::LayersMismatch)
+        );
+        assert_eq!(run.report().nodes, 0);
+        assert_eq!(run.resume(&view, &layers, u32::MAX), Ok(true));
     }
 
     /// Windows one peak wide miss the robot's heading on some maps; the full turn after
