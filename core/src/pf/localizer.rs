@@ -19,8 +19,11 @@
 
 use super::correlation::{ScanPoints, search_window, search_window_sparse_rows};
 use super::filter::ShiftSearch;
-use super::global::{self, GlobalError, GlobalSearchConfig, Hypotheses, Hypothesis, SearchReport};
+use super::global::{
+    GlobalError, GlobalSearch, GlobalSearchConfig, Hypotheses, Hypothesis, SearchReport,
+};
 use super::orientation::DirectionHistogram;
+use super::prediction::{arc_between, drive_arc};
 use super::{GridPfConfig, ParticleFilter, PfError, StepReport};
 use crate::geometry::Pose2;
 use crate::grid::{GridView, MaxPoolLayers, ScanIntegration};
@@ -102,11 +105,19 @@ pub struct RelocalizationConfig {
     pub spread_m: f32,
     /// Heading spread around each hypothesis, radians (0: the search's heading step).
     pub spread_rad: f32,
+    /// Scans one global search may span (≥ 1): each scan runs
+    /// [`GlobalSearchConfig::node_budget`] more node evaluations of the same search (on
+    /// the scan it started with) until it is over or has run this many; the hypotheses
+    /// are then moved by the odometry since that scan. Bounds the instructions per scan
+    /// by one node budget while giving the search several (a microcontroller cannot
+    /// spend a whole search between two scans).
+    pub search_scans: u8,
 }
 
 impl RelocalizationConfig {
     /// Automatic relocalization with [`GlobalSearchConfig::DEFAULT`] and
-    /// [`LostDetection::DEFAULT`], particles over the 4 best hypotheses.
+    /// [`LostDetection::DEFAULT`], particles over the 4 best hypotheses, a search
+    /// spanning up to 5 scans (see `docs/global-localization.md` for how that was chosen).
     pub const DEFAULT: Self = Self {
         search: GlobalSearchConfig::DEFAULT,
         lost: LostDetection::DEFAULT,
@@ -114,6 +125,7 @@ impl RelocalizationConfig {
         hypotheses: 4,
         spread_m: 0.0,
         spread_rad: 0.0,
+        search_scans: 5,
     };
 
     /// `true` when every setting is finite and in range.
@@ -126,6 +138,7 @@ impl RelocalizationConfig {
             && self.spread_m >= 0.0
             && self.spread_rad.is_finite()
             && self.spread_rad >= 0.0
+            && self.search_scans >= 1
     }
 }
 
@@ -190,8 +203,9 @@ impl LocalizerStatus {
 /// For global localization give it the map's max-pooled layers
 /// ([`GridLocalizer::with_layers`]; see the module documentation).
 ///
-/// RAM: `28·P + 24·B` bytes plus ~1 100 (lost detection, relocalization, the map's wall directions); the map and its layers are not copied. A global
-/// search adds ≈ 1.8 KB of stack.
+/// RAM: `28·P + 24·B` bytes plus ~5 600 (lost detection, relocalization, the map's wall
+/// directions, a global search spanning scans: 4 496); the map and its layers are not
+/// copied. A scan that runs the global search adds ≈ 3.5 KB of stack.
 ///
 /// ```
 /// use core::f32::consts::PI;
@@ -242,6 +256,18 @@ pub struct GridLocalizer<'m, const P: usize, const B: usize> {
     /// The shift search: the general one, or the one for the map's row length
     /// ([`GridLocalizer::with_bitmap_row_bytes`]).
     search: ShiftSearch,
+    /// The global search under way when it spans scans
+    /// ([`RelocalizationConfig::search_scans`]).
+    relocalizing: Option<Relocalizing>,
+}
+
+/// A global search spanning scans: the search, the scans it has run on, and the robot's
+/// motion since its scan (odometry without noise, in the frame of the robot then).
+#[derive(Clone)]
+struct Relocalizing {
+    search: GlobalSearch<MAX_HYPOTHESES>,
+    scans: u8,
+    moved: Pose2<f32>,
 }
 
 impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
@@ -271,6 +297,7 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
             ),
             hypotheses: Hypotheses::new(),
             search: search_window,
+            relocalizing: None,
         })
     }
 
@@ -351,7 +378,7 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
     }
 
     /// Changes the lost-detection and relocalization settings (the running expected hit
-    /// fraction is kept).
+    /// fraction is kept; a global search under way starts again on the next scan).
     pub fn set_relocalization(
         &mut self,
         relocalization: RelocalizationConfig,
@@ -360,11 +387,13 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
             return Err(GlobalError::InvalidConfig);
         }
         self.relocalization = relocalization;
+        self.relocalizing = None;
         Ok(())
     }
 
     /// Asks for a global relocalization (e.g. after the robot was carried): the state
-    /// becomes [`LocalizerState::Lost`] and the next scan runs the global search.
+    /// becomes [`LocalizerState::Lost`] and the next scan runs the global search (a
+    /// search under way starts again).
     /// Refused with [`GlobalError::NoLayers`] when the localizer has no layers.
     pub fn relocalize(&mut self) -> Result<(), GlobalError> {
         if self.layers.is_none() {
@@ -374,6 +403,7 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
         self.status.search_pending = true;
         self.status.low_scans = 0;
         self.status.good_scans = 0;
+        self.relocalizing = None;
         Ok(())
     }
 
@@ -387,7 +417,8 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
         self.status.state
     }
 
-    /// The hypotheses of the last global search, best first.
+    /// The hypotheses of the last global search, best first (moved by the odometry since
+    /// its scan when it spanned scans).
     pub fn hypotheses(&self) -> &[Hypothesis] {
         self.hypotheses.as_slice()
     }
@@ -408,6 +439,7 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
     ) -> Result<(), PfError> {
         self.filter.reset_around(pose, std_xy, std_theta)?;
         self.pose = pose;
+        self.relocalizing = None;
         let s = &mut self.status;
         s.state = LocalizerState::Tracking;
         s.search_pending = false;
@@ -433,17 +465,36 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
 
     /// Prediction with the arc `(distance, heading_change)`.
     pub fn predict(&mut self, distance: f32, heading_change: f32) -> Result<(), PfError> {
-        self.filter.predict(distance, heading_change)
+        self.filter.predict(distance, heading_change)?;
+        self.track_motion(distance, heading_change);
+        Ok(())
     }
 
     /// Prediction with `(v, ω)` held for `dt` seconds.
     pub fn predict_velocity(&mut self, v: f32, omega: f32, dt: f32) -> Result<(), PfError> {
-        self.filter.predict_velocity(v, omega, dt)
+        self.filter.predict_velocity(v, omega, dt)?;
+        if dt > 0.0 {
+            self.track_motion(v * dt, omega * dt);
+        }
+        Ok(())
     }
 
     /// Prediction with odometry poses before and after the step.
     pub fn predict_odometry(&mut self, from: &Pose2<f32>, to: &Pose2<f32>) -> Result<(), PfError> {
-        self.filter.predict_odometry(from, to)
+        self.filter.predict_odometry(from, to)?;
+        let (d, t) = arc_between(from, to);
+        self.track_motion(d, t);
+        Ok(())
+    }
+
+    /// While a global search spans scans, the robot's motion since its scan.
+    fn track_motion(&mut self, distance: f32, heading_change: f32) {
+        if let Some(run) = self.relocalizing.as_mut() {
+            let moved = drive_arc(&run.moved, distance, heading_change, 0.0);
+            if moved.is_finite() {
+                run.moved = moved;
+            }
+        }
     }
 
     /// Scores the scan against the map, shifts, reweights and resamples; before that, when
@@ -452,8 +503,16 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
     /// lost detection ([`GridLocalizer::status`]).
     pub fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
         let beams = self.config.load_scan(&mut self.points, scan)?;
-        if self.status.search_pending {
-            self.search_and_seed();
+        if self.status.search_pending && !self.search_and_seed() {
+            // The search goes on with the next scan: the particles wait for it.
+            return Ok(StepReport {
+                pose: self.pose,
+                n_eff: self.filter.n_eff(),
+                resampled: false,
+                beams,
+                score: 0,
+                map: ScanIntegration::default(),
+            });
         }
         let u = self
             .filter
@@ -472,30 +531,59 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
 }
 
 impl<const P: usize, const B: usize> GridLocalizer<'_, P, B> {
-    /// Runs the global search on the loaded points and, when it finds hypotheses, spreads
-    /// the particles over them.
-    fn search_and_seed(&mut self) {
+    /// Runs the global search on the loaded points, or its next slice when it spans scans
+    /// ([`RelocalizationConfig::search_scans`]); when it is over and found hypotheses,
+    /// spreads the particles over them (moved by the odometry since the search's scan).
+    /// `false` while the search goes on: the scan is then not filtered.
+    fn search_and_seed(&mut self) -> bool {
         let Some(layers) = self.layers else {
             self.status.search_pending = false;
-            return;
+            return true;
         };
-        let r = &self.relocalization;
-        let mut found = Hypotheses::<MAX_HYPOTHESES>::new();
-        let report = match global::search_with_walls(
-            &self.map,
-            &layers,
-            Some(&self.walls),
-            self.points.as_slice(),
-            &r.search,
-            &mut found,
-        ) {
-            Ok(report) => report,
+        let r = self.relocalization;
+        let run = match self.relocalizing.take() {
+            Some(run) => Ok(run),
+            None => GlobalSearch::start(
+                &self.map,
+                &layers,
+                Some(&self.walls),
+                self.points.as_slice(),
+                &r.search,
+            )
+            .map(|search| Relocalizing {
+                search,
+                scans: 0,
+                moved: Pose2::new(0.0, 0.0, 0.0),
+            }),
+        };
+        let mut run = match run {
+            Ok(run) => run,
             Err(_) => {
                 self.status.failed_searches = self.status.failed_searches.wrapping_add(1);
-                return;
+                return true;
             }
         };
+        if run
+            .search
+            .resume(&self.map, &layers, r.search.node_budget)
+            .is_err()
+        {
+            self.status.failed_searches = self.status.failed_searches.wrapping_add(1);
+            return true;
+        }
+        run.scans = run.scans.saturating_add(1);
+        if !run.search.is_done() && run.scans < r.search_scans {
+            self.status.last_search = Some(*run.search.report());
+            self.relocalizing = Some(run);
+            return false;
+        }
+        run.search.conclude();
+        let report = *run.search.report();
         self.status.last_search = Some(report);
+        let mut found = *run.search.hypotheses();
+        if run.scans > 1 {
+            found.move_by(&run.moved);
+        }
         let used = found
             .as_slice()
             .get(..usize::from(r.hypotheses))
@@ -522,13 +610,14 @@ impl<const P: usize, const B: usize> GridLocalizer<'_, P, B> {
             .is_err()
         {
             self.status.failed_searches = self.status.failed_searches.wrapping_add(1);
-            return;
+            return true;
         }
         self.status.search_pending = false;
         self.status.state = LocalizerState::Relocalized;
         self.status.relocalizations = self.status.relocalizations.wrapping_add(1);
         self.status.low_scans = 0;
         self.status.good_scans = 0;
+        true
     }
 
     /// Lost detection after an update whose best particle scored `score`.

@@ -165,6 +165,75 @@ fn global_localization_converges_within_ten_scans() {
     }
 }
 
+/// A search that spans scans (250 nodes a scan): the localizer stays lost and does not
+/// filter while it runs, then seeds the particles at the hypotheses moved by the odometry
+/// since the search's scan — where the robot is at the scan that ends the search.
+#[test]
+fn a_search_spanning_scans_seeds_where_the_robot_is_now() {
+    let (map, layers) = room_map();
+    let layers = MaxPoolLayers::from_bytes(&layers).unwrap();
+    let sim = simulate(7);
+    let reloc = RelocalizationConfig {
+        search: GlobalSearchConfig {
+            node_budget: 250,
+            ..GlobalSearchConfig::DEFAULT
+        },
+        search_scans: 40,
+        ..RelocalizationConfig::DEFAULT
+    };
+    let mut spanned = 0;
+    for start in (0..sim.scans.len() - 40).step_by(29) {
+        let mut loc = GridLocalizer::<64, 180>::without_pose(
+            map.view(),
+            GridPfConfig::DEFAULT,
+            layers,
+            reloc,
+        )
+        .unwrap();
+        let mut seeded_at = None;
+        for (n, i) in (start..start + 40).enumerate() {
+            if i > start {
+                loc.predict_odometry(&sim.odometry[i - 1], &sim.odometry[i])
+                    .unwrap();
+            }
+            loc.observe(&LidarScan::new(&sim.scans[i], LIDAR)).unwrap();
+            let s = *loc.status();
+            if !s.search_pending {
+                seeded_at = Some(i);
+                break;
+            }
+            assert_eq!(s.state, LocalizerState::Lost);
+            assert_eq!(loc.filter().update_count(), 0, "no update while searching");
+            let report = s.last_search.expect("a slice ran");
+            assert_eq!(report.nodes, 250 * (n as u32 + 1));
+            assert!(!report.complete);
+        }
+        let i = seeded_at.expect("the search ends within 40 scans");
+        let s = *loc.status();
+        let slices = i - start + 1;
+        std::println!(
+            "start {start}: seeded at scan {i} ({slices} slices), {:?}, truth {:?}",
+            loc.hypotheses(),
+            sim.truth[i]
+        );
+        assert_eq!(s.state, LocalizerState::Relocalized);
+        assert_eq!(s.relocalizations, 1);
+        assert!(s.last_search.is_some_and(|r| r.complete));
+        assert!(
+            loc.hypotheses()
+                .iter()
+                .any(|h| close(&h.pose, &sim.truth[i], 0.1, 0.05)),
+            "start {start}: {:?} vs {:?}",
+            loc.hypotheses(),
+            sim.truth[i]
+        );
+        spanned += usize::from(slices >= 3);
+    }
+    // The robot drove 10 cm a scan: at 3 slices and more, hypotheses left where the
+    // search's scan was taken would be 20 cm or more off.
+    assert!(spanned >= 3, "{spanned} searches spanned 3 scans or more");
+}
+
 #[test]
 fn lost_detection_fires_on_a_kidnapped_robot_and_not_on_a_normal_run() {
     let (map, layers) = room_map();

@@ -177,7 +177,9 @@ fn run(out: &mut Serial) -> core::fmt::Result {
         (err * 1000.0) as u32
     )?;
     // The worst case the node budget allows: the same scan with nothing pruned by score
-    // (every minimum score 0), so the search runs until the budget stops it.
+    // (every minimum score 0), so the search runs until the budget stops it; on one scan
+    // (`search_scans` 1), which then also starts the search, seeds the particles and
+    // filters: more than any scan of a search spanning scans spends.
     let exhaustive = RelocalizationConfig {
         search: GlobalSearchConfig {
             min_score_fraction: 0.0,
@@ -185,6 +187,7 @@ fn run(out: &mut Serial) -> core::fmt::Result {
             relative_score: 0.0,
             ..RelocalizationConfig::DEFAULT.search
         },
+        search_scans: 1,
         ..RelocalizationConfig::DEFAULT
     };
     let Ok(Ok(mut loc)) =

@@ -134,11 +134,12 @@ pub fn run_and_write(
             g["scans_to_converge"]
         );
         println!(
-            "  searches complete {}/{}, most nodes {}, most estimated M4 instructions {}; reference lost events {}",
+            "  searches complete {}/{}, most nodes {}, most estimated M4 instructions {} ({} in one scan); reference lost events {}",
             g["searches_complete"],
             g["trials"],
             g["max_nodes"],
             g["max_estimated_m4_instructions"],
+            g["max_estimated_m4_instructions_per_scan"],
             g["lost_detection"]["reference_lost_events"]
         );
         println!("  outputs in {}", out.display());

@@ -245,8 +245,10 @@ pub struct GlobalOptions {
     pub max_scans: usize,
     /// Levels of the max-pooled map layers.
     pub levels: u8,
-    /// Node budget of the search (`None`: the core's).
+    /// Node budget of the search, per scan when it spans scans (`None`: the core's).
     pub node_budget: Option<u32>,
+    /// Scans one search may span (`None`: the core's).
+    pub search_scans: Option<u8>,
     /// Smallest hypothesis score, a fraction of the beams' total weight.
     pub min_score: Option<f32>,
     /// Beams farther than this are left out of the search, metres.
@@ -277,6 +279,7 @@ impl Default for GlobalOptions {
             max_scans: 10,
             levels: 6,
             node_budget: None,
+            search_scans: None,
             min_score: None,
             search_range: None,
             search_beams: None,

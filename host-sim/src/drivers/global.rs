@@ -64,8 +64,11 @@ pub struct Trial {
     pub hypotheses: usize,
     /// The search.
     pub search: Option<SearchSummary>,
-    /// Wall time of the scan that ran the search, seconds.
+    /// Wall time of the scans that ran the search, seconds.
     pub search_wall_s: f64,
+    /// Scans that ran the search (more than one when it spans scans, or searched again
+    /// after finding nothing).
+    pub search_scans: usize,
 }
 
 /// The search's cost figures (a [`SearchReport`] as JSON).
@@ -320,6 +323,7 @@ fn trial_p<const P: usize>(
         hypotheses: 0,
         search: None,
         search_wall_s: 0.0,
+        search_scans: 0,
     };
     let mut previous = None;
     let end = (start + settings.max_scans)
@@ -331,8 +335,11 @@ fn trial_p<const P: usize>(
         let t0 = Instant::now();
         step(&mut loc, &mut previous, f, &settings.lidar)?;
         let Some(want) = reference.get(i) else { break };
+        if searching {
+            trial.search_wall_s += t0.elapsed().as_secs_f64();
+            trial.search_scans += 1;
+        }
         if searching && !loc.status().search_pending {
-            trial.search_wall_s = t0.elapsed().as_secs_f64();
             trial.search = loc.status().last_search.as_ref().map(|r| SearchSummary {
                 best_score_fraction: loc
                     .hypotheses()
@@ -402,6 +409,9 @@ pub fn settings_from(
     }
     if let Some(h) = args.hypotheses {
         relocalization.hypotheses = h;
+    }
+    if let Some(n) = args.search_scans {
+        relocalization.search_scans = n;
     }
     if !relocalization.is_valid() {
         bail!("global search settings out of range: {relocalization:?}");

@@ -31,6 +31,15 @@ pub fn metrics(
         .max()
         .unwrap_or(0);
     let r = &settings.relocalization;
+    // A search spanning scans spends at most one node budget a scan.
+    let max_instr_per_scan = searches
+        .iter()
+        .map(|s| {
+            let nodes = u64::from(s.nodes.max(1));
+            s.estimated_m4_instructions * nodes.min(u64::from(r.search.node_budget)) / nodes
+        })
+        .max()
+        .unwrap_or(0);
     serde_json::json!({
         "trials": trials.len(),
         "successes": successes,
@@ -44,6 +53,7 @@ pub fn metrics(
         "searches_complete": searches.iter().filter(|s| s.complete).count(),
         "max_nodes": max_nodes,
         "max_estimated_m4_instructions": max_instr,
+        "max_estimated_m4_instructions_per_scan": max_instr_per_scan,
         "layers": {
             "levels": settings.levels,
             "bytes": layers_bytes,
@@ -54,6 +64,7 @@ pub fn metrics(
             "min_score_fraction": r.search.min_score_fraction,
             "relative_score": r.search.relative_score,
             "node_budget": r.search.node_budget,
+            "search_scans": r.search_scans,
             "hypotheses": r.hypotheses,
         },
         "lost_detection": {
