@@ -11,8 +11,10 @@
 //! **Relocalization.** With max-pooled layers of the map
 //! ([`GridLocalizer::with_layers`]), a lost robot (automatically, or on
 //! [`GridLocalizer::relocalize`], or from the start with
-//! [`GridLocalizer::without_pose`]) runs the global search on its next scan, spreads the
-//! particles over the best hypotheses and goes on filtering from there
+//! [`GridLocalizer::without_pose`]) starts the global search on its next scan — one node
+//! budget a scan, on that scan, for up to [`RelocalizationConfig::search_scans`] scans,
+//! the particles waiting meanwhile — then spreads the particles over the best hypotheses,
+//! moved by the odometry since the search's scan, and goes on filtering from there
 //! ([`LocalizerState::Relocalized`]); [`LostDetection::confirm_scans`] scans that are not
 //! low make it [`LocalizerState::Tracking`] again. [`GridLocalizer::status`] reports the
 //! state and counters for the estimates.
@@ -40,8 +42,8 @@ pub enum LocalizerState {
     #[default]
     Tracking,
     /// The scans stopped fitting (or no pose was ever given, or a relocalization was
-    /// asked for): the estimate is not to be trusted. With layers, the next scan runs the
-    /// global search.
+    /// asked for): the estimate is not to be trusted. With layers, the next scan starts the
+    /// global search (which may span scans).
     Lost,
     /// The particles were seeded from a global search; not yet confirmed by
     /// [`LostDetection::confirm_scans`] good scans.
@@ -168,7 +170,8 @@ pub struct LocalizerStatus {
     pub relocalizations: u32,
     /// Global searches that found no hypothesis above the minimum score.
     pub failed_searches: u32,
-    /// `true` when the next scan runs the global search.
+    /// `true` when the next scan runs the global search (starts it, or runs its next slice
+    /// when it spans scans).
     pub search_pending: bool,
     /// The last global search, if any.
     pub last_search: Option<SearchReport>,
@@ -338,7 +341,7 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
     }
 
     /// A localizer that knows no pose: it is [`LocalizerState::Lost`] and its first scan
-    /// runs the global search over `layers` (made from `map`).
+    /// starts the global search over `layers` (made from `map`).
     pub fn without_pose(
         map: GridView<'m>,
         config: GridPfConfig,

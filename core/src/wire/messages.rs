@@ -92,9 +92,10 @@ pub enum Command {
     /// valid ([`EkfConfig::is_valid`]) are refused: counted in [`Status::rejected`], the
     /// settings unchanged.
     ConfigureEkf(EkfSettings),
-    /// Forget the localizer's pose: it is lost, and its next scan runs the global search
-    /// over the whole map (refused with [`ToHost::Refused`] unless the localizer is
-    /// active).
+    /// Forget the localizer's pose: it is lost, and its next scan starts the global search
+    /// over the whole map, one node budget a scan for up to
+    /// [`crate::pf::RelocalizationConfig::search_scans`] scans (refused with
+    /// [`ToHost::Refused`] unless the localizer is active).
     Relocalize,
 }
 

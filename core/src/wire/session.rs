@@ -33,7 +33,7 @@ pub const MAX_SCAN_BEAMS: usize = 360;
 /// every particle at the pose and the state to tracking) that can also be sent looking
 /// for itself and reports where it stands. Implemented by [`GridLocalizer`].
 pub trait LocalizerEstimator: GridEstimator {
-    /// Forget the pose: lost, the global search runs on the next scan. Refused with
+    /// Forget the pose: lost, the global search starts on the next scan. Refused with
     /// [`Refusal::NoGlobalSearch`] when the map has no layers for it.
     fn relocalize(&mut self) -> Result<(), Refusal>;
     /// Tracking, lost or relocalized, with its counters.
