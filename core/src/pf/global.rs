@@ -118,13 +118,13 @@ impl GlobalSearchConfig {
     /// how they were chosen and what they cost).
     pub const DEFAULT: Self = Self {
         max_range: 8.0,
-        max_beams: 45,
+        max_beams: 30,
         heading_step: 0.0,
         min_score_fraction: 0.5,
         relative_score: 0.8,
         first_pass_fraction: 0.8,
         pass_step: 0.1,
-        node_budget: 10_000,
+        node_budget: 11_000,
         separation_m: 0.5,
         separation_rad: 0.35,
         heading_peaks: 3,
