@@ -502,8 +502,10 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
 
     /// Scores the scan against the map, shifts, reweights and resamples; before that, when
     /// a search is pending (lost, [`GridLocalizer::relocalize`], no pose), runs the global
-    /// search on the scan and spreads the particles over its hypotheses. Then updates the
-    /// lost detection ([`GridLocalizer::status`]).
+    /// search (starts it on this scan, or runs its next slice) and, once it is over,
+    /// spreads the particles over its hypotheses. Then updates the lost detection
+    /// ([`GridLocalizer::status`]). While a search spanning scans goes on, the scan is not
+    /// filtered: the report carries the last estimate and a score of 0.
     pub fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
         let beams = self.config.load_scan(&mut self.points, scan)?;
         if self.status.search_pending && !self.search_and_seed() {
