@@ -855,7 +855,6 @@ pub fn search_with_walls<const N: usize>(
     config: &GlobalSearchConfig,
     out: &mut Hypotheses<N>,
 ) -> Result<SearchReport, GlobalError> {
-    out.clear();
     let mut run = GlobalSearch::<N>::start(map, layers, walls, points, config)?;
     run.resume(map, layers, config.node_budget)?;
     run.conclude();

@@ -266,7 +266,6 @@ pub struct GridLocalizer<'m, const P: usize, const B: usize> {
 
 /// A global search spanning scans: the search, the scans it has run on, and the robot's
 /// motion since its scan (odometry without noise, in the frame of the robot then).
-#[derive(Clone)]
 struct Relocalizing {
     search: GlobalSearch<MAX_HYPOTHESES>,
     scans: u8,
