@@ -414,6 +414,13 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
         &self.status
     }
 
+    /// Scans the global search under way has run so far (one slice each,
+    /// [`RelocalizationConfig::search_scans`] at most); 0 when no search is under way —
+    /// with [`LocalizerStatus::search_pending`] set, a search then starts on the next scan.
+    pub fn search_scans_run(&self) -> u8 {
+        self.relocalizing.as_ref().map_or(0, |run| run.scans)
+    }
+
     /// Tracking, lost or relocalized.
     pub fn state(&self) -> LocalizerState {
         self.status.state

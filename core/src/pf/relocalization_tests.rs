@@ -199,9 +199,11 @@ fn a_search_spanning_scans_seeds_where_the_robot_is_now() {
             loc.observe(&LidarScan::new(&sim.scans[i], LIDAR)).unwrap();
             let s = *loc.status();
             if !s.search_pending {
+                assert_eq!(loc.search_scans_run(), 0, "no search under way once seeded");
                 seeded_at = Some(i);
                 break;
             }
+            assert_eq!(loc.search_scans_run(), n as u8 + 1, "one slice a scan");
             assert_eq!(s.state, LocalizerState::Lost);
             assert_eq!(loc.filter().update_count(), 0, "no update while searching");
             let report = s.last_search.expect("a slice ran");

@@ -365,6 +365,13 @@ pub struct LocalizerReport {
     pub lost_events: u32,
     /// Global searches that seeded the particles.
     pub relocalizations: u32,
+    /// Scans the global search under way has run (one node budget each, at most
+    /// [`crate::pf::RelocalizationConfig::search_scans`]); 0 when none runs. While it is
+    /// above 0 the estimate's pose is the last one before the search, not filtered. A
+    /// search that found nothing ends with this back at 0, the state still
+    /// [`TrackingState::Lost`] and `relocalizations` unchanged; the next scan searches
+    /// again.
+    pub search_scans: u8,
 }
 
 /// Why a command was refused.
@@ -374,7 +381,7 @@ pub enum Refusal {
     /// The firmware carries no map (built without one): no localizer.
     NoMap,
     /// The map in flash failed its check at boot: `code` is the position of the variant in
-    /// [`crate::grid::MapImageError`].
+    /// `microslam::grid::MapImageError` (feature `map-image`).
     BadMap {
         /// Error code.
         code: u8,

@@ -55,6 +55,7 @@ impl<const P: usize, const B: usize> LocalizerEstimator for GridLocalizer<'_, P,
             hit_fraction: s.hit_fraction,
             lost_events: s.lost_events,
             relocalizations: s.relocalizations,
+            search_scans: self.search_scans_run(),
         }
     }
 }
@@ -1022,6 +1023,57 @@ mod tests {
         assert!(matches!(replies[6], ToHost::Status { seq: 6, .. }));
         let (_, report) = localization(&replies[8]);
         assert_eq!(report.relocalizations, 1, "{report:?}");
+        assert_eq!(
+            report.search_scans, 0,
+            "the search ended on its scan: {report:?}"
+        );
         assert_ne!(report, LocalizerReport::default());
+
+        // A search spanning scans (5 nodes a scan, at most 3 scans): each estimate says
+        // how many scans it has run, until it ends (seeded or failed) on the third.
+        let slow = RelocalizationConfig {
+            search: crate::pf::global::GlobalSearchConfig {
+                node_budget: 5,
+                ..crate::pf::global::GlobalSearchConfig::DEFAULT
+            },
+            search_scans: 3,
+            ..RelocalizationConfig::DEFAULT
+        };
+        let mut loc = GridLocalizer::<16, 40>::new(view, config, start)
+            .unwrap()
+            .with_layers(layers, slow)
+            .unwrap();
+        let mut session = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32)
+            .with_localizer(Ok(&mut loc), setup);
+        let msgs = [
+            command(1, Command::SelectEstimator(EstimatorKind::Localizer)),
+            command(2, Command::Relocalize),
+            chunk(3, 0),
+            chunk(3, 32),
+            chunk(4, 0),
+            chunk(4, 32),
+            chunk(5, 0),
+            chunk(5, 32),
+        ];
+        let replies: std::vec::Vec<_> = frames(&msgs)
+            .iter()
+            .filter_map(|&b| session.receive(b))
+            .collect();
+        drop(session);
+        assert_eq!(replies.len(), msgs.len());
+        let reports: std::vec::Vec<_> = [3, 5, 7].map(|i| localization(&replies[i]).1).to_vec();
+        assert_eq!(reports[0].search_scans, 1, "{reports:?}");
+        assert_eq!(reports[0].state, TrackingState::Lost);
+        assert_eq!(reports[1].search_scans, 2, "{reports:?}");
+        assert_eq!(reports[2].search_scans, 0, "{reports:?}");
+        // Ended: seeded (relocalized), or failed and lost (the next scan searches again).
+        let s = *loc.status();
+        assert_eq!(s.relocalizations + s.failed_searches, 1, "{s:?}");
+        assert_eq!(reports[2].relocalizations, s.relocalizations);
+        assert_eq!(
+            reports[2].state == TrackingState::Lost,
+            s.failed_searches == 1,
+            "{reports:?}"
+        );
     }
 }

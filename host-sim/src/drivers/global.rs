@@ -62,8 +62,12 @@ pub struct Trial {
     pub best_hypothesis_error_m: f64,
     /// Hypotheses the particles were spread over.
     pub hypotheses: usize,
-    /// The search.
+    /// The search that seeded the particles (none when every search of the trial ended
+    /// without a hypothesis: see `failed_searches`).
     pub search: Option<SearchSummary>,
+    /// Searches of the trial that ended without a hypothesis above the minimum score (the
+    /// localizer then searches again from the next scan).
+    pub failed_searches: u32,
     /// Wall time of the scans that ran the search, seconds.
     pub search_wall_s: f64,
     /// Scans that ran the search (more than one when it spans scans, or searched again
@@ -322,6 +326,7 @@ fn trial_p<const P: usize>(
         best_hypothesis_error_m: f64::NAN,
         hypotheses: 0,
         search: None,
+        failed_searches: 0,
         search_wall_s: 0.0,
         search_scans: 0,
     };
@@ -356,6 +361,7 @@ fn trial_p<const P: usize>(
                 .first()
                 .map_or(f64::NAN, |h| errors(&h.pose, want).0);
         }
+        trial.failed_searches = loc.status().failed_searches;
         let (m, d) = errors(&loc.pose(), want);
         trial.error_m.push(m);
         trial.error_deg.push(d);

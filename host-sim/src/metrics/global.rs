@@ -51,6 +51,7 @@ pub fn metrics(
         "seed": settings.seed,
         "reference": "the localizer tracked from the true start pose",
         "searches_complete": searches.iter().filter(|s| s.complete).count(),
+        "failed_searches": trials.iter().map(|t| t.failed_searches).sum::<u32>(),
         "max_nodes": max_nodes,
         "max_estimated_m4_instructions": max_instr,
         "max_estimated_m4_instructions_per_scan": max_instr_per_scan,
