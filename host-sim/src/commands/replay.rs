@@ -129,14 +129,22 @@ pub fn run_and_report(
     mcap: Option<(&mut crate::output::mcap::McapFile, &str)>,
 ) -> Result<()> {
     let progress = (!quiet).then(|| super::progress_bar(recording.events.len() as u64));
-    // The ground truth is written while the filter runs.
+    // The ground truth is written while the filter runs, the trajectory while the metrics
+    // are computed.
     let metrics = std::thread::scope(|s| -> Result<_> {
         let truth = s.spawn(|| crate::output::write_truth(out, recording));
         let run = replay(recording, settings, mode, precision, progress.as_ref())?;
         if let Some(p) = &progress {
             p.finish_and_clear();
         }
-        let mut metrics = crate::metrics::evaluate(recording, &run);
+        let mut metrics = std::thread::scope(|inner| -> Result<_> {
+            let trajectory = inner.spawn(|| crate::output::write_trajectory(out, &run));
+            let metrics = crate::metrics::evaluate(recording, &run);
+            trajectory
+                .join()
+                .map_err(|_| anyhow::anyhow!("writer thread panicked"))??;
+            Ok(metrics)
+        })?;
         metrics.faults = faults;
         truth
             .join()

@@ -23,8 +23,9 @@ use microslam::geometry::Pose2;
 use std::path::Path;
 use std::time::Instant;
 
-/// Writes `trajectory.tum`, `landmarks.csv`, `map.png` and
-/// `errors.png` (when `plots`), then `metrics.json` with the wall time since `started`.
+/// Writes `landmarks.csv`, `map.png` and `errors.png` (when `plots`), then `metrics.json`
+/// with the wall time since `started`. (`trajectory.tum` and `groundtruth.tum` need no
+/// metrics: [`write_trajectory`] and [`write_truth`] run while the metrics are computed.)
 pub fn write_all(
     out: &Path,
     recording: &Recording,
@@ -37,34 +38,31 @@ pub fn write_all(
         .se2_alignment
         .map_or(Pose2::IDENTITY, |[x, y, theta]| Pose2::new(x, y, theta));
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let (a, b, c) = std::thread::scope(|s| {
-        let tum = s.spawn(|| -> Result<()> {
-            write_tum_slice(&out.join("trajectory.tum"), &run.trajectory, |p| {
-                (p.stamp, p.pose)
-            })
+    if plots {
+        let (map, errors) = std::thread::scope(|s| {
+            let map = s.spawn(|| draw_map(&out.join("map.png"), recording, run, &alignment));
+            let errors = draw_errors(&out.join("errors.png"), recording, run, &alignment);
+            let map = map
+                .join()
+                .unwrap_or_else(|_| Err(anyhow::anyhow!("writer thread panicked")));
+            (map, errors)
         });
-        let map = s.spawn(|| -> Result<()> {
-            if plots {
-                draw_map(&out.join("map.png"), recording, run, &alignment)?;
-            }
-            Ok(())
-        });
-        let errors =
-            plots.then(|| draw_errors(&out.join("errors.png"), recording, run, &alignment));
-        let join = |h: std::thread::ScopedJoinHandle<'_, Result<()>>| {
-            h.join()
-                .unwrap_or_else(|_| Err(anyhow::anyhow!("writer thread panicked")))
-        };
-        (join(tum), join(map), errors.unwrap_or(Ok(())))
-    });
-    a?;
-    b?;
-    c?;
+        map?;
+        errors?;
+    }
     write_landmarks(&out.join("landmarks.csv"), run)?;
     metrics.wall_time_s = started.elapsed().as_secs_f64();
     let json = serde_json::to_string_pretty(metrics)?;
     let path = out.join("metrics.json");
     std::fs::write(&path, json + "\n").with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Writes `trajectory.tum` (the filter's estimate after each event) into `out`, creating it.
+pub fn write_trajectory(out: &Path, run: &ReplayRun) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    write_tum_slice(&out.join("trajectory.tum"), &run.trajectory, |p| {
+        (p.stamp, p.pose)
+    })
 }
 
 /// `landmarks.csv`: the final map, one landmark a line: index, bound id (known-id mode,
