@@ -392,6 +392,12 @@ pub enum Refusal {
     NoGlobalSearch,
 }
 
+/// Version of the messages' layout, sent in every [`ToHost::Status`]: raised whenever a
+/// message of either direction changes. [`ToHost::Status`] keeps its variant index (1)
+/// and its first two fields (`seq`, `protocol`) in every version, so a host can always
+/// tell which version a device speaks.
+pub const PROTOCOL_VERSION: u16 = 1;
+
 /// Messages from the device to the host.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -402,6 +408,8 @@ pub enum ToHost {
     Status {
         /// Sequence number of the command.
         seq: u32,
+        /// The device's [`PROTOCOL_VERSION`].
+        protocol: u16,
         /// The estimator now active.
         estimator: EstimatorKind,
         /// The counters.

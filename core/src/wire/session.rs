@@ -440,6 +440,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
         }
         ToHost::Status {
             seq,
+            protocol: super::PROTOCOL_VERSION,
             estimator: self.active,
             status: self.status,
             stack_peak_bytes: 0,

@@ -175,6 +175,41 @@ fn largest_messages_fit_the_declared_limits() {
     let mut got = None;
     dec.feed::<ToHost>(&frame_of(&worst_estimate), |r| got = Some(r));
     assert_eq!(got, Some(Ok(worst_estimate)));
+    let ToHost::Estimate(estimate) = worst_estimate else {
+        unreachable!()
+    };
+    let worst_localization = ToHost::Localization {
+        estimate,
+        localizer: LocalizerReport {
+            state: TrackingState::Relocalized,
+            hit_fraction: 1.0,
+            lost_events: u32::MAX,
+            relocalizations: u32::MAX,
+            search_scans: u8::MAX,
+        },
+    };
+    let payload = body_of(&worst_localization);
+    assert!(payload.len() <= MAX_PAYLOAD_LEN, "{}", payload.len());
+    let mut got = None;
+    dec.feed::<ToHost>(&frame_of(&worst_localization), |r| got = Some(r));
+    assert_eq!(got, Some(Ok(worst_localization)));
+}
+
+/// A host reads the version of any device from its status: the variant index and the
+/// first two fields stay where they are (see [`PROTOCOL_VERSION`]).
+#[test]
+fn a_status_starts_with_its_sequence_number_and_the_protocol_version() {
+    let status = ToHost::Status {
+        seq: 5,
+        protocol: PROTOCOL_VERSION,
+        estimator: EstimatorKind::Grid,
+        status: Status::default(),
+        stack_peak_bytes: 0,
+    };
+    let body = body_of(&status);
+    // Variant 1, then seq and protocol as varints (one byte each while below 128).
+    const { assert!(PROTOCOL_VERSION < 128) };
+    assert_eq!(body[..3], [1, 5, PROTOCOL_VERSION as u8]);
 }
 
 #[test]

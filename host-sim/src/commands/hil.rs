@@ -190,6 +190,7 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
             report.display()
         );
     }
+    crate::drivers::hil::check_protocol(&comparison)?;
     if comparison
         .device_frames_bad
         .is_some_and(|bad| bad as usize != corrupted)

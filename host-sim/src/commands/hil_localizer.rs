@@ -221,6 +221,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
             json.display()
         );
     }
+    crate::drivers::hil::check_protocol(&report.comparison)?;
     if report.replies_received != report.replies_expected
         || report.replies_identical != report.replies_expected
     {

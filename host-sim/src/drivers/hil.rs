@@ -281,6 +281,26 @@ pub struct Comparison {
     pub device_ate_se2_m: Option<f64>,
     /// How many device estimates that ATE is over.
     pub device_ate_poses: usize,
+    /// The wire protocol version of the device's last status, when one decoded.
+    pub device_protocol: Option<u16>,
+}
+
+/// Refuses a device that speaks another wire protocol version than this host, with what
+/// to do about it (checked before the replies are compared: they cannot match then).
+pub fn check_protocol(comparison: &Comparison) -> Result<()> {
+    let host = microslam::wire::PROTOCOL_VERSION;
+    match comparison.device_protocol {
+        Some(device) if device != host => bail!(
+            "the device speaks wire protocol {device}, this host {host}: build the firmware \
+             from the same commit as host-sim"
+        ),
+        None if comparison.received == 0 && comparison.bad_frames > 0 => bail!(
+            "none of the device's {} frames decoded: is its firmware built from the same \
+             commit as host-sim (wire protocol {host})?",
+            comparison.bad_frames
+        ),
+        _ => Ok(()),
+    }
 }
 
 fn canonical(reply: &ToHost) -> Vec<u8> {
@@ -324,13 +344,50 @@ pub fn compare(messages: usize, device: &LinkRun, host: &[ToHost]) -> Comparison
         }
     }
     if let Some(ToHost::Status {
+        protocol,
         stack_peak_bytes,
         status,
         ..
     }) = device.replies.last()
     {
+        c.device_protocol = Some(*protocol);
         c.stack_peak_bytes = Some(*stack_peak_bytes);
         c.device_frames_bad = Some(status.frames_bad);
     }
     c
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_device_of_another_protocol_version_is_refused_with_both_versions() {
+        let host = microslam::wire::PROTOCOL_VERSION;
+        let ok = Comparison {
+            received: 3,
+            device_protocol: Some(host),
+            ..Comparison::default()
+        };
+        assert!(check_protocol(&ok).is_ok());
+        let other = Comparison {
+            device_protocol: Some(host + 1),
+            ..ok.clone()
+        };
+        let e = check_protocol(&other).unwrap_err().to_string();
+        assert!(
+            e.contains(&format!("protocol {}, this host {host}", host + 1)),
+            "{e}"
+        );
+        let garbled = Comparison {
+            received: 0,
+            bad_frames: 7,
+            device_protocol: None,
+            ..Comparison::default()
+        };
+        let e = check_protocol(&garbled).unwrap_err().to_string();
+        assert!(e.contains("none of the device's 7 frames decoded"), "{e}");
+        // No reply at all is another error (the device did not answer), reported elsewhere.
+        assert!(check_protocol(&Comparison::default()).is_ok());
+    }
 }
