@@ -134,9 +134,10 @@ pub fn run_and_write(
             g["scans_to_converge"]
         );
         println!(
-            "  searches complete {}/{}, most nodes {}, most estimated M4 instructions {} ({} in one scan); reference lost events {}",
+            "  searches complete {}/{}, ended without a hypothesis {}, most nodes {}, most estimated M4 instructions {} ({} in one scan); reference lost events {}",
             g["searches_complete"],
             g["trials"],
+            g["failed_searches"],
             g["max_nodes"],
             g["max_estimated_m4_instructions"],
             g["max_estimated_m4_instructions_per_scan"],
