@@ -140,15 +140,11 @@ pub fn run_and_report(
         let mut metrics = std::thread::scope(|inner| -> Result<_> {
             let trajectory = inner.spawn(|| crate::output::write_trajectory(out, &run));
             let metrics = crate::metrics::evaluate(recording, &run);
-            trajectory
-                .join()
-                .map_err(|_| anyhow::anyhow!("writer thread panicked"))??;
+            crate::output::join_writer(trajectory)?;
             Ok(metrics)
         })?;
         metrics.faults = faults;
-        truth
-            .join()
-            .map_err(|_| anyhow::anyhow!("writer thread panicked"))??;
+        crate::output::join_writer(truth)?;
         crate::output::write_all(out, recording, &run, &mut metrics, plots, started)?;
         if let Some((file, prefix)) = mcap {
             crate::output::mcap::scene::record_ekf_run(file, prefix, recording, &run, 0.1)?;

@@ -361,11 +361,11 @@ fn trial_p<const P: usize>(
                 .first()
                 .map_or(f64::NAN, |h| errors(&h.pose, want).0);
         }
-        trial.failed_searches = loc.status().failed_searches;
         let (m, d) = errors(&loc.pose(), want);
         trial.error_m.push(m);
         trial.error_deg.push(d);
     }
+    trial.failed_searches = loc.status().failed_searches;
     let within: Vec<bool> = trial
         .error_m
         .iter()

@@ -42,9 +42,7 @@ pub fn write_all(
         let (map, errors) = std::thread::scope(|s| {
             let map = s.spawn(|| draw_map(&out.join("map.png"), recording, run, &alignment));
             let errors = draw_errors(&out.join("errors.png"), recording, run, &alignment);
-            let map = map
-                .join()
-                .unwrap_or_else(|_| Err(anyhow::anyhow!("writer thread panicked")));
+            let map = join_writer(map);
             (map, errors)
         });
         map?;
@@ -55,6 +53,13 @@ pub fn write_all(
     let json = serde_json::to_string_pretty(metrics)?;
     let path = out.join("metrics.json");
     std::fs::write(&path, json + "\n").with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// The result of a scoped writer thread (a panic in it becomes an error).
+pub fn join_writer(writer: std::thread::ScopedJoinHandle<'_, Result<()>>) -> Result<()> {
+    writer
+        .join()
+        .unwrap_or_else(|_| Err(anyhow::anyhow!("writer thread panicked")))
 }
 
 /// Writes `trajectory.tum` (the filter's estimate after each event) into `out`, creating it.
