@@ -168,7 +168,9 @@ pub struct LocalizerStatus {
     pub lost_events: u32,
     /// Global searches that seeded the particles.
     pub relocalizations: u32,
-    /// Global searches that found no hypothesis above the minimum score.
+    /// Global searches that did not seed the particles: no hypothesis above the minimum
+    /// score, or a search that could not start or go on (e.g. a scan with no beam within
+    /// the search's range). The localizer stays lost and searches again on the next scan.
     pub failed_searches: u32,
     /// `true` when the next scan runs the global search (starts it, or runs its next slice
     /// when it spans scans).
