@@ -263,7 +263,8 @@ fn dataset_ekf_settings_travel_over_the_wire() {
     let a = host_replies(&host_sim::drivers::hil::encode_all(&with));
     let b = host_replies(&host_sim::drivers::hil::encode_all(&without));
     assert_eq!(a.len(), with.len());
-    match &a[0] {
+    // a[0] answers the handshake, a[1] the settings.
+    match &a[1] {
         ToHost::Status { seq: 0, status, .. } => assert_eq!(status.rejected, 0),
         other => panic!("{other:?}"),
     }
@@ -446,8 +447,9 @@ fn localizer_firmware_relocalizes_like_the_host_on_intel() {
     for start in starts {
         let part = &scans[start..start + 10];
         let (mut messages, chunks) = localizer_messages(part, microslam::geometry::Pose2::IDENTITY);
+        // After the handshake, the selection and the reset.
         messages.insert(
-            2,
+            3,
             ToDevice::Command {
                 seq: 10_000,
                 command: WireCommand::Relocalize,

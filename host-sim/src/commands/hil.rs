@@ -2,9 +2,7 @@
 //! [`crate::drivers::hil`], compares its estimates with the host's bit for bit, and writes
 //! `hil.json` and `firmware.tum`.
 
-use crate::drivers::hil::{
-    compare, encode_all_corrupted, host_replies, messages_for, run_qemu, run_serial,
-};
+use crate::drivers::hil::{Device, compare, encode_all_corrupted, host_replies, messages_for};
 use crate::inputs::readers::DatasetSpec;
 use crate::output::tum_text;
 use anyhow::{Context, Result, bail};
@@ -100,13 +98,14 @@ pub struct HilOptions {
 
 /// `host-sim hil`.
 pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
-    if let Some(elf) = &args.qemu {
+    let device = Device::from_options(args.qemu.as_deref(), args.serial.as_deref(), args.baud)?;
+    if let Device::Qemu(elf) = device {
         check_firmware_elf(elf)?;
     }
     if let DatasetSpec::Carmen(log) = &args.dataset {
         use crate::commands::hil_localizer::{LocalizerHilOptions, run_cli};
         let options = LocalizerHilOptions {
-            qemu: args.qemu.as_deref(),
+            device,
             map: args.map.as_deref(),
             log,
             scans: args.scans,
@@ -149,11 +148,7 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
             bytes.len()
         );
     }
-    let run = match (&args.qemu, &args.serial) {
-        (Some(elf), None) => run_qemu(elf, bytes, host.len(), timeout)?,
-        (None, Some(port)) => run_serial(port, args.baud, bytes, host.len(), timeout)?,
-        _ => bail!("give exactly one of --qemu <elf> and --serial <port>"),
-    };
+    let run = device.run(bytes, host.len(), timeout)?;
     let mut comparison = compare(messages.len(), &run, &host);
     comparison.corrupted_frames = corrupted;
     (comparison.device_ate_se2_m, comparison.device_ate_poses) =

@@ -19,7 +19,7 @@ use microslam::grid::MapImage;
 use microslam::wire::ToHost;
 use serde::Serialize;
 
-use crate::drivers::hil::{compare, encode_all, run_qemu};
+use crate::drivers::hil::{Device, compare, encode_all};
 use crate::drivers::hil_localizer::{
     host_localizer_replies, localizer_messages, map_image_of, map_image_with_levels,
 };
@@ -93,8 +93,8 @@ fn trajectory(
 /// Options of the localizer HIL (from `host-sim hil` with a `carmen:` dataset).
 #[derive(Debug, Clone)]
 pub struct LocalizerHilOptions<'a> {
-    /// The localizer firmware ELF, run under QEMU.
-    pub qemu: Option<&'a Path>,
+    /// The device running the localizer firmware: under QEMU or a board.
+    pub device: Device<'a>,
     /// The map it was built with (`MICROSLAM_MAP`).
     pub map: Option<&'a Path>,
     /// The CARMEN log (`carmen:<file>`).
@@ -113,9 +113,6 @@ pub struct LocalizerHilOptions<'a> {
 pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
     let Some(map_yaml) = args.map else {
         bail!("a lidar dataset runs the device's localizer: give --map <map.yaml>");
-    };
-    let Some(elf) = args.qemu else {
-        bail!("the localizer HIL runs under QEMU: give --qemu <elf>");
     };
     let file = args.log;
     let path = resolve_log(file)?;
@@ -138,7 +135,9 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
             image.len()
         );
     }
-    let run = run_qemu(elf, bytes, host.len(), Duration::from_secs(args.timeout_s))?;
+    let run = args
+        .device
+        .run(bytes, host.len(), Duration::from_secs(args.timeout_s))?;
     let comparison = compare(messages.len(), &run, &host);
     let relation_error = match crate::metrics::relations::find_relations(&path, None) {
         Ok(r) => {

@@ -4,9 +4,11 @@
 //! with the host running the very code the firmware runs ([`Session`], f32, libm), fed the
 //! same bytes. With libm on both sides they are equal bit for bit.
 //!
-//! The stream: a reset to the dataset's initial pose, the events through
-//! [`EventsToWire`] (velocity odometry becomes motion steps up to each next event), and a
-//! status request whose answer carries the firmware's counters and stack peak.
+//! The stream: a status request (the handshake, [`handshake`]: sent alone, and nothing
+//! more is sent until the device answers it with this host's wire protocol version), a
+//! reset to the dataset's initial pose, the events through [`EventsToWire`] (velocity
+//! odometry becomes motion steps up to each next event), and a status request whose answer
+//! carries the firmware's counters and stack peak.
 
 use std::io::{Read, Write};
 use std::path::Path;
@@ -26,17 +28,30 @@ use serde::Serialize;
 
 use crate::domain::recording::Recording;
 
-/// The messages for a recording: EKF settings when given, reset to its initial pose, its
-/// events, a status request.
+/// How long the device has to answer the [`handshake`] (QEMU boots in well under a
+/// second; a board that runs answers within milliseconds).
+pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// The status request that opens a stream: [`run_qemu`] and [`run_serial`] send it alone
+/// and wait for its answer before the rest, so that a device that is not running, not
+/// listening, or speaking another wire protocol version is reported within
+/// [`HANDSHAKE_TIMEOUT`] instead of after the whole recording.
+pub fn handshake() -> ToDevice {
+    ToDevice::Command {
+        seq: 0,
+        command: WireCommand::ReportStatus,
+    }
+}
+
+/// The messages for a recording: the [`handshake`], EKF settings when given, reset to its
+/// initial pose, its events, a status request.
 pub fn messages_for(recording: &Recording, settings: Option<EkfSettings>) -> Vec<ToDevice> {
     let start = recording.initial_pose.unwrap_or_default();
-    let mut out: Vec<ToDevice> = settings
-        .map(|s| ToDevice::Command {
-            seq: 0,
-            command: WireCommand::ConfigureEkf(s),
-        })
-        .into_iter()
-        .collect();
+    let mut out = vec![handshake()];
+    out.extend(settings.map(|s| ToDevice::Command {
+        seq: 0,
+        command: WireCommand::ConfigureEkf(s),
+    }));
     out.push(ToDevice::Command {
         seq: 0,
         command: WireCommand::Reset {
@@ -137,32 +152,127 @@ pub struct LinkRun {
     pub elapsed: Duration,
 }
 
-/// Writes `bytes` from one thread and decodes replies from `rx` until `expected` arrived
-/// or `timeout` passed.
-fn collect(
-    rx: &mpsc::Receiver<Vec<u8>>,
-    expected: usize,
-    start: Instant,
-    timeout: Duration,
-) -> LinkRun {
+/// Replies decoded from a link so far.
+struct Collector {
+    decoder: FrameDecoder<MAX_FRAME_LEN>,
+    replies: Vec<ToHost>,
+}
+
+impl Collector {
+    fn new(expected: usize) -> Self {
+        Self {
+            decoder: FrameDecoder::new(),
+            replies: Vec::with_capacity(expected),
+        }
+    }
+
+    /// Decodes what arrives on `rx` until `count` replies are in or `deadline` passed.
+    /// Returns `false` when the link closed (the device stopped) before.
+    fn until(&mut self, rx: &mpsc::Receiver<Vec<u8>>, count: usize, deadline: Instant) -> bool {
+        while self.replies.len() < count {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let chunk = match rx.recv_timeout(left) {
+                Ok(chunk) => chunk,
+                Err(mpsc::RecvTimeoutError::Timeout) => break,
+                Err(mpsc::RecvTimeoutError::Disconnected) => return false,
+            };
+            let replies = &mut self.replies;
+            self.decoder.feed::<ToHost>(&chunk, |r| {
+                if let Ok(m) = r {
+                    replies.push(m);
+                }
+            });
+        }
+        true
+    }
+
+    fn bad_frames(&self) -> u32 {
+        self.decoder.counters().bad()
+    }
+}
+
+/// The length of the frame `bytes` opens with when it is the [`handshake`].
+fn handshake_len(bytes: &[u8]) -> Option<usize> {
+    let end = bytes.iter().position(|&b| b == 0)? + 1;
     let mut decoder = FrameDecoder::<MAX_FRAME_LEN>::new();
-    let mut replies = Vec::with_capacity(expected);
-    while replies.len() < expected {
-        let left = timeout.saturating_sub(start.elapsed());
-        let Ok(chunk) = rx.recv_timeout(left) else {
-            break;
-        };
-        decoder.feed::<ToHost>(&chunk, |r| {
-            if let Ok(m) = r {
-                replies.push(m);
-            }
-        });
+    let mut first = None;
+    decoder.feed::<ToDevice>(bytes.get(..end)?, |m| first = m.ok());
+    (first == Some(handshake())).then_some(end)
+}
+
+/// Checks the device's answer to the [`handshake`]: there is one, and it speaks this
+/// host's wire protocol. `waited`: how long the device had, or `None` when the link
+/// closed first.
+fn check_handshake(replies: &[ToHost], bad_frames: u32, waited: Option<Duration>) -> Result<()> {
+    match replies.first() {
+        None => {
+            let garbled = if bad_frames > 0 {
+                format!(
+                    " ({bad_frames} frames from it did not decode: a firmware of another \
+                     wire protocol version?)"
+                )
+            } else {
+                String::new()
+            };
+            let when = match waited {
+                Some(t) => format!("within {} s", t.as_secs_f64()),
+                None => "before its link closed".to_string(),
+            };
+            bail!(
+                "the device did not answer the opening status request {when}{garbled}: is \
+                 the firmware running (under QEMU: the ELF; on a board: flashed, and the \
+                 port and baud right)?"
+            )
+        }
+        Some(ToHost::Status { protocol, .. }) if *protocol != microslam::wire::PROTOCOL_VERSION => {
+            Err(other_protocol(*protocol))
+        }
+        Some(_) => Ok(()),
     }
-    LinkRun {
-        replies,
-        bad_frames: decoder.counters().bad(),
+}
+
+/// Writes `bytes` to `link` and decodes replies from `rx` until `expected` arrived or
+/// `timeout` passed. A stream that opens with the [`handshake`] sends it alone first and
+/// refuses a device that does not answer it (within [`HANDSHAKE_TIMEOUT`]) or answers
+/// with another protocol version, before anything else is sent. The rest is written
+/// from a thread, without waiting for replies; its handle returns the link, to be joined
+/// once the device is stopped or has read everything.
+fn exchange<W: Write + Send + 'static>(
+    mut link: W,
+    rx: &mpsc::Receiver<Vec<u8>>,
+    mut bytes: Vec<u8>,
+    expected: usize,
+    timeout: Duration,
+) -> Result<(LinkRun, thread::JoinHandle<W>)> {
+    let start = Instant::now();
+    let mut collector = Collector::new(expected);
+    if let Some(n) = handshake_len(&bytes) {
+        let rest = bytes.split_off(n);
+        link.write_all(&bytes)
+            .and_then(|()| link.flush())
+            .context("writing the opening status request")?;
+        let waited = timeout.min(HANDSHAKE_TIMEOUT);
+        let open = collector.until(rx, 1, start + waited);
+        check_handshake(
+            &collector.replies,
+            collector.bad_frames(),
+            open.then_some(waited),
+        )?;
+        bytes = rest;
+    }
+    let writer = thread::spawn(move || {
+        let _ = link.write_all(&bytes);
+        let _ = link.flush();
+        // Kept open until the run ends: the firmware would not notice EOF anyway.
+        link
+    });
+    collector.until(rx, expected, start + timeout);
+    let run = LinkRun {
+        bad_frames: collector.bad_frames(),
+        replies: collector.replies,
         elapsed: start.elapsed(),
-    }
+    };
+    Ok((run, writer))
 }
 
 fn reader_thread(mut source: impl Read + Send + 'static) -> mpsc::Receiver<Vec<u8>> {
@@ -187,7 +297,9 @@ fn reader_thread(mut source: impl Read + Send + 'static) -> mpsc::Receiver<Vec<u
 }
 
 /// Runs `elf` under QEMU (`mps2-an386`, UART0 on the child's stdin/stdout, semihosting
-/// on a file next to the ELF), writes `bytes` and collects `expected` replies.
+/// on a file next to the ELF), writes `bytes` and collects `expected` replies (a stream
+/// that opens with the [`handshake`] is refused when the firmware does not answer it
+/// within [`HANDSHAKE_TIMEOUT`] or speaks another protocol version).
 pub fn run_qemu(elf: &Path, bytes: Vec<u8>, expected: usize, timeout: Duration) -> Result<LinkRun> {
     let semihosting_log = elf.with_extension("semihosting.log");
     let mut child: Child = Command::new("qemu-system-arm")
@@ -206,26 +318,60 @@ pub fn run_qemu(elf: &Path, bytes: Vec<u8>, expected: usize, timeout: Duration) 
         .stderr(Stdio::inherit())
         .spawn()
         .context("starting qemu-system-arm (apt-get install qemu-system-arm)")?;
-    let start = Instant::now();
-    let (Some(mut stdin), Some(stdout)) = (child.stdin.take(), child.stdout.take()) else {
+    let (Some(stdin), Some(stdout)) = (child.stdin.take(), child.stdout.take()) else {
+        let _ = child.kill();
+        let _ = child.wait();
         bail!("qemu-system-arm without piped stdio");
     };
-    let writer = thread::spawn(move || {
-        let _ = stdin.write_all(&bytes);
-        let _ = stdin.flush();
-        // Kept open until the run ends: the firmware would not notice EOF anyway.
-        stdin
-    });
     let rx = reader_thread(stdout);
-    let run = collect(&rx, expected, start, timeout);
+    let exchanged = exchange(stdin, &rx, bytes, expected, timeout);
     let _ = child.kill();
     let _ = child.wait();
+    let (run, writer) = exchanged?;
     drop(writer.join());
     Ok(run)
 }
 
+/// Where the device runs: a firmware ELF under QEMU, or a board on a serial port.
+#[derive(Clone, Copy, Debug)]
+pub enum Device<'a> {
+    /// The firmware ELF, run by [`run_qemu`].
+    Qemu(&'a Path),
+    /// A board's serial port and its baud rate ([`run_serial`]).
+    Serial {
+        /// The port, e.g. `/dev/ttyACM0`.
+        port: &'a str,
+        /// Baud rate.
+        baud: u32,
+    },
+}
+
+impl<'a> Device<'a> {
+    /// The device of `host-sim hil`'s options: exactly one of an ELF and a port.
+    pub fn from_options(
+        qemu: Option<&'a Path>,
+        serial: Option<&'a str>,
+        baud: u32,
+    ) -> Result<Self> {
+        match (qemu, serial) {
+            (Some(elf), None) => Ok(Self::Qemu(elf)),
+            (None, Some(port)) => Ok(Self::Serial { port, baud }),
+            _ => bail!("give exactly one of --qemu <elf> and --serial <port>"),
+        }
+    }
+
+    /// Streams `bytes` to the device and collects `expected` replies ([`run_qemu`],
+    /// [`run_serial`]).
+    pub fn run(&self, bytes: Vec<u8>, expected: usize, timeout: Duration) -> Result<LinkRun> {
+        match *self {
+            Self::Qemu(elf) => run_qemu(elf, bytes, expected, timeout),
+            Self::Serial { port, baud } => run_serial(port, baud, bytes, expected, timeout),
+        }
+    }
+}
+
 /// Opens a board's serial port (8N1, `baud`), writes `bytes` and collects `expected`
-/// replies.
+/// replies (with the [`handshake`] first, as [`run_qemu`]).
 pub fn run_serial(
     port: &str,
     baud: u32,
@@ -238,15 +384,8 @@ pub fn run_serial(
         .open()
         .with_context(|| format!("opening serial port {port}"))?;
     let reader = link.try_clone().context("cloning the serial port")?;
-    let start = Instant::now();
-    let mut writer_link = link;
-    let writer = thread::spawn(move || {
-        let _ = writer_link.write_all(&bytes);
-        let _ = writer_link.flush();
-        writer_link
-    });
     let rx = reader_thread(reader);
-    let run = collect(&rx, expected, start, timeout);
+    let (run, writer) = exchange(link, &rx, bytes, expected, timeout)?;
     drop(writer.join());
     Ok(run)
 }
@@ -290,10 +429,7 @@ pub struct Comparison {
 pub fn check_protocol(comparison: &Comparison) -> Result<()> {
     let host = microslam::wire::PROTOCOL_VERSION;
     match comparison.device_protocol {
-        Some(device) if device != host => bail!(
-            "the device speaks wire protocol {device}, this host {host}: build the firmware \
-             from the same commit as host-sim"
-        ),
+        Some(device) if device != host => Err(other_protocol(device)),
         None if comparison.received == 0 && comparison.bad_frames > 0 => bail!(
             "none of the device's {} frames decoded: is its firmware built from the same \
              commit as host-sim (wire protocol {host})?",
@@ -301,6 +437,15 @@ pub fn check_protocol(comparison: &Comparison) -> Result<()> {
         ),
         _ => Ok(()),
     }
+}
+
+/// The error for a device that speaks wire protocol `device`, not this host's.
+fn other_protocol(device: u16) -> anyhow::Error {
+    anyhow::anyhow!(
+        "the device speaks wire protocol {device}, this host {}: build the firmware from the \
+         same commit as host-sim",
+        microslam::wire::PROTOCOL_VERSION
+    )
 }
 
 fn canonical(reply: &ToHost) -> Vec<u8> {
@@ -359,7 +504,174 @@ pub fn compare(messages: usize, device: &LinkRun, host: &[ToHost]) -> Comparison
 
 #[cfg(test)]
 mod tests {
+    use std::sync::{Arc, Mutex};
+
+    use microslam::wire::{EstimatorKind, Status};
+
     use super::*;
+
+    /// A link that keeps what is written to it.
+    #[derive(Clone, Default)]
+    struct Recorder(Arc<Mutex<Vec<u8>>>);
+
+    impl Write for Recorder {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            self.0.lock().expect("not poisoned").extend_from_slice(buf);
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    fn status(protocol: u16) -> Vec<u8> {
+        let reply = ToHost::Status {
+            seq: 0,
+            protocol,
+            estimator: EstimatorKind::Ekf,
+            status: Status::default(),
+            stack_peak_bytes: 0,
+        };
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        encode_frame(&reply, &mut buf).expect("fits").to_vec()
+    }
+
+    /// The handshake, a reset and a final status request.
+    fn stream() -> (Vec<u8>, usize) {
+        let messages = [
+            handshake(),
+            ToDevice::Command {
+                seq: 0,
+                command: WireCommand::Reset {
+                    x: 1.0,
+                    y: 2.0,
+                    theta: 0.5,
+                },
+            },
+            ToDevice::Command {
+                seq: 1,
+                command: WireCommand::ReportStatus,
+            },
+        ];
+        let bytes = encode_all(&messages);
+        let first = encode_all(&messages[..1]).len();
+        (bytes, first)
+    }
+
+    /// Runs [`exchange`] against a device that has already sent `replies`.
+    fn exchange_with(
+        bytes: Vec<u8>,
+        replies: Vec<u8>,
+        expected: usize,
+    ) -> (Result<LinkRun>, Vec<u8>) {
+        let (tx, rx) = mpsc::channel();
+        if !replies.is_empty() {
+            tx.send(replies).expect("receiver alive");
+        }
+        let link = Recorder::default();
+        let written = link.0.clone();
+        let run = exchange(link, &rx, bytes, expected, Duration::from_millis(200)).map(
+            |(run, writer)| {
+                drop(writer.join());
+                run
+            },
+        );
+        let written = written.lock().expect("not poisoned").clone();
+        (run, written)
+    }
+
+    #[test]
+    fn a_device_is_an_elf_or_a_port_never_both() {
+        let elf = Path::new("fw.elf");
+        assert!(matches!(
+            Device::from_options(Some(elf), None, 9600),
+            Ok(Device::Qemu(e)) if e == elf
+        ));
+        assert!(matches!(
+            Device::from_options(None, Some("/dev/ttyACM0"), 9600),
+            Ok(Device::Serial {
+                port: "/dev/ttyACM0",
+                baud: 9600
+            })
+        ));
+        for (qemu, serial) in [(Some(elf), Some("/dev/ttyACM0")), (None, None)] {
+            let e = Device::from_options(qemu, serial, 9600).expect_err("refused");
+            assert!(e.to_string().contains("exactly one of --qemu"), "{e}");
+        }
+    }
+
+    #[test]
+    fn a_stream_opening_with_the_handshake_is_recognised() {
+        let (bytes, first) = stream();
+        assert_eq!(handshake_len(&bytes), Some(first));
+        // A stream that opens with anything else is written at once.
+        assert_eq!(handshake_len(bytes.get(first..).expect("rest")), None);
+        assert_eq!(handshake_len(&[]), None);
+        assert_eq!(handshake_len(&[1, 2, 3]), None);
+    }
+
+    #[test]
+    fn nothing_follows_the_handshake_until_the_device_answers_it() {
+        let (bytes, first) = stream();
+        let (run, written) = exchange_with(bytes.clone(), Vec::new(), 3);
+        let e = run.expect_err("a silent device is refused").to_string();
+        assert!(
+            e.contains("did not answer the opening status request within 0.2 s"),
+            "{e}"
+        );
+        assert_eq!(written, bytes[..first], "only the handshake was sent");
+
+        // A device that stops (QEMU exits) is reported at once.
+        let (tx, rx) = mpsc::channel::<Vec<u8>>();
+        drop(tx);
+        let link = Recorder::default();
+        let e = exchange(
+            link.clone(),
+            &rx,
+            bytes.clone(),
+            3,
+            Duration::from_secs(600),
+        )
+        .map(|_| ())
+        .expect_err("refused")
+        .to_string();
+        assert!(e.contains("before its link closed"), "{e}");
+        assert_eq!(*link.0.lock().expect("not poisoned"), bytes[..first]);
+
+        // Garbage instead of an answer: said so.
+        let (run, written) = exchange_with(bytes.clone(), vec![7, 7, 7, 0, 9, 9, 0], 3);
+        let e = run.expect_err("refused").to_string();
+        assert!(e.contains("2 frames from it did not decode"), "{e}");
+        assert_eq!(written, bytes[..first]);
+    }
+
+    #[test]
+    fn a_device_answering_with_another_protocol_version_gets_nothing_more() {
+        let host = microslam::wire::PROTOCOL_VERSION;
+        let (bytes, first) = stream();
+        let (run, written) = exchange_with(bytes.clone(), status(host + 1), 3);
+        let e = run.expect_err("refused").to_string();
+        assert!(
+            e.contains(&format!("protocol {}, this host {host}", host + 1)),
+            "{e}"
+        );
+        assert_eq!(written, bytes[..first]);
+    }
+
+    #[test]
+    fn a_device_that_answers_the_handshake_gets_the_whole_stream() {
+        let host = microslam::wire::PROTOCOL_VERSION;
+        let (bytes, first) = stream();
+        let (run, written) = exchange_with(bytes.clone(), status(host), 3);
+        let run = run.expect("accepted");
+        assert_eq!(written, bytes, "everything was sent");
+        assert_eq!(run.replies.len(), 1, "the other two never came");
+        // Without a handshake the stream is written at once, whatever comes back.
+        let rest = bytes.get(first..).expect("rest").to_vec();
+        let (run, written) = exchange_with(rest.clone(), Vec::new(), 2);
+        assert!(run.expect("no handshake, no check").replies.is_empty());
+        assert_eq!(written, rest);
+    }
 
     #[test]
     fn a_device_of_another_protocol_version_is_refused_with_both_versions() {

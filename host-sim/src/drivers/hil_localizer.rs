@@ -1,9 +1,10 @@
 //! The firmware's localizer mode in the loop: the map image a firmware built with
 //! `MICROSLAM_MAP=<map.yaml>` embeds ([`map_image_of`], the build script's code), the wire
-//! messages of a lidar log in localizer mode ([`localizer_messages`]: select the localizer,
-//! reset at a pose, then per front scan its odometry increment and its scan chunks), and
-//! the host reference the device must equal bit for bit ([`host_localizer_replies`]: the
-//! firmware's [`Session`] with its localizer on the same map image).
+//! messages of a lidar log in localizer mode ([`localizer_messages`]: the handshake, select
+//! the localizer, reset at a pose, then per front scan its odometry increment and its scan
+//! chunks), and the host reference the device must equal bit for bit
+//! ([`host_localizer_replies`]: the firmware's [`Session`] with its localizer on the same
+//! map image).
 
 use std::path::Path;
 
@@ -57,15 +58,16 @@ fn range_mm(r: f32) -> u16 {
     }
 }
 
-/// The messages for localizer mode over `scans`: select the localizer, reset at
-/// `start`, then per scan its odometry increment (from the previous finite odometry
-/// pose) and its chunks, then a status request. Also the index of each scan's last
-/// chunk in the messages.
+/// The messages for localizer mode over `scans`: the handshake
+/// ([`super::hil::handshake`]), select the localizer, reset at `start`, then per scan its
+/// odometry increment (from the previous finite odometry pose) and its chunks, then a
+/// status request. Also the index of each scan's last chunk in the messages.
 pub fn localizer_messages(
     scans: &[&LaserMessage],
     start: Pose2<f32>,
 ) -> (Vec<ToDevice>, Vec<usize>) {
     let mut out = vec![
+        super::hil::handshake(),
         ToDevice::Command {
             seq: 0,
             command: WireCommand::SelectEstimator(EstimatorKind::Localizer),
