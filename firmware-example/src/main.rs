@@ -88,7 +88,9 @@ mod grid {
 
     /// The session with the EKF and the localizer, or with the reason the map was refused.
     pub fn session(ekf: &'static mut Ekf) -> FirmwareSession {
-        let localizer = match MapImage::parse(MAP_IMAGE) {
+        let image = MapImage::parse(MAP_IMAGE);
+        let checksum = image.as_ref().ok().map(|image| image.checksum());
+        let localizer = match image {
             Ok(image) => {
                 let g = image.geometry();
                 defmt::info!(
@@ -128,7 +130,9 @@ mod grid {
             }
         };
         defmt::info!("localizer: {} particles", LOCALIZER_PARTICLES);
-        Session::new(ekf, EKF_CONFIG).with_localizer(localizer, GRID_SETUP)
+        Session::new(ekf, EKF_CONFIG)
+            .with_localizer(localizer, GRID_SETUP)
+            .with_map_checksum(checksum)
     }
 }
 

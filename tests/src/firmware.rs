@@ -44,11 +44,17 @@ pub fn firmware_elf_from(
     workspace_root().join(target).join("firmware-elf/qemu.elf")
 }
 
-pub use host_sim::drivers::hil::{LinkRun as QemuRun, encode_all, host_replies};
+pub use host_sim::drivers::hil::{Expected, LinkRun as QemuRun, encode_all, host_replies};
 
-/// Runs `elf` under QEMU, writes `bytes` to its UART without waiting, and reads replies
-/// until `expected` have arrived (or `timeout` passes: then fewer are returned).
-pub fn run_in_qemu(elf: &Path, bytes: Vec<u8>, expected: usize, timeout: Duration) -> QemuRun {
+/// Runs `elf` under QEMU, writes `bytes` to its UART without waiting (after the
+/// handshake's answer, when the stream opens with it), and reads replies until the
+/// `expected` ones have arrived (or `timeout` passes: then fewer are returned).
+pub fn run_in_qemu(
+    elf: &Path,
+    bytes: Vec<u8>,
+    expected: Expected<'_>,
+    timeout: Duration,
+) -> QemuRun {
     host_sim::drivers::hil::run_qemu(elf, bytes, expected, timeout).expect("qemu-system-arm runs")
 }
 

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use microslam::wire::{EstimatorKind, Status, StepResult, ToDevice, ToHost};
 use microslam_replay_tests::firmware::{
-    QemuRun, encode_all, firmware_elf, host_replies, lidar_world_messages, run_in_qemu,
+    Expected, QemuRun, encode_all, firmware_elf, host_replies, lidar_world_messages, run_in_qemu,
     synthetic_drive, synthetic_lidar_drive, with_line_noise,
 };
 
@@ -57,7 +57,7 @@ fn run_equal_to_host(
     expected: &[ToHost],
     timeout: Duration,
 ) -> QemuRun {
-    let run = run_in_qemu(elf, bytes, expected.len(), timeout);
+    let run = run_in_qemu(elf, bytes, Expected::host(expected), timeout);
     assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
     assert_eq!(run.replies.len(), expected.len(), "every message answered");
     for (i, (got, want)) in run.replies.iter().zip(expected).enumerate() {
@@ -374,7 +374,12 @@ fn localizer_requests_are_refused_without_a_valid_map() {
     };
 
     let plain = built(firmware_elf());
-    let run = run_in_qemu(&plain, encode_all(&ask), 3, Duration::from_secs(60));
+    let run = run_in_qemu(
+        &plain,
+        encode_all(&ask),
+        Expected::count(3),
+        Duration::from_secs(60),
+    );
     assert_eq!(run.replies.len(), 3, "{:?}", run.replies);
     assert_eq!(bits(&run.replies[0]), bits(&refused(Refusal::NoMap)));
     assert_eq!(bits(&run.replies[1]), bits(&not_localizing));
@@ -384,7 +389,12 @@ fn localizer_requests_are_refused_without_a_valid_map() {
     let dir = tempfile::tempdir().expect("temporary folder");
     let bad = dir.path().join("corrupt-map.elf");
     elf_with_corrupt_map(&localizer_elf(), &image, &bad).expect("the map image is in the ELF");
-    let run = run_in_qemu(&bad, encode_all(&ask), 3, Duration::from_secs(60));
+    let run = run_in_qemu(
+        &bad,
+        encode_all(&ask),
+        Expected::count(3),
+        Duration::from_secs(60),
+    );
     assert_eq!(run.replies.len(), 3, "{:?}", run.replies);
     let code = MapImageError::ChecksumMismatch as u8;
     assert_eq!(

@@ -396,7 +396,7 @@ pub enum Refusal {
 /// message of either direction changes. [`ToHost::Status`] keeps its variant index (1)
 /// and its first two fields (`seq`, `protocol`) in every version, so a host can always
 /// tell which version a device speaks.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 
 /// Messages from the device to the host.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -417,6 +417,10 @@ pub enum ToHost {
         /// Deepest use of the stack so far, bytes, where the device can measure it
         /// (a firmware that paints its stack at reset); 0 where it cannot.
         stack_peak_bytes: u32,
+        /// The CRC-32 of the map image the localizer runs on (the map in flash,
+        /// [`crate::grid::MapImage::checksum`]); `None` without a valid one. Tells which
+        /// map a device carries (since protocol 2).
+        map_checksum: Option<u32>,
     },
     /// An estimate after an event in localizer mode, with the localizer's state.
     Localization {

@@ -134,6 +134,8 @@ pub struct Session<'a, const N: usize, const P: usize, const L: usize> {
     grid: Option<&'a mut dyn GridEstimator>,
     grid_setup: Option<GridSetup>,
     localizer: Result<&'a mut dyn LocalizerEstimator, Refusal>,
+    /// The map image's CRC-32, reported in every status.
+    map_checksum: Option<u32>,
     assembler: ScanAssembler<MAX_SCAN_BEAMS>,
     ranges: [f32; MAX_SCAN_BEAMS],
     active: EstimatorKind,
@@ -154,6 +156,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             grid: None,
             grid_setup: None,
             localizer: Err(Refusal::NoMap),
+            map_checksum: None,
             assembler: ScanAssembler::new(),
             ranges: [0.0; MAX_SCAN_BEAMS],
             active: EstimatorKind::Ekf,
@@ -190,6 +193,14 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
         self.localizer = localizer;
         self.grid_setup = Some(setup);
         self.reset(Pose2::new(0.0, 0.0, 0.0));
+        self
+    }
+
+    /// The same session naming its map: every [`ToHost::Status`] carries `checksum`
+    /// (the map image's CRC-32, [`crate::grid::MapImage::checksum`], `None` when there
+    /// is no valid image), so that a host can tell which map the device carries.
+    pub fn with_map_checksum(mut self, checksum: Option<u32>) -> Self {
+        self.map_checksum = checksum;
         self
     }
 
@@ -390,6 +401,9 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
         }
     }
 
+    // Not inlined: commands are rare, and inlined into the firmware's receive loop they
+    // cost ~650 bytes more flash (measured with the map checksum added to `Status`).
+    #[inline(never)]
     fn command(&mut self, seq: u32, command: &Command) -> ToHost {
         match *command {
             Command::Reset { x, y, theta } => self.reset(Pose2::new(x, y, theta)),
@@ -444,6 +458,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             estimator: self.active,
             status: self.status,
             stack_peak_bytes: 0,
+            map_checksum: self.map_checksum,
         }
     }
 
@@ -561,6 +576,39 @@ mod tests {
             range,
             bearing,
         }
+    }
+
+    #[test]
+    fn every_status_names_the_map_the_session_was_given() {
+        let mut ekf =
+            EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+        let ask = frames(&[ToDevice::Command {
+            seq: 1,
+            command: Command::ReportStatus,
+        }]);
+        let map_of =
+            |session: &mut Session<'_, _, _, 4>| match ask.iter().find_map(|&b| session.receive(b))
+            {
+                Some(ToHost::Status { map_checksum, .. }) => map_checksum,
+                other => panic!("{other:?}"),
+            };
+        let mut plain = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+        assert_eq!(map_of(&mut plain), None);
+        drop(plain);
+        let mut named = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32)
+            .with_map_checksum(Some(0x1234_5678));
+        assert_eq!(map_of(&mut named), Some(0x1234_5678));
+        // A reset does not forget it.
+        let reset = frames(&[ToDevice::Command {
+            seq: 2,
+            command: Command::Reset {
+                x: 1.0,
+                y: 0.0,
+                theta: 0.0,
+            },
+        }]);
+        assert!(reset.iter().filter_map(|&b| named.receive(b)).count() == 1);
+        assert_eq!(map_of(&mut named), Some(0x1234_5678));
     }
 
     #[test]

@@ -2,7 +2,9 @@
 //! [`crate::drivers::hil`], compares its estimates with the host's bit for bit, and writes
 //! `hil.json` and `firmware.tum`.
 
-use crate::drivers::hil::{Device, compare, encode_all_corrupted, host_replies, messages_for};
+use crate::drivers::hil::{
+    Device, Expected, compare, encode_all_corrupted, host_replies, messages_for,
+};
 use crate::inputs::readers::DatasetSpec;
 use crate::output::tum_text;
 use anyhow::{Context, Result, bail};
@@ -148,7 +150,7 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
             bytes.len()
         );
     }
-    let run = device.run(bytes, host.len(), timeout)?;
+    let run = device.run(bytes, Expected::host(&host), timeout)?;
     let mut comparison = compare(messages.len(), &run, &host);
     comparison.corrupted_frames = corrupted;
     (comparison.device_ate_se2_m, comparison.device_ate_poses) =

@@ -19,7 +19,7 @@ use microslam::grid::MapImage;
 use microslam::wire::ToHost;
 use serde::Serialize;
 
-use crate::drivers::hil::{Device, compare, encode_all};
+use crate::drivers::hil::{Device, Expected, compare, encode_all};
 use crate::drivers::hil_localizer::{
     host_localizer_replies, localizer_messages, map_image_of, map_image_with_levels,
 };
@@ -135,9 +135,11 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
             image.len()
         );
     }
-    let run = args
-        .device
-        .run(bytes, host.len(), Duration::from_secs(args.timeout_s))?;
+    let run = args.device.run(
+        bytes,
+        Expected::host(&host),
+        Duration::from_secs(args.timeout_s),
+    )?;
     let comparison = compare(messages.len(), &run, &host);
     let relation_error = match crate::metrics::relations::find_relations(&path, None) {
         Ok(r) => {

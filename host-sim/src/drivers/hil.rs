@@ -5,7 +5,8 @@
 //! same bytes. With libm on both sides they are equal bit for bit.
 //!
 //! The stream: a status request (the handshake, [`handshake`]: sent alone, and nothing
-//! more is sent until the device answers it with this host's wire protocol version), a
+//! more is sent until the device answers it as the host does — the same wire protocol
+//! version, the same map, a fresh start), a
 //! reset to the dataset's initial pose, the events through [`EventsToWire`] (velocity
 //! odometry becomes motion steps up to each next event), and a status request whose answer
 //! carries the firmware's counters and stack peak.
@@ -40,6 +41,35 @@ pub fn handshake() -> ToDevice {
     ToDevice::Command {
         seq: 0,
         command: WireCommand::ReportStatus,
+    }
+}
+
+/// What the host expects back over a link.
+#[derive(Clone, Copy, Debug)]
+pub struct Expected<'h> {
+    /// Replies to wait for (one per message that decodes).
+    pub replies: usize,
+    /// The answer to the [`handshake`] the device must give (the host reference's), when
+    /// known; without it only the protocol version is checked.
+    pub handshake: Option<&'h ToHost>,
+}
+
+impl<'h> Expected<'h> {
+    /// The replies of the host reference to the same bytes (the first answers the
+    /// handshake when the stream opens with it).
+    pub fn host(replies: &'h [ToHost]) -> Self {
+        Self {
+            replies: replies.len(),
+            handshake: replies.first(),
+        }
+    }
+
+    /// `replies` replies, the handshake's answer checked for the protocol version only.
+    pub fn count(replies: usize) -> Self {
+        Self {
+            replies,
+            handshake: None,
+        }
     }
 }
 
@@ -200,10 +230,15 @@ fn handshake_len(bytes: &[u8]) -> Option<usize> {
     (first == Some(handshake())).then_some(end)
 }
 
-/// Checks the device's answer to the [`handshake`]: there is one, and it speaks this
-/// host's wire protocol. `waited`: how long the device had, or `None` when the link
-/// closed first.
-fn check_handshake(replies: &[ToHost], bad_frames: u32, waited: Option<Duration>) -> Result<()> {
+/// Checks the device's answer to the [`handshake`]: there is one, it speaks this host's
+/// wire protocol, and it equals the host's `answer` when given (the same map, a fresh
+/// start). `waited`: how long the device had, or `None` when the link closed first.
+fn check_handshake(
+    replies: &[ToHost],
+    bad_frames: u32,
+    waited: Option<Duration>,
+    answer: Option<&ToHost>,
+) -> Result<()> {
     match replies.first() {
         None => {
             let garbled = if bad_frames > 0 {
@@ -227,25 +262,57 @@ fn check_handshake(replies: &[ToHost], bad_frames: u32, waited: Option<Duration>
         Some(ToHost::Status { protocol, .. }) if *protocol != microslam::wire::PROTOCOL_VERSION => {
             Err(other_protocol(*protocol))
         }
-        Some(_) => Ok(()),
+        Some(got) => match answer {
+            Some(want) => check_answer(got, want),
+            None => Ok(()),
+        },
+    }
+}
+
+/// The device's answer `got` to the [`handshake`] against the host's `want`: the map the
+/// host runs on (when it runs on one), then everything else.
+fn check_answer(got: &ToHost, want: &ToHost) -> Result<()> {
+    let map_of = |r: &ToHost| match r {
+        ToHost::Status { map_checksum, .. } => *map_checksum,
+        _ => None,
+    };
+    match (map_of(got), map_of(want)) {
+        (Some(device), Some(host)) if device != host => bail!(
+            "the device carries the map with CRC-32 {device:#010x}, the host runs on the map \
+             with CRC-32 {host:#010x}: give --map the map the firmware was built with, or \
+             build it with MICROSLAM_MAP=<that map>"
+        ),
+        (None, Some(host)) => bail!(
+            "the device carries no valid map, the host runs on the map with CRC-32 \
+             {host:#010x}: build the firmware with MICROSLAM_MAP=<that map> (a map refused \
+             at boot is in the firmware's log)"
+        ),
+        _ if canonical(got) != canonical(want) => bail!(
+            "the device's answer to the opening status request is not the host's: device \
+             {got:?}, host {want:?}: reset the device before the run (a board keeps its \
+             state and counters until it is reset) and build its firmware from the same \
+             commit as host-sim"
+        ),
+        _ => Ok(()),
     }
 }
 
 /// Writes `bytes` to `link` and decodes replies from `rx` until `expected` arrived or
 /// `timeout` passed. A stream that opens with the [`handshake`] sends it alone first and
 /// refuses a device that does not answer it (within [`HANDSHAKE_TIMEOUT`]) or answers
-/// with another protocol version, before anything else is sent. The rest is written
+/// otherwise than `expected.handshake` ([`check_handshake`]), before anything else is
+/// sent. The rest is written
 /// from a thread, without waiting for replies; its handle returns the link, to be joined
 /// once the device is stopped or has read everything.
 fn exchange<W: Write + Send + 'static>(
     mut link: W,
     rx: &mpsc::Receiver<Vec<u8>>,
     mut bytes: Vec<u8>,
-    expected: usize,
+    expected: Expected<'_>,
     timeout: Duration,
 ) -> Result<(LinkRun, thread::JoinHandle<W>)> {
     let start = Instant::now();
-    let mut collector = Collector::new(expected);
+    let mut collector = Collector::new(expected.replies);
     if let Some(n) = handshake_len(&bytes) {
         let rest = bytes.split_off(n);
         link.write_all(&bytes)
@@ -257,6 +324,7 @@ fn exchange<W: Write + Send + 'static>(
             &collector.replies,
             collector.bad_frames(),
             open.then_some(waited),
+            expected.handshake,
         )?;
         bytes = rest;
     }
@@ -266,7 +334,7 @@ fn exchange<W: Write + Send + 'static>(
         // Kept open until the run ends: the firmware would not notice EOF anyway.
         link
     });
-    collector.until(rx, expected, start + timeout);
+    collector.until(rx, expected.replies, start + timeout);
     let run = LinkRun {
         bad_frames: collector.bad_frames(),
         replies: collector.replies,
@@ -297,10 +365,15 @@ fn reader_thread(mut source: impl Read + Send + 'static) -> mpsc::Receiver<Vec<u
 }
 
 /// Runs `elf` under QEMU (`mps2-an386`, UART0 on the child's stdin/stdout, semihosting
-/// on a file next to the ELF), writes `bytes` and collects `expected` replies (a stream
-/// that opens with the [`handshake`] is refused when the firmware does not answer it
-/// within [`HANDSHAKE_TIMEOUT`] or speaks another protocol version).
-pub fn run_qemu(elf: &Path, bytes: Vec<u8>, expected: usize, timeout: Duration) -> Result<LinkRun> {
+/// on a file next to the ELF), writes `bytes` and collects the `expected` replies (a
+/// stream that opens with the [`handshake`] is refused when the firmware does not answer
+/// it within [`HANDSHAKE_TIMEOUT`] or not as expected).
+pub fn run_qemu(
+    elf: &Path,
+    bytes: Vec<u8>,
+    expected: Expected<'_>,
+    timeout: Duration,
+) -> Result<LinkRun> {
     let semihosting_log = elf.with_extension("semihosting.log");
     let mut child: Child = Command::new("qemu-system-arm")
         .args(["-machine", "mps2-an386", "-cpu", "cortex-m4"])
@@ -360,9 +433,14 @@ impl<'a> Device<'a> {
         }
     }
 
-    /// Streams `bytes` to the device and collects `expected` replies ([`run_qemu`],
+    /// Streams `bytes` to the device and collects the `expected` replies ([`run_qemu`],
     /// [`run_serial`]).
-    pub fn run(&self, bytes: Vec<u8>, expected: usize, timeout: Duration) -> Result<LinkRun> {
+    pub fn run(
+        &self,
+        bytes: Vec<u8>,
+        expected: Expected<'_>,
+        timeout: Duration,
+    ) -> Result<LinkRun> {
         match *self {
             Self::Qemu(elf) => run_qemu(elf, bytes, expected, timeout),
             Self::Serial { port, baud } => run_serial(port, baud, bytes, expected, timeout),
@@ -376,7 +454,7 @@ pub fn run_serial(
     port: &str,
     baud: u32,
     bytes: Vec<u8>,
-    expected: usize,
+    expected: Expected<'_>,
     timeout: Duration,
 ) -> Result<LinkRun> {
     let link = serialport::new(port, baud)
@@ -401,7 +479,8 @@ pub struct Comparison {
     pub received: usize,
     /// Received frames that did not decode.
     pub bad_frames: u32,
-    /// Replies equal to the host's bit for bit (the stack figure aside).
+    /// Replies equal to the host's bit for bit (the stack figure aside, and the map
+    /// checksum, which the handshake checks).
     pub identical: usize,
     /// Largest |device − host| over all estimates: x, y, θ (m, m, rad).
     pub max_pose_difference: [f64; 3],
@@ -422,6 +501,9 @@ pub struct Comparison {
     pub device_ate_poses: usize,
     /// The wire protocol version of the device's last status, when one decoded.
     pub device_protocol: Option<u16>,
+    /// The CRC-32 of the map image in the device's flash, from its last status (`None`:
+    /// no valid map, or no status).
+    pub device_map_checksum: Option<u32>,
 }
 
 /// Refuses a device that speaks another wire protocol version than this host, with what
@@ -448,13 +530,20 @@ fn other_protocol(device: u16) -> anyhow::Error {
     )
 }
 
+/// The bytes of a reply as compared: without what only the device knows (its stack peak)
+/// and what the handshake checks on its own (the map checksum).
 fn canonical(reply: &ToHost) -> Vec<u8> {
     let mut r = *reply;
     if let ToHost::Status {
-        stack_peak_bytes, ..
+        stack_peak_bytes,
+        map_checksum,
+        ..
     } = &mut r
     {
         *stack_peak_bytes = 0; // measured on the device only
+        // Checked at the handshake against the host's map, when the host runs on one (the
+        // EKF's reference has none, whatever the firmware carries).
+        *map_checksum = None;
     }
     let mut buf = [0u8; 256];
     postcard::to_slice(&r, &mut buf)
@@ -492,10 +581,12 @@ pub fn compare(messages: usize, device: &LinkRun, host: &[ToHost]) -> Comparison
         protocol,
         stack_peak_bytes,
         status,
+        map_checksum,
         ..
     }) = device.replies.last()
     {
         c.device_protocol = Some(*protocol);
+        c.device_map_checksum = *map_checksum;
         c.stack_peak_bytes = Some(*stack_peak_bytes);
         c.device_frames_bad = Some(status.frames_bad);
     }
@@ -524,16 +615,26 @@ mod tests {
         }
     }
 
-    fn status(protocol: u16) -> Vec<u8> {
-        let reply = ToHost::Status {
+    /// A fresh device's answer to the handshake.
+    fn answer(protocol: u16, map_checksum: Option<u32>) -> ToHost {
+        ToHost::Status {
             seq: 0,
             protocol,
             estimator: EstimatorKind::Ekf,
-            status: Status::default(),
+            status: Status {
+                frames_ok: 1,
+                ..Status::default()
+            },
             stack_peak_bytes: 0,
-        };
+            map_checksum,
+        }
+    }
+
+    fn status(protocol: u16) -> Vec<u8> {
         let mut buf = [0u8; MAX_FRAME_LEN];
-        encode_frame(&reply, &mut buf).expect("fits").to_vec()
+        encode_frame(&answer(protocol, None), &mut buf)
+            .expect("fits")
+            .to_vec()
     }
 
     /// The handshake, a reset and a final status request.
@@ -570,6 +671,7 @@ mod tests {
         }
         let link = Recorder::default();
         let written = link.0.clone();
+        let expected = Expected::count(expected);
         let run = exchange(link, &rx, bytes, expected, Duration::from_millis(200)).map(
             |(run, writer)| {
                 drop(writer.join());
@@ -629,7 +731,7 @@ mod tests {
             link.clone(),
             &rx,
             bytes.clone(),
-            3,
+            Expected::count(3),
             Duration::from_secs(600),
         )
         .map(|_| ())
@@ -643,6 +745,32 @@ mod tests {
         let e = run.expect_err("refused").to_string();
         assert!(e.contains("2 frames from it did not decode"), "{e}");
         assert_eq!(written, bytes[..first]);
+    }
+
+    #[test]
+    fn the_answer_to_the_handshake_names_the_map_and_a_fresh_start() {
+        let v = microslam::wire::PROTOCOL_VERSION;
+        let check = |got: &ToHost, want: &ToHost| check_handshake(&[*got], 0, None, Some(want));
+        let (a, b) = (answer(v, Some(0xAAAA_0001)), answer(v, Some(0xBBBB_0002)));
+        assert!(check(&a, &a).is_ok());
+        let e = check(&a, &b).expect_err("another map").to_string();
+        assert!(
+            e.contains("CRC-32 0xaaaa0001, the host runs on the map with CRC-32 0xbbbb0002"),
+            "{e}"
+        );
+        let e = check(&answer(v, None), &b).expect_err("no map").to_string();
+        assert!(e.contains("the device carries no valid map"), "{e}");
+        // A host without a map (the EKF's reference) does not ask for one.
+        assert!(check(&a, &answer(v, None)).is_ok());
+        // A device that has run before: its counters are not a fresh start's.
+        let mut used = a;
+        if let ToHost::Status { status, .. } = &mut used {
+            (status.frames_ok, status.events) = (5_000, 4_000);
+        }
+        let e = check(&used, &a).expect_err("not fresh").to_string();
+        assert!(e.contains("reset the device before the run"), "{e}");
+        // Without the host's answer only the version counts.
+        assert!(check_handshake(&[used], 0, None, None).is_ok());
     }
 
     #[test]

@@ -155,6 +155,7 @@ pub fn host_localizer_replies(bytes: &[u8], image: &[u8]) -> Result<Vec<ToHost>>
             .with_localizer(
                 Ok(&mut *localizer as &mut dyn LocalizerEstimator),
                 profile::GRID_SETUP,
-            );
+            )
+            .with_map_checksum(Some(map.checksum()));
     Ok(bytes.iter().filter_map(|&b| session.receive(b)).collect())
 }
