@@ -607,7 +607,7 @@ mod tests {
                 theta: 0.0,
             },
         }]);
-        assert!(reset.iter().filter_map(|&b| named.receive(b)).count() == 1);
+        assert_eq!(reset.iter().filter_map(|&b| named.receive(b)).count(), 1);
         assert_eq!(map_of(&mut named), Some(0x1234_5678));
     }
 

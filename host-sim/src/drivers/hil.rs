@@ -6,10 +6,10 @@
 //!
 //! The stream: a status request (the handshake, [`handshake`]: sent alone, and nothing
 //! more is sent until the device answers it as the host does — the same wire protocol
-//! version, the same map, a fresh start), a
-//! reset to the dataset's initial pose, the events through [`EventsToWire`] (velocity
-//! odometry becomes motion steps up to each next event), and a status request whose answer
-//! carries the firmware's counters and stack peak.
+//! version, the same map, a fresh start), a reset to the dataset's initial pose, the
+//! events through [`EventsToWire`] (velocity odometry becomes motion steps up to each next
+//! event), and a status request whose answer carries the firmware's counters and stack
+//! peak.
 
 use std::io::{Read, Write};
 use std::path::Path;
@@ -35,8 +35,9 @@ pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// The status request that opens a stream: [`run_qemu`] and [`run_serial`] send it alone
 /// and wait for its answer before the rest, so that a device that is not running, not
-/// listening, or speaking another wire protocol version is reported within
-/// [`HANDSHAKE_TIMEOUT`] instead of after the whole recording.
+/// listening, or answering otherwise than the host reference (another wire protocol
+/// version, another map, not a fresh start) is reported within [`HANDSHAKE_TIMEOUT`]
+/// instead of after the whole recording.
 pub fn handshake() -> ToDevice {
     ToDevice::Command {
         seq: 0,
