@@ -126,22 +126,16 @@ for elf in cost cost_grid cost_grid_map cost_relocalize; do
     cat "$OUT/$elf.run.log" >>"$cost_log"
 done
 # `ekf n=N key=value…` → ekfN_key_instructions for every key;
-# `grid p=P beams=B step=S …` → gridPP_bB_w9_step_instructions.
+# `grid p=P beams=B window=W step=S …` → grid_pP_bB_wW_step_instructions (W × W shifts);
+# `localizer …` → localizer_pP_bB_wW_…, `localizer_map …` → localizer_intel_pP_bB_wW_….
 awk '/^ekf /{
         split($2, n, "=");
         for (i = 3; i <= NF; i++) { split($i, kv, "="); printf "%-40s %s\n", "ekf" n[2] "_" kv[1] "_instructions", kv[2] }
     }
-    /^grid /{
-        split($2, p, "="); split($3, b, "="); split($4, w, "=");
-        printf "%-40s %s\n", "grid_p" p[2] "_b" b[2] "_w9_step_instructions", w[2];
-    }
-    /^localizer /{
-        split($2, p, "="); split($4, w, "=");
-        printf "%-40s %s\n", "localizer_p" p[2] "_b90_w9_step_instructions", w[2];
-    }
-    /^localizer_map /{
-        split($2, p, "="); split($4, w, "=");
-        printf "%-40s %s\n", "localizer_intel_p" p[2] "_b90_w9_step_instructions", w[2];
+    /^(grid|localizer|localizer_map) /{
+        split($2, p, "="); split($3, b, "="); split($4, w, "="); split($5, s, "=");
+        name = ($1 == "localizer_map") ? "localizer_intel" : $1;
+        printf "%-40s %s\n", name "_p" p[2] "_b" b[2] "_w" w[2] "_step_instructions", s[2];
     }
     /^relocalize /{
         split($2, c, "="); split($6, n, "=");
@@ -184,17 +178,18 @@ awk '
 awk '
     { v[$1] = $2 }
     END {
-        split("localizer_flash_bytes localizer_static_ram_bytes localizer_stm32f411_flash_bytes localizer_stack_peak_bytes localizer_p32_b90_w9_step_instructions localizer_p64_b90_w9_step_instructions localizer_p128_b90_w9_step_instructions localizer_intel_p32_b90_w9_step_instructions localizer_intel_p64_b90_w9_step_instructions localizer_intel_p128_b90_w9_step_instructions relocalize_256x256_instructions relocalize_budget_256x256_instructions", need, " ");
+        split("localizer_flash_bytes localizer_static_ram_bytes localizer_stm32f411_flash_bytes localizer_stack_peak_bytes localizer_p32_b90_w3_step_instructions localizer_p64_b90_w3_step_instructions localizer_p128_b90_w3_step_instructions localizer_intel_p32_b90_w3_step_instructions localizer_intel_p64_b90_w3_step_instructions localizer_intel_p128_b90_w3_step_instructions localizer_intel_p64_b90_w9_step_instructions relocalize_256x256_instructions relocalize_budget_256x256_instructions", need, " ");
         for (i in need) if (!(need[i] in v)) { printf "FAIL: localizer figure %s missing\n", need[i]; bad = 1 }
         ram = v["localizer_static_ram_bytes"] + v["localizer_stack_peak_bytes"];
         printf "localizer firmware: flash %d bytes with the map (bar <= 524288), static RAM + stack %d bytes (bar <= 131072)\n", v["localizer_flash_bytes"], ram;
         if (v["localizer_flash_bytes"] > 524288 || v["localizer_stm32f411_flash_bytes"] > 524288 || ram > 131072) {
             print "FAIL: the localizer firmware is over the STM32F411 memory bar"; bad = 1
         }
-        s = v["localizer_p64_b90_w9_step_instructions"];
-        printf "localizer step P=64, 90 beams, 9x9, room map: %d instructions (bar <= 800000: %s)\n", s, (s <= 800000) ? "met" : "NOT MET";
-        s = v["localizer_intel_p64_b90_w9_step_instructions"];
-        printf "localizer step P=64, 90 beams, 9x9, Intel map: %d instructions (bar <= 800000: %s)\n", s, (s <= 800000) ? "met" : "NOT MET";
+        s = v["localizer_p64_b90_w3_step_instructions"];
+        printf "localizer step P=64, 90 beams, 3x3, room map: %d instructions (bar <= 800000: %s)\n", s, (s <= 800000) ? "met" : "NOT MET";
+        s = v["localizer_intel_p64_b90_w3_step_instructions"];
+        printf "localizer step P=64, 90 beams, 3x3, Intel map: %d instructions (bar <= 800000: %s)\n", s, (s <= 800000) ? "met" : "NOT MET";
+        printf "  (with grid SLAM'"'"'s 9x9 window on the Intel map: %d)\n", v["localizer_intel_p64_b90_w9_step_instructions"];
         r = v["relocalize_256x256_instructions"];
         printf "relocalization on 256x256: %d instructions (bar <= 50000000: %s)\n", r, (r <= 50000000) ? "met" : "NOT MET";
         b = v["relocalize_budget_256x256_instructions"];

@@ -10,7 +10,7 @@ use crate::commands::sim::SimOptions;
 use crate::commands::sweep::SweepOptions;
 use crate::commands::texture::TextureOptions;
 use crate::commands::{detections, hil, localize, replay, sim, sweep, texture};
-use crate::domain::grid::{GlobalOptions, GridOptions, SUPPORTED_PARTICLES};
+use crate::domain::grid::{FilterRole, GlobalOptions, GridOptions, SUPPORTED_PARTICLES};
 use crate::domain::{AssociationMode, FilterKind, Precision};
 use crate::inputs::faults::FaultRates;
 use crate::inputs::readers::DatasetSpec;
@@ -151,7 +151,8 @@ pub struct GridArgs {
     /// Particles of the grid filter: 8, 16, 32, 64, 100, 128, 200 or 400.
     #[arg(long, default_value_t = 200, value_parser = particle_count)]
     pub particles: usize,
-    /// Half-width k of the (2k+1)² shift window, cells (default 4: 9 × 9).
+    /// Half-width k of the (2k+1)² shift window, cells (default: 4, a 9 × 9 window, for
+    /// SLAM; 1, 3 × 3, for `localize`).
     #[arg(long)]
     pub window: Option<u8>,
     /// Beams used per scan, 1 up to the log's (every n-th beam is kept; default all).
@@ -549,6 +550,7 @@ impl From<&GridArgs> for GridOptions {
             preset: a.preset,
             reference: a.reference.clone(),
             reference_offset: a.reference_offset,
+            role: FilterRole::Slam,
         }
     }
 }
@@ -581,7 +583,10 @@ impl From<&LocalizeArgs> for LocalizeOptions {
             map: a.map.clone(),
             dataset: a.dataset.clone(),
             config: a.config.clone(),
-            grid: (&a.grid).into(),
+            grid: GridOptions {
+                role: FilterRole::Localizer,
+                ..(&a.grid).into()
+            },
             out: a.out.clone(),
             global: (&a.global).into(),
             mcap: a.mcap.clone(),

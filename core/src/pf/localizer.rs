@@ -19,14 +19,16 @@
 //! low make it [`LocalizerState::Tracking`] again. [`GridLocalizer::status`] reports the
 //! state and counters for the estimates.
 
-use super::correlation::{ScanPoints, search_window, search_window_sparse_rows};
+use super::correlation::{
+    ScanPoints, search_window, search_window_packed, search_window_sparse_rows,
+};
 use super::filter::ShiftSearch;
 use super::global::{
     GlobalError, GlobalSearch, GlobalSearchConfig, Hypotheses, Hypothesis, SearchReport,
 };
 use super::orientation::DirectionHistogram;
 use super::prediction::{arc_between, drive_arc};
-use super::{GridPfConfig, ParticleFilter, PfError, StepReport};
+use super::{GridPfConfig, LOCALIZER_SHIFT_WINDOW, ParticleFilter, PfError, StepReport};
 use crate::geometry::Pose2;
 use crate::grid::{GridView, MaxPoolLayers, ScanIntegration};
 use crate::sensors::lidar::LidarScan;
@@ -307,9 +309,11 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
 
     /// The same localizer with the shift search for a map whose occupied-cell bitmap has
     /// `S` bytes a row (`⌈width / 8⌉`), for a map whose size is known when the program is
-    /// built (a map in flash): [`search_window_sparse_rows`], the same estimates in fewer
-    /// instructions (per step on the Cortex-M4F a fifth fewer on a room's thin walls, a
-    /// tenth on a building's map, where the occupied cells dominate). Refused with
+    /// built (a map in flash): [`search_window_sparse_rows`] for a 9 × 9 window,
+    /// [`search_window_packed`] for the localizer's 3 × 3
+    /// ([`GridPfConfig::for_localizer`]), the same estimates in fewer instructions (per
+    /// step on the Cortex-M4F a fifth fewer on a room's thin walls, a tenth on a
+    /// building's map, where the occupied cells dominate). Refused with
     /// [`PfError::MapMismatch`] when the map has no bitmap or rows of another length.
     ///
     /// ```
@@ -337,7 +341,13 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
         if self.map.occupancy_bits().is_none() || !rows_fit {
             return Err(PfError::MapMismatch);
         }
-        self.search = search_window_sparse_rows::<S>;
+        // The window of the settings gets its copy: 3 × 3 (`GridPfConfig::for_localizer`)
+        // or 9 × 9 (the presets'); another size takes the general path in either.
+        self.search = if self.config.filter.shift_window_cells == LOCALIZER_SHIFT_WINDOW {
+            search_window_packed::<{ 2 * LOCALIZER_SHIFT_WINDOW as usize + 1 }, S>
+        } else {
+            search_window_sparse_rows::<S>
+        };
         Ok(self)
     }
 

@@ -1,13 +1,15 @@
 //! Instructions per grid particle-filter step under QEMU `-icount shift=6` (see
-//! `firmware_example::cost`): P = 16, 32, 64 particles, 90 beams, 9 × 9 shift window, a
-//! 256 × 256 grid of 5 cm cells, in a synthetic 6 m × 6 m room with a pillar; then the
-//! localizer (no map writes) at P = 32, 64, 128 on the map the SLAM runs built, read
-//! through its occupied-cell bitmap alone (as a map image in flash is).
+//! `firmware_example::cost`): grid SLAM at P = 16, 32, 64 particles, 90 beams, 9 × 9
+//! shift window, a 256 × 256 grid of 5 cm cells, in a synthetic 6 m × 6 m room with a
+//! pillar; then the localizer (no map writes, the firmware's `LOCALIZER_CONFIG`: a 5 × 5
+//! window) at P = 32, 64, 128 on the map the SLAM runs built, read through its
+//! occupied-cell bitmap alone (as a map image in flash is).
 //!
 //! Built with `MICROSLAM_MAP` (the map image in flash, `cfg(microslam_map)`), it times
 //! the localizer on that map instead (`localizer_map` lines): the scans are ray-cast in
 //! the map itself from the map frame's origin (the first pose of the run that built it)
-//! along the same arc, so the end points meet the map's real walls. A room map built
+//! along the same arc, so the end points meet the map's real walls (and once more at
+//! P = 64 with grid SLAM's 9 × 9 window, for comparison). A room map built
 //! from nine scans has thin walls and many windows without an occupied cell; a map of a
 //! whole run has the walls a robot meets, and its step costs what a robot pays.
 //!
@@ -19,6 +21,7 @@ use core::fmt::Write;
 
 use cortex_m_rt::entry;
 use firmware_example::board::Serial;
+use firmware_example::config::LOCALIZER_CONFIG;
 use firmware_example::cost::{BEAMS, LIDAR, Ticks, report_calibration};
 use microslam::geometry::Pose2;
 use microslam::grid::GridView;
@@ -27,23 +30,35 @@ use microslam::sensors::lidar::LidarScan;
 use microslam::wire::GridEstimator;
 use panic_probe as _;
 
+/// Grid SLAM's settings (the firmware's `GRID_CONFIG`).
 const CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
 
 /// Steps measured per P (after the first scan, which only builds the map).
 const STEPS: u32 = 8;
 
+/// What a [`drive`] line names: the filter, its particle count and its settings.
+struct Label<'a> {
+    what: &'a str,
+    particles: usize,
+    config: &'a GridPfConfig,
+}
+
 /// Drives `filter` from `start` for [`STEPS`] steps of an arc, with the scans `scan_at`
 /// gives at each true pose, counting the instructions of each prediction and scan, and
-/// prints one line named `what` with their means.
+/// prints one line named by `label` with their means.
 fn drive<F: GridEstimator>(
     out: &mut Serial,
     ticks: &mut Ticks,
-    what: &str,
-    particles: usize,
+    label: Label<'_>,
     filter: &mut F,
     start: Pose2<f32>,
     scan_at: impl Fn(&Pose2<f32>, &mut [f32; BEAMS]),
 ) -> core::fmt::Result {
+    let Label {
+        what,
+        particles,
+        config,
+    } = label;
     let mut truth = start;
     let mut ranges = [0.0f32; BEAMS];
     let (v, omega, dt) = (0.4f32, 0.3f32, 0.1f32);
@@ -68,10 +83,11 @@ fn drive<F: GridEstimator>(
     let est = filter.pose();
     writeln!(
         out,
-        "{} p={} beams={} step={} predict={} observe={} resamples={} error_mm={}",
+        "{} p={} beams={} window={} step={} predict={} observe={} resamples={} error_mm={}",
         what,
         particles,
         BEAMS,
+        2 * config.filter.shift_window_cells + 1,
         (predict + observe) / STEPS,
         predict / STEPS,
         observe / STEPS,
@@ -119,7 +135,12 @@ mod room {
         if slam.observe(&LidarScan::new(&ranges, LIDAR)).is_err() {
             return writeln!(out, "error grid p={P} first scan");
         }
-        drive(out, ticks, "grid", P, &mut slam, START, scan_at)
+        let label = Label {
+            what: "grid",
+            particles: P,
+            config: &CONFIG,
+        };
+        drive(out, ticks, label, &mut slam, START, scan_at)
     }
 
     /// The localizer's step (prediction + scan) on `map`, started at the true pose, along the
@@ -131,12 +152,17 @@ mod room {
     ) -> core::fmt::Result {
         // The room's 256-cell rows: 32 bytes of bitmap (as a firmware with a map of this
         // size in flash compiles it).
-        let Ok(mut loc) = GridLocalizer::<P, BEAMS>::new(map, CONFIG, START)
+        let Ok(mut loc) = GridLocalizer::<P, BEAMS>::new(map, LOCALIZER_CONFIG, START)
             .and_then(|l| l.with_bitmap_row_bytes::<{ occupancy_bytes(256, 1) }>())
         else {
             return writeln!(out, "error localizer p={P} new");
         };
-        drive(out, ticks, "localizer", P, &mut loc, START, scan_at)
+        let label = Label {
+            what: "localizer",
+            particles: P,
+            config: &LOCALIZER_CONFIG,
+        };
+        drive(out, ticks, label, &mut loc, START, scan_at)
     }
 
     pub fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
@@ -173,15 +199,16 @@ mod flash_map {
     use super::*;
     use microslam::grid::MapImage;
 
-    /// The localizer's step on the map image in flash, started at the map frame's origin,
-    /// with scans ray-cast in the map (see the module documentation).
+    /// The localizer's step with `config` on the map image in flash, started at the map
+    /// frame's origin, with scans ray-cast in the map (see the module documentation).
     fn measure_flash_map<const P: usize>(
         out: &mut Serial,
         ticks: &mut Ticks,
         map: GridView<'_>,
+        config: &GridPfConfig,
     ) -> core::fmt::Result {
         let start = Pose2::new(0.0, 0.0, 0.0);
-        let Ok(mut loc) = GridLocalizer::<P, BEAMS>::new(map, CONFIG, start)
+        let Ok(mut loc) = GridLocalizer::<P, BEAMS>::new(map, *config, start)
             .and_then(|l| l.with_bitmap_row_bytes::<{ firmware_example::config::MAP_ROW_BYTES }>())
         else {
             return writeln!(out, "error localizer_map p={P} new");
@@ -194,7 +221,12 @@ mod flash_map {
                     .unwrap_or(f32::INFINITY);
             }
         };
-        drive(out, ticks, "localizer_map", P, &mut loc, start, cast)
+        let label = Label {
+            what: "localizer_map",
+            particles: P,
+            config,
+        };
+        drive(out, ticks, label, &mut loc, start, cast)
     }
 
     pub fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
@@ -205,9 +237,11 @@ mod flash_map {
         let map = image.view();
         let g = map.geometry();
         writeln!(out, "map cells={}x{}", g.width, g.height)?;
-        measure_flash_map::<32>(out, ticks, map)?;
-        measure_flash_map::<64>(out, ticks, map)?;
-        measure_flash_map::<128>(out, ticks, map)?;
+        measure_flash_map::<32>(out, ticks, map, &LOCALIZER_CONFIG)?;
+        measure_flash_map::<64>(out, ticks, map, &LOCALIZER_CONFIG)?;
+        measure_flash_map::<128>(out, ticks, map, &LOCALIZER_CONFIG)?;
+        // For comparison: the same at P = 64 with grid SLAM's 9 × 9 window.
+        measure_flash_map::<64>(out, ticks, map, &CONFIG)?;
         firmware_example::cost::report_end(out)
     }
 }

@@ -187,7 +187,7 @@ pub(crate) fn options_for_beams(
     let mut c = grid
         .preset
         .unwrap_or_else(|| Preset::for_particles(grid.particles))
-        .settings(config, grid.beams, n)?;
+        .settings(config, grid.beams, n, grid.role)?;
     if let Some(k) = grid.window {
         c.filter.shift_window_cells = k;
     }

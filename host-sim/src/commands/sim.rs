@@ -7,7 +7,7 @@ use super::replay::run_and_report;
 use crate::domain::AssociationMode;
 use crate::domain::Precision;
 use crate::domain::config::Settings;
-use crate::domain::grid::{GlobalOptions, Preset};
+use crate::domain::grid::{FilterRole, GlobalOptions, Preset};
 use crate::drivers::grid::{
     GridRunOptions, f32_pose, run_localizer_observed, run_slam_observed, sim_inputs,
 };
@@ -101,26 +101,39 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
     let rec = crate::inputs::sim::lidar_world::simulate(&world, args.seed)?;
     let preset = args
         .grid_preset
-        .unwrap_or_else(|| Preset::for_particles(args.grid_particles))
-        .settings(args.grid_config.as_deref(), None, rec.lidar_beams())?;
-    let config = microslam::pf::GridPfConfig {
-        filter: microslam::pf::FilterConfig {
-            seed: args.seed,
-            ..preset.filter
-        },
-        ..preset
-    };
+        .unwrap_or_else(|| Preset::for_particles(args.grid_particles));
+    // SLAM's settings and the localizer's (the same but for the shift window), the
+    // filter seeded with the world's seed.
+    let [config, localizer] = [FilterRole::Slam, FilterRole::Localizer].map(|role| {
+        preset
+            .settings(args.grid_config.as_deref(), None, rec.lidar_beams(), role)
+            .map(|c| microslam::pf::GridPfConfig {
+                filter: microslam::pf::FilterConfig {
+                    seed: args.seed,
+                    ..c.filter
+                },
+                ..c
+            })
+    });
+    let (config, localizer) = (config?, localizer?);
     let out = args.out.join("grid");
     let (slam, loc) = run_and_write(
         &rec,
-        config,
+        [config, localizer],
         args.grid_particles,
         &out,
         mcap.as_mut(),
         args.animate.as_deref(),
     )?;
     if args.global.enabled {
-        super::global::sim_cli(&rec, config, args.grid_particles, &args.global, &out, quiet)?;
+        super::global::sim_cli(
+            &rec,
+            localizer,
+            args.grid_particles,
+            &args.global,
+            &out,
+            quiet,
+        )?;
     }
     if !quiet {
         println!(
@@ -146,14 +159,15 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
 /// Particle counts `host-sim sim --grid-particles` accepts.
 pub const SIM_PARTICLES: [usize; 4] = [16, 32, 64, 200];
 
-/// Runs SLAM and the localizer with `particles` particles, writing
+/// Runs SLAM and the localizer with `particles` particles and their settings `configs`
+/// (SLAM's, the localizer's), writing
 /// `out/slam/` and `out/localize/` (map.pgm, map.yaml, map.png, trajectory.tum,
 /// groundtruth.tum, metrics.json), recording both into `mcap` (under `/grid_slam` and
 /// `/grid_localize`) and drawing `animate` (an animated GIF of SLAM) when given. Returns
 /// the two metrics documents.
 pub fn run_and_write(
     rec: &LidarRecording,
-    config: GridPfConfig,
+    configs: [GridPfConfig; 2],
     particles: usize,
     out: &Path,
     mut mcap: Option<&mut crate::output::mcap::McapFile>,
@@ -166,6 +180,7 @@ pub fn run_and_write(
     let first = rec.scans.first().ok_or_else(|| anyhow!("no scans"))?;
     let start = f32_pose(&first.truth);
     let inputs = sim_inputs(rec);
+    let [config, localizer] = configs;
     let options = GridRunOptions {
         particles,
         config,
@@ -198,8 +213,12 @@ pub fn run_and_write(
     let map = true_map(&rec.world.walls, &config);
     let view = map.view();
     let started = Instant::now();
+    let localizer_options = GridRunOptions {
+        config: localizer,
+        ..options.clone()
+    };
     let loc = super::recorded_grid_run(mcap, "grid_localize", n, lo, &truth_poses, false, |o| {
-        run_localizer_observed(&inputs, &view, start, &options, &|_| {}, o)
+        run_localizer_observed(&inputs, &view, start, &localizer_options, &|_| {}, o)
     })?;
     let loc_wall = started.elapsed().as_secs_f64();
     let truth: Vec<(f64, Pose2<f32>)> = rec
@@ -209,18 +228,20 @@ pub fn run_and_write(
         .collect();
     let odometry_ate = odometry_ate_m(rec);
     let mut docs = Vec::new();
-    for (name, run, wall, what) in [
+    for (name, run, wall, what, config) in [
         (
             "slam",
             &slam,
             slam_wall,
             "grid SLAM from the true start pose",
+            config,
         ),
         (
             "localize",
             &loc,
             loc_wall,
             "grid localizer on the true map (walls rasterised)",
+            localizer,
         ),
     ] {
         let dir = out.join(name);

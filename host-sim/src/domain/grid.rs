@@ -60,6 +60,11 @@ pub struct GridToml {
 }
 
 impl GridToml {
+    /// `true` when the file sets the shift window (`shift_window_cells`).
+    pub fn sets_window(&self) -> bool {
+        self.shift_window_cells.is_some()
+    }
+
     /// Reads a TOML file.
     pub fn read(path: &Path) -> Result<Self> {
         let text =
@@ -129,8 +134,11 @@ pub fn decimation_for(n: usize, beams: usize) -> anyhow::Result<usize> {
 pub struct GridOptions {
     /// Particles (one of [`SUPPORTED_PARTICLES`]).
     pub particles: usize,
-    /// Half-width k of the (2k+1)² shift window, cells (default 4: 9 × 9).
+    /// Half-width k of the (2k+1)² shift window, cells (default: the preset's 4, 9 × 9,
+    /// for SLAM; [`microslam::pf::LOCALIZER_SHIFT_WINDOW`] for a localizer).
     pub window: Option<u8>,
+    /// What the filter does: SLAM, or localize on a map (its shift window).
+    pub role: FilterRole,
     /// Beams used per scan (decimated from the log's; default all).
     pub beams: Option<usize>,
     /// Benchmark relations file (default: a `*.relations` file next to the log).
@@ -141,6 +149,17 @@ pub struct GridOptions {
     pub reference: Option<std::path::PathBuf>,
     /// Seconds added to the reference's stamps.
     pub reference_offset: f64,
+}
+
+/// What a grid filter is run for: its settings differ in the shift window.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FilterRole {
+    /// Grid SLAM: the preset's window.
+    #[default]
+    Slam,
+    /// A localizer on a fixed map: [`GridPfConfig::for_localizer`]'s window unless the
+    /// settings file or `--window` sets one.
+    Localizer,
 }
 
 /// Named grid filter settings (`--preset`).
@@ -177,19 +196,26 @@ impl Preset {
         }
     }
 
-    /// The settings of `self` with the file `config` (if any) laid over them, and the
-    /// `microcontroller` preset's beam count ([`MICROCONTROLLER_BEAMS`]) for a lidar of
-    /// `lidar_beams` when neither the file nor `beams` sets one.
+    /// The settings of `self` for `role` with the file `config` (if any) laid over them,
+    /// and the `microcontroller` preset's beam count ([`MICROCONTROLLER_BEAMS`]) for a
+    /// lidar of `lidar_beams` when neither the file nor `beams` sets one. A localizer gets
+    /// the localizer's shift window ([`GridPfConfig::for_localizer`]) unless the file sets
+    /// one.
     pub fn settings(
         self,
         config: Option<&Path>,
         beams: Option<usize>,
         lidar_beams: usize,
+        role: FilterRole,
     ) -> Result<GridPfConfig> {
-        let mut c = match config {
-            Some(p) => GridToml::read(p)?.apply_over(self.config())?,
+        let file = config.map(GridToml::read).transpose()?;
+        let mut c = match &file {
+            Some(f) => f.apply_over(self.config())?,
             None => self.config(),
         };
+        if role == FilterRole::Localizer && !file.as_ref().is_some_and(GridToml::sets_window) {
+            c = c.for_localizer();
+        }
         if let Some(beams) = beams {
             c.beam_decimation = decimation_for(lidar_beams, beams)?;
         } else if self == Self::Microcontroller && c.beam_decimation == 1 {
@@ -208,6 +234,27 @@ pub const MICROCONTROLLER_BEAMS: usize = 90;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_localizer_gets_the_narrow_window_unless_the_file_sets_one() {
+        let window = |config: Option<&Path>, role| {
+            Preset::Microcontroller
+                .settings(config, None, 180, role)
+                .unwrap()
+                .filter
+                .shift_window_cells
+        };
+        assert_eq!(window(None, FilterRole::Slam), 4);
+        assert_eq!(window(None, FilterRole::Localizer), 1);
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("w.toml");
+        std::fs::write(&file, "shift_window_cells = 3\n").unwrap();
+        assert_eq!(window(Some(&file), FilterRole::Slam), 3);
+        assert_eq!(window(Some(&file), FilterRole::Localizer), 3);
+        // A file that sets something else leaves the localizer's window.
+        std::fs::write(&file, "seed = 7\n").unwrap();
+        assert_eq!(window(Some(&file), FilterRole::Localizer), 1);
+    }
 
     #[test]
     fn beams_outside_one_to_all_are_refused() {
