@@ -344,21 +344,24 @@ fn exchange<W: Write + Send + 'static>(
     Ok((run, writer))
 }
 
+/// Reads `source` on a thread of its own and passes what arrives on the channel it
+/// returns. The thread ends, and drops `source` (closing a serial port), when the source
+/// ends or fails, or when the receiver is dropped: a read that times out (a serial port
+/// with nothing to say) sends an empty chunk, which fails once nobody listens.
 fn reader_thread(mut source: impl Read + Send + 'static) -> mpsc::Receiver<Vec<u8>> {
     let (tx, rx) = mpsc::channel::<Vec<u8>>();
     thread::spawn(move || {
         let mut buf = [0u8; 4096];
         loop {
-            match source.read(&mut buf) {
+            let chunk = match source.read(&mut buf) {
                 Ok(0) => break,
-                Ok(n) => {
-                    if tx.send(buf[..n].to_vec()).is_err() {
-                        break;
-                    }
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Ok(n) => buf[..n].to_vec(),
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => Vec::new(),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
                 Err(_) => break,
+            };
+            if tx.send(chunk).is_err() {
+                break;
             }
         }
     });
@@ -596,6 +599,7 @@ pub fn compare(messages: usize, device: &LinkRun, host: &[ToHost]) -> Comparison
 
 #[cfg(test)]
 mod tests {
+    use std::sync::atomic::{AtomicBool, Ordering};
     use std::sync::{Arc, Mutex};
 
     use microslam::wire::{EstimatorKind, Status};
@@ -830,5 +834,41 @@ mod tests {
         assert!(e.contains("none of the device's 7 frames decoded"), "{e}");
         // No reply at all is another error (the device did not answer), reported elsewhere.
         assert!(check_protocol(&Comparison::default()).is_ok());
+    }
+
+    /// A source that never has anything to read (a silent serial port) and says when it
+    /// is dropped.
+    struct Silent(Arc<AtomicBool>);
+
+    impl Read for Silent {
+        fn read(&mut self, _: &mut [u8]) -> std::io::Result<usize> {
+            thread::sleep(Duration::from_millis(1));
+            Err(std::io::ErrorKind::TimedOut.into())
+        }
+    }
+
+    impl Drop for Silent {
+        fn drop(&mut self) {
+            self.0.store(true, Ordering::SeqCst);
+        }
+    }
+
+    #[test]
+    fn the_reader_of_a_silent_port_ends_when_nobody_listens() {
+        let dropped = Arc::new(AtomicBool::new(false));
+        let rx = reader_thread(Silent(Arc::clone(&dropped)));
+        // While the receiver lives, timeouts arrive as empty chunks and the thread reads on.
+        assert_eq!(rx.recv_timeout(Duration::from_secs(5)), Ok(Vec::new()));
+        assert!(!dropped.load(Ordering::SeqCst));
+        drop(rx);
+        // Then the thread ends and drops the port (within its next read or two).
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while !dropped.load(Ordering::SeqCst) && Instant::now() < deadline {
+            thread::sleep(Duration::from_millis(5));
+        }
+        assert!(
+            dropped.load(Ordering::SeqCst),
+            "the reader thread still holds the port"
+        );
     }
 }
