@@ -144,8 +144,7 @@ pub fn detections_cli(args: &DetectionsOptions, quiet: bool) -> Result<()> {
         min_spacing_m: args.min_spacing,
     };
     let (report, recording, chain) = run_detections(args.seed, &detector, field)?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    crate::output::create_folder(&args.out)?;
     // The picture of the mode the estimator is meant to run in.
     let metrics = crate::metrics::evaluate(&recording, &chain.run);
     let alignment = metrics

@@ -116,7 +116,7 @@ pub fn run_and_write(
         "wall_time_s": started.elapsed().as_secs_f64(),
         "global": global,
     });
-    std::fs::create_dir_all(out)?;
+    crate::output::create_folder(out)?;
     std::fs::write(
         out.join("metrics.json"),
         serde_json::to_string_pretty(&doc)? + "\n",

@@ -155,8 +155,7 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
     comparison.corrupted_frames = corrupted;
     (comparison.device_ate_se2_m, comparison.device_ate_poses) =
         device_ate(&run.replies, &recording.ground_truth);
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    crate::output::create_folder(&args.out)?;
     let report = args.out.join("hil.json");
     std::fs::write(&report, serde_json::to_string_pretty(&comparison)?)?;
     std::fs::write(args.out.join("firmware.tum"), tum(&run.replies))?;

@@ -171,8 +171,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
         }),
         comparison,
     };
-    std::fs::create_dir_all(args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    crate::output::create_folder(args.out)?;
     let json = args.out.join("hil.json");
     std::fs::write(&json, serde_json::to_string_pretty(&report)?)?;
     let poses = trajectory(&run.replies, &scans, &last_chunks)

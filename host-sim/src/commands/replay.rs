@@ -450,7 +450,7 @@ fn thor_replay(dir: &str, run: u32, out: &Path, quiet: bool) -> Result<()> {
         crate::domain::datasets::resolve("", dir)?
     };
     let traj = thor::dead_reckoning(&path, run)?;
-    std::fs::create_dir_all(out)?;
+    crate::output::create_folder(out)?;
     write_tum(&out.join("trajectory.tum"), traj.iter().copied())?;
     let length: f64 = traj
         .windows(2)

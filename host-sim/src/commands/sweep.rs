@@ -399,7 +399,7 @@ pub fn run_cli(args: &SweepOptions, quiet: bool) -> Result<()> {
 
 /// Writes `sweep.csv` and `sweep.json` into `out`.
 pub fn write(out: &Path, table: &Table) -> Result<()> {
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    crate::output::create_folder(out)?;
     std::fs::write(out.join("sweep.csv"), csv(table))
         .with_context(|| format!("cannot write {}", out.join("sweep.csv").display()))?;
     let json = serde_json::to_string_pretty(table)?;

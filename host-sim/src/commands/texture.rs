@@ -7,7 +7,7 @@ use crate::domain::recording::{TruePose, interpolate_pose};
 use crate::drivers::detections::{self, ClassUse, DetectorSettings};
 use crate::drivers::texture::{self, PointCounts, TextureError, TextureSettings};
 use crate::output::floor_texture::draw_floor_maps;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -115,7 +115,7 @@ pub fn texture_cli(args: &TextureOptions, quiet: bool) -> Result<()> {
     };
     let (report, map, ekf_map) = run_texture(args.seed, &settings)?;
     let out = &args.out;
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    crate::output::create_folder(out)?;
     let n = map.size as u32;
     let half = f64::from(n) * map.resolution_m / 2.0;
     let note =

@@ -3,7 +3,7 @@
 
 use super::grid_picture::{CellBox, GridPicture, draw_grid_map, grey as grey_level, probability};
 use crate::drivers::grid::GridRun;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use microslam::geometry::Pose2;
 use microslam::grid::{GridGeometry, LogOdds};
 use microslam::pf::GridPfConfig;
@@ -67,7 +67,7 @@ pub fn write_outputs(
     metrics: &serde_json::Value,
     truth: Option<&[(f64, Pose2<f32>)]>,
 ) -> Result<()> {
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    super::create_folder(out)?;
     write_map_server(out, &run.cells, &run.geometry, &config.log_odds)?;
     let estimator = metrics["estimator"].as_str().unwrap_or("grid SLAM");
     let mut letters = estimator.chars();

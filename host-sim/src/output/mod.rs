@@ -23,6 +23,13 @@ use microslam::geometry::Pose2;
 use std::path::Path;
 use std::time::Instant;
 
+/// Creates the folder `path` (and its parents) for a command's outputs; the error names
+/// the folder.
+pub fn create_folder(path: &Path) -> Result<()> {
+    std::fs::create_dir_all(path)
+        .with_context(|| format!("creating the output folder {}", path.display()))
+}
+
 /// Writes `landmarks.csv`, `map.png` and `errors.png` (when `plots`), then `metrics.json`
 /// with the wall time since `started`. (`trajectory.tum` and `groundtruth.tum` need no
 /// metrics: [`write_trajectory`] and [`write_truth`] run while the metrics are computed.)
@@ -37,7 +44,7 @@ pub fn write_all(
     let alignment = metrics
         .se2_alignment
         .map_or(Pose2::IDENTITY, |[x, y, theta]| Pose2::new(x, y, theta));
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    create_folder(out)?;
     if plots {
         let (map, errors) = std::thread::scope(|s| {
             let map = s.spawn(|| draw_map(&out.join("map.png"), recording, run, &alignment));
@@ -64,7 +71,7 @@ pub fn join_writer(writer: std::thread::ScopedJoinHandle<'_, Result<()>>) -> Res
 
 /// Writes `trajectory.tum` (the filter's estimate after each event) into `out`, creating it.
 pub fn write_trajectory(out: &Path, run: &ReplayRun) -> Result<()> {
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    create_folder(out)?;
     write_tum_slice(&out.join("trajectory.tum"), &run.trajectory, |p| {
         (p.stamp, p.pose)
     })
@@ -92,9 +99,30 @@ pub fn write_landmarks(path: &Path, run: &ReplayRun) -> Result<()> {
 
 /// Writes `groundtruth.tum` (the recording's ground truth) into `out`, creating it.
 pub fn write_truth(out: &Path, recording: &Recording) -> Result<()> {
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    create_folder(out)?;
     write_tum(
         &out.join("groundtruth.tum"),
         recording.ground_truth.iter().map(|p| (p.stamp, p.pose)),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_output_folder_that_cannot_be_made_is_named_in_the_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("a-file");
+        std::fs::write(&file, b"not a folder").unwrap();
+        let inside = file.join("out");
+        let e = format!("{:#}", create_folder(&inside).unwrap_err());
+        assert!(
+            e.contains("creating the output folder") && e.contains(&*inside.to_string_lossy()),
+            "{e}"
+        );
+        let fine = dir.path().join("a/b");
+        create_folder(&fine).unwrap();
+        assert!(fine.is_dir());
+    }
 }

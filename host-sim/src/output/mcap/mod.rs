@@ -56,7 +56,7 @@ impl McapFile {
     /// for Foxglove recordings).
     pub fn create(path: &Path, profile: &str) -> Result<Self> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            crate::output::create_folder(dir)?;
         }
         let file = File::create(path).with_context(|| format!("creating {}", path.display()))?;
         let writer = mcap::WriteOptions::new()
