@@ -303,12 +303,26 @@ impl<const P: usize> ParticleFilter<P> {
         search: ShiftSearch,
         shift_penalty: f32,
     ) -> Result<UpdateReport, PfError> {
+        let k = self.config.shift_window_cells;
+        self.update_in_window(map, points, (search, shift_penalty), k)
+    }
+
+    /// [`ParticleFilter::update_with_prior`] over a shift window of half-width `k`
+    /// instead of the configured one (clamped to [`super::correlation::MAX_SHIFT_WINDOW`]
+    /// by the search).
+    pub(crate) fn update_in_window(
+        &mut self,
+        map: &GridView<'_>,
+        points: &[ScanPoint],
+        search: PriorSearch,
+        k: u8,
+    ) -> Result<UpdateReport, PfError> {
+        let (search, shift_penalty) = search;
         if points.is_empty() {
             return Err(PfError::EmptyScan);
         }
         let res = map.geometry().resolution;
         let scale = self.config.log_likelihood_per_unit / WEIGHT_ONE as f32;
-        let k = self.config.shift_window_cells;
         let mut shifts = [ShiftScore {
             dx: 0,
             dy: 0,

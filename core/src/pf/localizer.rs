@@ -116,6 +116,12 @@ pub struct RelocalizationConfig {
     /// by one node budget while giving the search several (a microcontroller cannot
     /// spend a whole search between two scans).
     pub search_scans: u8,
+    /// Half-width, cells, of the shift window while the localizer is
+    /// [`LocalizerState::Relocalized`] (until [`LostDetection::confirm_scans`] good
+    /// scans): the particles of a hypothesis, which is only as good as the search's cell
+    /// and heading step, are pulled onto the walls from further than the tracking window
+    /// ([`GridPfConfig::for_localizer`]) reaches. 0: the tracking window throughout.
+    pub pull_in_window_cells: u8,
 }
 
 impl RelocalizationConfig {
@@ -130,6 +136,7 @@ impl RelocalizationConfig {
         spread_m: 0.0,
         spread_rad: 0.0,
         search_scans: 5,
+        pull_in_window_cells: 4,
     };
 
     /// `true` when every setting is finite and in range.
@@ -143,6 +150,7 @@ impl RelocalizationConfig {
             && self.spread_rad.is_finite()
             && self.spread_rad >= 0.0
             && self.search_scans >= 1
+            && self.pull_in_window_cells <= super::correlation::MAX_SHIFT_WINDOW
     }
 }
 
@@ -263,6 +271,9 @@ pub struct GridLocalizer<'m, const P: usize, const B: usize> {
     /// The shift search: the general one, or the one for the map's row length
     /// ([`GridLocalizer::with_bitmap_row_bytes`]).
     search: ShiftSearch,
+    /// The same for the pull-in window after a relocalization
+    /// ([`RelocalizationConfig::pull_in_window_cells`]).
+    pull_in_search: ShiftSearch,
     /// The global search under way when it spans scans
     /// ([`RelocalizationConfig::search_scans`]).
     relocalizing: Option<Relocalizing>,
@@ -303,6 +314,7 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
             ),
             hypotheses: Hypotheses::new(),
             search: search_window,
+            pull_in_search: search_window,
             relocalizing: None,
         })
     }
@@ -348,6 +360,7 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
         } else {
             search_window_sparse_rows::<S>
         };
+        self.pull_in_search = search_window_sparse_rows::<S>;
         Ok(self)
     }
 
@@ -537,9 +550,16 @@ impl<'m, const P: usize, const B: usize> GridLocalizer<'m, P, B> {
                 map: ScanIntegration::default(),
             });
         }
-        let u = self
-            .filter
-            .update_with(&self.map, self.points.as_slice(), self.search)?;
+        // Right after a relocalization the wider pull-in window, then the tracking one.
+        let pull_in = self.relocalization.pull_in_window_cells;
+        let (search, k) = if self.status.state == LocalizerState::Relocalized && pull_in > 0 {
+            (self.pull_in_search, pull_in)
+        } else {
+            (self.search, self.config.filter.shift_window_cells)
+        };
+        let u =
+            self.filter
+                .update_in_window(&self.map, self.points.as_slice(), (search, 0.0), k)?;
         self.pose = u.best_pose;
         self.track_score(u.best_shift.score);
         Ok(StepReport {
@@ -678,5 +698,43 @@ impl<const P: usize, const B: usize> GridLocalizer<'_, P, B> {
             s.lost_events = s.lost_events.wrapping_add(1);
             s.search_pending = self.layers.is_some() && self.relocalization.automatic;
         }
+    }
+}
+
+#[cfg(test)]
+mod pull_in_tests {
+    use super::*;
+    use crate::pf::tests::{Grid, LIDAR, simulate};
+
+    /// After a relocalization the localizer scores over the pull-in window: particles
+    /// three cells off the truth in x and in y reach it with one scan; with the tracking
+    /// window (3 × 3) alone they move by one cell.
+    #[test]
+    fn a_relocalized_localizer_pulls_in_from_further_than_it_tracks() {
+        let sim = simulate(5);
+        let config = GridPfConfig::DEFAULT;
+        let mut map = Box::new(Grid::centred(config.resolution, config.log_odds));
+        for (p, r) in sim.truth.iter().zip(&sim.scans).step_by(5) {
+            map.integrate_scan(p, &LidarScan::new(r, LIDAR), 1).unwrap();
+        }
+        let k = 40;
+        let truth = sim.truth[k];
+        let off = Pose2::new(truth.x + 0.15, truth.y - 0.15, truth.theta);
+        let error_after_one_scan = |pull_in: u8| {
+            let mut loc =
+                GridLocalizer::<32, 180>::new(map.view(), config.for_localizer(), off).unwrap();
+            loc.relocalization.pull_in_window_cells = pull_in;
+            loc.status.state = LocalizerState::Relocalized;
+            loc.observe(&LidarScan::new(&sim.scans[k], LIDAR)).unwrap();
+            let p = loc.pose();
+            (p.x - truth.x).hypot(p.y - truth.y)
+        };
+        let (wide, narrow) = (error_after_one_scan(4), error_after_one_scan(0));
+        std::println!(
+            "one scan from 0.21 m off: pull-in window {wide:.3} m, tracking window {narrow:.3} m"
+        );
+        assert!(wide <= 0.05, "{wide}");
+        // The 3 × 3 window moves a particle by at most one cell (0.05 m) in x and in y.
+        assert!(narrow >= 0.13, "{narrow}");
     }
 }

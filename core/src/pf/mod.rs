@@ -183,6 +183,8 @@ impl GridPfConfig {
     /// of the scans, with the odometry's distances 10 % too long, with 200 particles and
     /// on the simulator's office; no shift at all loses the robot. On the Cortex-M4F the
     /// step costs less than half as much as with 9 × 9 (`docs/firmware-localizer.md`).
+    /// Right after a global relocalization the localizer widens the window for a few
+    /// scans ([`RelocalizationConfig::pull_in_window_cells`]).
     ///
     /// ```
     /// use microslam::pf::{GridPfConfig, LOCALIZER_SHIFT_WINDOW};
