@@ -89,7 +89,7 @@ pub const GRID_SETUP: crate::wire::GridSetup = crate::wire::GridSetup::EXAMPLE;
 pub const LOCALIZER_PARTICLES: usize = 64;
 
 /// Settings of the localizer: the grid estimator's (the map image is made with its
-/// log-odds thresholds) with the localizer's 5 × 5 shift window
+/// log-odds thresholds) with the localizer's 3 × 3 shift window
 /// ([`GridPfConfig::for_localizer`]).
 pub const LOCALIZER_CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER.for_localizer();
 

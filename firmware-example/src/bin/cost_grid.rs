@@ -1,7 +1,7 @@
 //! Instructions per grid particle-filter step under QEMU `-icount shift=6` (see
 //! `firmware_example::cost`): grid SLAM at P = 16, 32, 64 particles, 90 beams, 9 × 9
 //! shift window, a 256 × 256 grid of 5 cm cells, in a synthetic 6 m × 6 m room with a
-//! pillar; then the localizer (no map writes, the firmware's `LOCALIZER_CONFIG`: a 5 × 5
+//! pillar; then the localizer (no map writes, the firmware's `LOCALIZER_CONFIG`: a 3 × 3
 //! window) at P = 32, 64, 128 on the map the SLAM runs built, read through its
 //! occupied-cell bitmap alone (as a map image in flash is).
 //!
