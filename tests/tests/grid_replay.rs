@@ -92,6 +92,13 @@ fn intel_grid_slam_relation_error() {
     assert_eq!(el.used, 1030);
     assert!(el.trans_mean_m < 0.034, "{el:?}");
     assert!(el.rot_mean_deg < 0.32, "{el:?}");
+    // The localizer's lost detection over the run (SLAM has none). Measured: one lost
+    // event (a stretch of low hit fractions; without layers it does not search) and
+    // tracking again at the end.
+    assert_eq!(run.localizer, None);
+    let summary = loc.localizer.expect("a localizer's summary");
+    assert!(summary.lost_events <= 1, "{summary:?}");
+    assert_eq!(summary.final_state, "tracking", "{summary:?}");
 }
 
 #[test]

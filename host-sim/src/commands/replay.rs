@@ -236,6 +236,7 @@ pub(crate) fn metrics_json(
         "beam_decimation": options.config.beam_decimation,
         "range_weight_exponent": options.config.range_weight_exponent,
         "seed": options.config.filter.seed,
+        "localizer": run.localizer,
     })
 }
 

@@ -264,6 +264,7 @@ pub fn run_and_write(
             "beam_decimation": config.beam_decimation,
             "range_weight_exponent": config.range_weight_exponent,
             "seed": config.filter.seed,
+            "localizer": run.localizer,
         });
         write_outputs(&dir, run, &config, &metrics, Some(&truth))?;
         write_tum(

@@ -14,7 +14,7 @@ use crate::inputs::sim::lidar_world::LidarRecording;
 use anyhow::{Result, anyhow, bail};
 use microslam::geometry::Pose2;
 use microslam::grid::{GridGeometry, GridView, OccupancyGrid};
-use microslam::pf::{GridEstimator, GridLocalizer, GridPfConfig, GridSlam};
+use microslam::pf::{GridEstimator, GridLocalizer, GridPfConfig, GridSlam, LocalizerState};
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
 use std::time::Instant;
 
@@ -63,6 +63,23 @@ pub struct GridRun {
     /// The map as it grew ([`run_slam_observed`] with `snapshot_every` > 0; empty otherwise): the first entry holds
     /// the known cells of the starting map, each later one the cells changed since.
     pub snapshots: Vec<MapChanges>,
+    /// A localizer's lost detection at the end of the run (`None` for SLAM).
+    pub localizer: Option<LocalizerSummary>,
+}
+
+/// What a localizer's lost detection saw over a run ([`microslam::pf::LocalizerStatus`]).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct LocalizerSummary {
+    /// Times it declared itself lost.
+    pub lost_events: u32,
+    /// Global relocalizations it made.
+    pub relocalizations: u32,
+    /// Its state after the last scan (`tracking`, `lost`, `relocalized`).
+    pub final_state: &'static str,
+    /// The last scan's hit fraction (best particle's correlation / the beams' weight).
+    pub final_hit_fraction: f32,
+    /// The running mean of the hit fraction while tracking.
+    pub expected_hit_fraction: f32,
 }
 
 /// Cells of the map that changed since the previous snapshot.
@@ -98,6 +115,7 @@ impl GridRun {
             refused_odometry: 0,
             non_finite_beams: 0,
             snapshots: Vec::new(),
+            localizer: None,
         }
     }
 }
@@ -373,6 +391,18 @@ fn localize_p<const P: usize>(
         0,
     )?;
     run.filter_time_s = t0.elapsed().as_secs_f64() - run.observer_time_s;
+    let s = loc.status();
+    run.localizer = Some(LocalizerSummary {
+        lost_events: s.lost_events,
+        relocalizations: s.relocalizations,
+        final_state: match s.state {
+            LocalizerState::Tracking => "tracking",
+            LocalizerState::Lost => "lost",
+            LocalizerState::Relocalized => "relocalized",
+        },
+        final_hit_fraction: s.hit_fraction,
+        expected_hit_fraction: s.expected_hit_fraction,
+    });
     Ok(run)
 }
 
