@@ -704,7 +704,7 @@ impl<const P: usize, const B: usize> GridLocalizer<'_, P, B> {
 #[cfg(test)]
 mod pull_in_tests {
     use super::*;
-    use crate::pf::tests::{Grid, LIDAR, simulate};
+    use crate::pf::tests::{LIDAR, simulate, true_map};
 
     /// After a relocalization the localizer scores over the pull-in window: particles
     /// three cells off the truth in x and in y reach it with one scan; with the tracking
@@ -713,10 +713,7 @@ mod pull_in_tests {
     fn a_relocalized_localizer_pulls_in_from_further_than_it_tracks() {
         let sim = simulate(5);
         let config = GridPfConfig::DEFAULT;
-        let mut map = Box::new(Grid::centred(config.resolution, config.log_odds));
-        for (p, r) in sim.truth.iter().zip(&sim.scans).step_by(5) {
-            map.integrate_scan(p, &LidarScan::new(r, LIDAR), 1).unwrap();
-        }
+        let map = true_map(&sim, &config);
         let k = 40;
         let truth = sim.truth[k];
         let off = Pose2::new(truth.x + 0.15, truth.y - 0.15, truth.theta);

@@ -3,7 +3,7 @@
 //! other noise.
 
 use super::global::{self, GlobalSearchConfig, Hypotheses};
-use super::tests::{Grid, LIDAR, Sim, simulate};
+use super::tests::{Grid, LIDAR, Sim, simulate, true_map};
 use super::*;
 use crate::geometry::{Pose2, wrap_angle};
 use crate::grid::{GridView, MaxPoolLayers};
@@ -13,12 +13,8 @@ const LEVELS: u8 = 6;
 
 /// The room's map (from run 5's true poses) and its max-pooled layers.
 fn room_map() -> (Box<Grid>, Vec<u8>) {
-    let sim = simulate(5);
     let config = GridPfConfig::DEFAULT;
-    let mut map = Box::new(Grid::centred(config.resolution, config.log_odds));
-    for (p, r) in sim.truth.iter().zip(&sim.scans).step_by(5) {
-        map.integrate_scan(p, &LidarScan::new(r, LIDAR), 1).unwrap();
-    }
+    let map = true_map(&simulate(5), &config);
     let view = map.view();
     let mut layers = vec![0u8; MaxPoolLayers::bytes_for(256, 256, LEVELS).unwrap()];
     MaxPoolLayers::build(&view, config.log_odds.free_below, LEVELS, &mut layers).unwrap();

@@ -169,14 +169,21 @@ fn simulated_slam_beats_odometry_and_stays_within_bound() {
     assert!(occupied > 110, "{occupied} of 140 wall cells");
 }
 
-#[test]
-fn simulated_localizer_on_a_true_map() {
-    let sim = simulate(5);
-    let config = GridPfConfig::DEFAULT;
+/// The simulated room's map with `config`'s cells, drawn from every fifth scan of `sim`
+/// at its true poses (what a localizer's map in flash would hold).
+pub(super) fn true_map(sim: &Sim, config: &GridPfConfig) -> Box<Grid> {
     let mut map = Box::new(Grid::centred(config.resolution, config.log_odds));
     for (p, r) in sim.truth.iter().zip(&sim.scans).step_by(5) {
         map.integrate_scan(p, &LidarScan::new(r, LIDAR), 1).unwrap();
     }
+    map
+}
+
+#[test]
+fn simulated_localizer_on_a_true_map() {
+    let sim = simulate(5);
+    let config = GridPfConfig::DEFAULT;
+    let map = true_map(&sim, &config);
     // The map as a borrowed slice, as a flash map would be.
     let cells: &[i8] = map.cells();
     let view = GridView::new(cells, *map.geometry(), config.log_odds.occupied_above).unwrap();
