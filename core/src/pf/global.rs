@@ -55,7 +55,7 @@
 //! the tabled dilations (≈ 3.5 KB of stack).
 
 use super::correlation::ScanPoint;
-use crate::geometry::{Pose2, wrap_angle};
+use crate::geometry::{Pose2, wrap_angle, wrap_near};
 use crate::grid::{GridView, MaxPoolLayers, floor_i32};
 use core::fmt;
 
@@ -263,9 +263,14 @@ impl<const N: usize> Hypotheses<N> {
         if N == 0 || (self.len >= N && h.score <= self.floor()) {
             return;
         }
+        // No trigonometry and no square root: a search that holds many candidates
+        // above its threshold offers one per leaf, and libm's `sincosf`, `atan2f` and
+        // `hypotf` cost thousands of Cortex-M4F instructions each (headings are in
+        // (−π, π], so their difference is within `wrap_near`'s one turn).
         let near = |o: &Hypothesis| {
-            libm::hypotf(o.pose.x - h.pose.x, o.pose.y - h.pose.y) < sep_m
-                && libm::fabsf(wrap_angle(o.pose.theta - h.pose.theta)) < sep_rad
+            let (dx, dy) = (o.pose.x - h.pose.x, o.pose.y - h.pose.y);
+            dx * dx + dy * dy < sep_m * sep_m
+                && libm::fabsf(wrap_near(o.pose.theta - h.pose.theta)) < sep_rad
         };
         if self
             .as_slice()
@@ -521,9 +526,10 @@ impl EndCells {
     }
 }
 
-/// Heading `j` of the candidate set, radians in (−π, π].
+/// Heading `j` of the candidate set, radians in (−π, π] (`j · step` is within one turn:
+/// no trigonometry).
 fn heading_angle(j: u32, step: f32) -> f32 {
-    wrap_angle(j as f32 * step)
+    wrap_near(j as f32 * step)
 }
 
 /// Cells an end cell may move, at most, when the heading moves by up to `delta` radians
