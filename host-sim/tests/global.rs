@@ -1,14 +1,15 @@
 //! Global localization on the Intel map (`docs/global-localization.md`): 20 starts without
 //! a pose on the map of a host grid-SLAM run, P = 64, with a 4 000 000-node search, with
-//! and without the full turn after the heading windows. Deterministic: the counts are the
-//! measured ones (the bar is 19 of 20).
+//! and without the full turn after the heading windows, and with the device's settings
+//! and node budget. Deterministic: the counts are the measured ones (the bar is
+//! 19 of 20).
 
 mod common;
 
 use common::{host_sim, succeeds};
 use std::path::Path;
 
-fn global(dir: &Path, map: &Path, full_turn_below: &str) -> serde_json::Value {
+fn global(dir: &Path, map: &Path, settings: &[&str]) -> serde_json::Value {
     succeeds(
         host_sim()
             .args(["localize", "--map"])
@@ -21,12 +22,9 @@ fn global(dir: &Path, map: &Path, full_turn_below: &str) -> serde_json::Value {
                 "20",
                 "--particles",
                 "64",
-                "--node-budget",
-                "4000000",
-                "--full-turn-below",
-                full_turn_below,
-                "--out",
             ])
+            .args(settings)
+            .arg("--out")
             .arg(dir),
     );
     let text = std::fs::read_to_string(dir.join("metrics.json")).expect("metrics.json");
@@ -64,18 +62,45 @@ fn intel_global_localization_finds_every_start_with_the_full_turn() {
     );
     let map = slam.join("map.yaml");
 
-    let with = global(&dir.path().join("with"), &map, "0.6");
+    let with = global(
+        &dir.path().join("with"),
+        &map,
+        &["--node-budget", "4000000", "--full-turn-below", "0.6"],
+    );
     assert_eq!(with["trials"], 20);
     assert_eq!(with["successes"], 20, "{:?}", with["scans_to_converge"]);
     assert_eq!(with["searches_complete"], 20);
     // The starts whose wall directions put the true heading outside every window.
     assert_eq!(full_turn_starts(&with), [389, 407, 450, 795]);
 
-    let without = global(&dir.path().join("without"), &map, "0");
+    let without = global(
+        &dir.path().join("without"),
+        &map,
+        &["--node-budget", "4000000", "--full-turn-below", "0"],
+    );
     assert_eq!(
         without["successes"], 18,
         "{:?}",
         without["scans_to_converge"]
     );
     assert!(full_turn_starts(&without).is_empty());
+
+    // The device's settings and search budget (21 000 nodes of 30 beams a scan, up to 5
+    // scans) on the map's bitmap, as the localizer firmware holds it.
+    let device = global(
+        &dir.path().join("device"),
+        &map,
+        &[
+            "--beams",
+            "90",
+            "--preset",
+            "microcontroller",
+            "--levels",
+            "5",
+            "--bitmap-only",
+        ],
+    );
+    assert_eq!(device["search"]["node_budget"], 21_000);
+    assert_eq!(device["successes"], 17, "{:?}", device["scans_to_converge"]);
+    assert_eq!(device["searches_complete"], 13);
 }

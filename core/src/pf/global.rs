@@ -124,7 +124,7 @@ impl GlobalSearchConfig {
         relative_score: 0.8,
         first_pass_fraction: 0.8,
         pass_step: 0.1,
-        node_budget: 11_000,
+        node_budget: 21_000,
         separation_m: 0.5,
         separation_rad: 0.35,
         heading_peaks: 3,
@@ -356,12 +356,14 @@ pub struct SearchReport {
 }
 
 impl SearchReport {
-    /// Estimated Cortex-M4F instructions of the search: `nodes · (72 · beams + 2560)`
-    /// (end-cell rotations, about one per two nodes, folded in) — fitted to QEMU
-    /// instruction counts of 1000-node searches with 30 and 45 beams on a 128 × 128 map
-    /// (4.72 M and 5.80 M instructions); see `docs/global-localization.md`.
+    /// Estimated Cortex-M4F instructions of the search: `nodes · (64 · beams + 50)`
+    /// (end-cell rotations and leaves folded in) — the instructions per node of the
+    /// budget-stopped relocalization scan under QEMU (`cost_relocalize`, every minimum
+    /// score at 0 so that every leaf is a hypothesis offered: 1 969 per node with 30
+    /// beams, 2 931 with 45, from 11 000 and 21 000 nodes); see
+    /// `docs/global-localization.md`.
     pub fn estimated_instructions(&self) -> u64 {
-        u64::from(self.nodes) * (72 * u64::from(self.beams) + 2560)
+        u64::from(self.nodes) * (64 * u64::from(self.beams) + 50)
     }
 }
 
