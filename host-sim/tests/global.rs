@@ -44,7 +44,7 @@ fn full_turn_starts(g: &serde_json::Value) -> Vec<u64> {
 }
 
 #[test]
-fn intel_global_localization_finds_every_start_with_the_full_turn() {
+fn intel_global_localization_with_a_large_budget_and_with_the_devices() {
     let dir = tempfile::tempdir().expect("temporary folder");
     let slam = dir.path().join("slam");
     succeeds(
