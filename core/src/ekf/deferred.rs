@@ -70,13 +70,6 @@ impl<T: Real> RowMap<T> {
         let a = &self.a;
         a[(r, 0)] * stored[0] + a[(r, 1)] * stored[1] + a[(r, 2)] * stored[2] + self.near(r, c)
     }
-
-    /// The true entries of the robot's three rows in column `c`.
-    #[inline]
-    pub(crate) fn column(&self, c: usize, stored: [T; 3]) -> [T; 3] {
-        let v = self.apply(stored);
-        [0, 1, 2].map(|r| v[r] + self.near(r, c))
-    }
 }
 
 /// A run of predictions kept as a [`RowMap`], with what the robot's covariance needs of

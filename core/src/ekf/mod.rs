@@ -926,6 +926,11 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// caps the robot's variances (see [`MAX_POSITION_VARIANCE`]); it is the identity
     /// unless a cap is exceeded. Checks everything before writing.
     ///
+    /// The caps are tested on the robot covariance the step leaves with `S = I` (the run's
+    /// coupled part plus the new own block, what [`EkfSlam::pose_covariance`] reads next):
+    /// no `F P Fᵀ` is formed beside the factor. A step that exceeds a cap is made again
+    /// with its `S`.
+    ///
     /// With the odometry scale factors as states (slot 0, factor rows 0 and 1, before
     /// every other state) the map also has `F_s = ∂pose'/∂s` (`wrt_scale`): the robot's
     /// rows gain `S F_s L_s`, with `L_s = [[1, 0], [l₁₀, 1]]` the scale rows of `L`; they
@@ -938,109 +943,61 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         wrt_scale: Option<&[[T; 2]; 3]>,
     ) -> Result<(), EkfError> {
         let run = self.deferred.unwrap_or_else(|| self.start_deferral());
-        let p_rr = run.coupled() + self.own_covariance();
-        let mut new_rr =
-            congruence(f, &p_rr) + congruence(g, &Matrix3::from_diagonal(&(*q).into()));
-        if let Some(fs) = wrt_scale.filter(|_| self.calibration & SCALE_SLOT != 0) {
-            // The scale states move the robot too: its variances gain the diagonal of
-            // F P_Rs F_sᵀ + F_s P_sR Fᵀ + F_s P_ss F_sᵀ, which the caps and the finiteness
-            // check below must see (a long step can make it overflow on its own).
-            for (a, v) in self
-                .scale_motion_variances(&run, f, fs)
-                .into_iter()
-                .enumerate()
-            {
-                new_rr[(a, a)] += v;
-            }
-        }
-        let scale = capped([
-            (new_rr[(0, 0)], MAX_POSITION_VARIANCE),
-            (new_rr[(1, 1)], MAX_POSITION_VARIANCE),
-            (new_rr[(2, 2)], MAX_HEADING_VARIANCE),
-        ]);
-        let s = Matrix3::from_diagonal(&scale.into());
-        let (f, g) = (product(&s, f), product(&s, g));
         let (lrr, dr) = self.robot_block();
-        let flrr = product(&f, &Matrix3::from_fn(|i, j| lrr[i][j]));
-        let mut w = [[T::ZERO; 6]; 3];
-        let mut weights = [T::ZERO; 6];
-        for a in 0..3 {
-            for c in 0..3 {
-                w[a][c] = flrr[(a, c)];
-                w[a][3 + c] = g[(a, c)];
-            }
-            weights[a] = dr[a];
-            weights[3 + a] = q[a];
-        }
-        let (l, d) = mwgs(w, &weights);
-        // S F_s L_s, rows of the robot over columns 0 and 1.
+        let lrr = Matrix3::from_fn(|i, j| lrr[i][j]);
         let l10 = self.factor.get(1).copied().unwrap_or(T::ZERO);
-        let scale_terms = wrt_scale.map(|fs| {
-            Matrix3::from_fn(|a, c| {
-                let (f0, f1) = (scale[a] * fs[a][0], scale[a] * fs[a][1]);
-                match c {
-                    0 => f0 + f1 * l10,
-                    1 => f1,
-                    _ => T::ZERO,
+        let estimated = self.calibration & SCALE_SLOT != 0;
+        // The step for the row scales `s` (the diagonal of `S`): the own block's new
+        // factor, the run after it, and the robot covariance they give.
+        let step = |s: [T; 3]| {
+            let f = Matrix3::from_fn(|i, j| s[i] * f[(i, j)]);
+            let flrr = product(&f, &lrr);
+            let mut w = [[T::ZERO; 6]; 3];
+            let mut weights = [T::ZERO; 6];
+            for a in 0..3 {
+                for c in 0..3 {
+                    w[a][c] = flrr[(a, c)];
+                    w[a][3 + c] = s[a] * g[(a, c)];
                 }
-            })
-        });
+                weights[a] = dr[a];
+                weights[3 + a] = q[a];
+            }
+            let (l, d) = mwgs(w, &weights);
+            // S F_s L_s, rows of the robot over columns 0 and 1.
+            let scale_terms = wrt_scale.map(|fs| {
+                Matrix3::from_fn(|a, c| {
+                    let (f0, f1) = (s[a] * fs[a][0], s[a] * fs[a][1]);
+                    match c {
+                        0 => f0 + f1 * l10,
+                        1 => f1,
+                        _ => T::ZERO,
+                    }
+                })
+            });
+            let next = run.then(&f, scale_terms.as_ref().filter(|_| estimated));
+            let own = congruence(
+                &Matrix3::from_fn(|i, j| l[i][j]),
+                &Matrix3::from_diagonal(&d.into()),
+            );
+            (l, d, next, next.coupled() + own, scale_terms)
+        };
+        let (mut l, mut d, mut next, p_rr, mut scale_terms) = step([T::ONE; 3]);
+        let scale = capped([
+            (p_rr[(0, 0)], MAX_POSITION_VARIANCE),
+            (p_rr[(1, 1)], MAX_POSITION_VARIANCE),
+            (p_rr[(2, 2)], MAX_HEADING_VARIANCE),
+        ]);
+        if scale.iter().any(|&s| s != T::ONE) {
+            (l, d, next, _, scale_terms) = step(scale);
+        }
         let scale_ok = scale_terms.is_none_or(|t| t.iter().all(|v| v.finite()));
-        let with_scale = scale_terms.filter(|_| self.calibration & SCALE_SLOT != 0);
-        let next = run.then(&f, with_scale.as_ref());
-        if !new_rr.iter().all(|v| v.finite())
-            || !all_finite(&l, &d)
-            || !next.is_finite()
-            || !scale_ok
+        if !p_rr.iter().all(|v| v.finite()) || !all_finite(&l, &d) || !next.is_finite() || !scale_ok
         {
             return Err(EkfError::NumericalFailure);
         }
         self.set_robot_block(&l, &d);
         self.deferred = Some(next);
         Ok(())
-    }
-
-    /// The diagonal of what a motion with `∂pose'/∂(s_v, s_ω) = fs` adds to the robot
-    /// covariance through the odometry scale states (factor rows 0 and 1,
-    /// `L_s = [[1, 0], [l₁₀, 1]]`): of `F P_Rs F_sᵀ + F_s P_sR Fᵀ + F_s P_ss F_sᵀ`, with
-    /// `P_Rs` and `P_ss` read from the scale columns of the factor (O(1)). The caps and
-    /// the finiteness check need the diagonal only: a covariance's off-diagonal entries
-    /// are bounded by its diagonal.
-    fn scale_motion_variances(
-        &self,
-        run: &DeferredMotion<T>,
-        f: &Matrix3<T>,
-        fs: &[[T; 2]; 3],
-    ) -> [T; 3] {
-        let r0 = self.active_dim() - 3;
-        let (d0, d1) = (pivot(&self.factor, 0), pivot(&self.factor, 1));
-        let l10 = self.factor.get(1).copied().unwrap_or(T::ZERO);
-        // The robot rows' columns 0 and 1, with the deferred predictions applied.
-        let stored = |c: usize| {
-            [0, 1, 2].map(|b| {
-                strict_row(&self.factor, r0 + b)
-                    .get(c)
-                    .copied()
-                    .unwrap_or(T::ZERO)
-            })
-        };
-        let (col0, col1) = (run.map.column(0, stored(0)), run.map.column(1, stored(1)));
-        // P_Rs row b: (L_b0 D₀, L_b0 D₀ l₁₀ + L_b1 D₁).
-        let prs = [0, 1, 2].map(|b| {
-            let (l0, l1) = (col0[b], col1[b]);
-            [l0 * d0, l0 * d0 * l10 + l1 * d1]
-        });
-        [0, 1, 2].map(|a| {
-            let [s0, s1] = fs[a];
-            let (mut u0, mut u1) = (T::ZERO, T::ZERO);
-            for (b, [p0, p1]) in prs.iter().enumerate() {
-                u0 += f[(a, b)] * *p0;
-                u1 += f[(a, b)] * *p1;
-            }
-            // P_ss = [[D₀, D₀ l₁₀], [D₀ l₁₀, D₀ l₁₀² + D₁]]: s P_ss sᵀ = D₀ (s₀ + l₁₀ s₁)² + D₁ s₁².
-            let t = s0 + l10 * s1;
-            T::lit(2.0) * (u0 * s0 + u1 * s1) + d0 * t * t + d1 * s1 * s1
-        })
     }
 
     /// The two measurement rows of a sighting of the landmark in slot `index` with Jacobians
