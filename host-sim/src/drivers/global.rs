@@ -7,7 +7,7 @@
 //! within the tolerance of the reference and stays there up to the last of those scans;
 //! `scans_to_converge` is the first scan (1-based) from which it stays.
 
-use super::grid::GridInput;
+use super::grid::{GridInput, state_name};
 use crate::domain::grid::{GlobalOptions, MAX_BEAMS};
 use anyhow::{Result, anyhow, bail};
 use microslam::geometry::{Pose2, wrap_angle};
@@ -58,6 +58,8 @@ pub struct Trial {
     pub error_m: Vec<f64>,
     /// Heading error after each scan, degrees.
     pub error_deg: Vec<f64>,
+    /// The localizer's state after each scan (`lost`, `relocalized`, `tracking`).
+    pub state: Vec<&'static str>,
     /// Position error of the search's best hypothesis, metres.
     pub best_hypothesis_error_m: f64,
     /// Hypotheses the particles were spread over.
@@ -323,6 +325,7 @@ fn trial_p<const P: usize>(
         scans_to_converge: None,
         error_m: Vec::new(),
         error_deg: Vec::new(),
+        state: Vec::new(),
         best_hypothesis_error_m: f64::NAN,
         hypotheses: 0,
         search: None,
@@ -364,6 +367,7 @@ fn trial_p<const P: usize>(
         let (m, d) = errors(&loc.pose(), want);
         trial.error_m.push(m);
         trial.error_deg.push(d);
+        trial.state.push(state_name(loc.state()));
     }
     trial.failed_searches = loc.status().failed_searches;
     let within: Vec<bool> = trial

@@ -395,15 +395,20 @@ fn localize_p<const P: usize>(
     run.localizer = Some(LocalizerSummary {
         lost_events: s.lost_events,
         relocalizations: s.relocalizations,
-        final_state: match s.state {
-            LocalizerState::Tracking => "tracking",
-            LocalizerState::Lost => "lost",
-            LocalizerState::Relocalized => "relocalized",
-        },
+        final_state: state_name(s.state),
         final_hit_fraction: s.hit_fraction,
         expected_hit_fraction: s.expected_hit_fraction,
     });
     Ok(run)
+}
+
+/// The name of a localizer state in `metrics.json`.
+pub fn state_name(state: LocalizerState) -> &'static str {
+    match state {
+        LocalizerState::Tracking => "tracking",
+        LocalizerState::Lost => "lost",
+        LocalizerState::Relocalized => "relocalized",
+    }
 }
 
 /// The driver's inputs from CARMEN laser messages (odometry narrowed to `f32`).

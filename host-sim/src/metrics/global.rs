@@ -14,6 +14,25 @@ pub fn metrics(
         .iter()
         .filter(|t| t.scans_to_converge.is_some())
         .count();
+    // A trial claims a wrong pose when the localizer says it is tracking (a confirmed
+    // relocalization) while outside the tolerance: the failure a robot cannot see.
+    let wrong_claims = trials
+        .iter()
+        .filter(|t| {
+            t.state
+                .iter()
+                .zip(t.error_m.iter().zip(&t.error_deg))
+                .any(|(s, (m, d))| {
+                    *s == "tracking" && (*m > settings.tolerance_m || *d > settings.tolerance_deg)
+                })
+        })
+        .count();
+    let ending = |name: &str| {
+        trials
+            .iter()
+            .filter(|t| t.state.last() == Some(&name))
+            .count()
+    };
     let mut hits: Vec<f32> = reference.hit_fractions.clone();
     hits.sort_by(f32::total_cmp);
     let pct = |p: f64| -> f64 {
@@ -43,6 +62,12 @@ pub fn metrics(
     serde_json::json!({
         "trials": trials.len(),
         "successes": successes,
+        "tracking_a_wrong_pose": wrong_claims,
+        "final_states": {
+            "tracking": ending("tracking"),
+            "relocalized": ending("relocalized"),
+            "lost": ending("lost"),
+        },
         "scans_to_converge": trials.iter().map(|t| t.scans_to_converge).collect::<Vec<_>>(),
         "tolerance_m": settings.tolerance_m,
         "tolerance_deg": settings.tolerance_deg,
