@@ -15,7 +15,7 @@
 //! The noise of each form is configuration ([`IncrementNoise`], [`VelocityNoise`]); nothing
 //! here hard-codes a covariance.
 
-use crate::geometry::{Pose2, wrap_angle};
+use crate::geometry::{Pose2, wrap_near};
 use crate::scalar::Real;
 use nalgebra::{Matrix2, Matrix3, Matrix3x2};
 
@@ -36,7 +36,7 @@ pub struct MotionStep<T: Real, const U: usize> {
 /// Compounds `pose ⊕ increment` and returns the Jacobians with respect to the pose (A)
 /// and to the increment (W).
 pub fn compose_increment<T: Real>(pose: &Pose2<T>, inc: &OdometryIncrement<T>) -> MotionStep<T, 3> {
-    let (s, c) = pose.theta.sin_cos();
+    let (s, c) = pose.theta.sin_cos_native();
     let wrt_pose = Matrix3::new(
         T::ONE,
         T::ZERO,
@@ -65,7 +65,7 @@ fn sinc_and_derivative<T: Real>(h: T) -> (T, T) {
             -h / T::lit(3.0) + h * h2 / T::lit(30.0),
         )
     } else {
-        let (s, c) = h.sin_cos();
+        let (s, c) = h.sin_cos_native();
         (s / h, (h * c - s) / (h * h))
     }
 }
@@ -77,7 +77,7 @@ pub fn integrate_velocity<T: Real>(pose: &Pose2<T>, v: T, omega: T, dt: T) -> Mo
     let (sinc, dsinc) = sinc_and_derivative(half);
     let chord = v * dt * sinc;
     let phi = pose.theta + half;
-    let (sp, cp) = phi.sin_cos();
+    let (sp, cp) = phi.sin_cos_native();
     let dchord_dv = dt * sinc;
     let dchord_dw = v * dt * dsinc * dt / T::lit(2.0);
     let half_dt = dt / T::lit(2.0);
@@ -104,7 +104,7 @@ pub fn integrate_velocity<T: Real>(pose: &Pose2<T>, v: T, omega: T, dt: T) -> Mo
         pose: Pose2::new(
             pose.x + chord * cp,
             pose.y + chord * sp,
-            wrap_angle(pose.theta + omega * dt),
+            wrap_near(pose.theta + omega * dt),
         ),
         wrt_pose,
         wrt_input,

@@ -114,7 +114,7 @@ impl<T: Real> RangeBearingSensor<T> {
 
     /// Sensor pose in the world and ∂(s_x, s_y)/∂θ of the robot.
     fn sensor_pose(&self, robot: &Pose2<T>) -> (T, T, T, T, T) {
-        let (s, c) = robot.theta.sin_cos();
+        let (s, c) = robot.theta.sin_cos_native();
         let m = &self.mount;
         let sx = robot.x + c * m.x - s * m.y;
         let sy = robot.y + s * m.x + c * m.y;
@@ -158,7 +158,7 @@ impl<T: Real> RangeBearingSensor<T> {
     /// with its Jacobians.
     pub fn landmark_from(&self, robot: &Pose2<T>, z: &RangeBearing<T>) -> InverseObservation<T> {
         let (sx, sy, sth, dsx_dth, dsy_dth) = self.sensor_pose(robot);
-        let (sp, cp) = (sth + z.bearing).sin_cos();
+        let (sp, cp) = (sth + z.bearing).sin_cos_native();
         let r = z.range;
         InverseObservation {
             landmark: Vector2::new(sx + r * cp, sy + r * sp),
