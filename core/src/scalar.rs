@@ -49,7 +49,10 @@ impl Real for f32 {
         self.is_finite()
     }
 
-    #[inline]
+    // Not inlined on a microcontroller: one copy of the polynomials in the firmware's
+    // flash for the five call sites of the motion and sighting models.
+    #[cfg_attr(target_os = "none", inline(never))]
+    #[cfg_attr(not(target_os = "none"), inline)]
     fn sin_cos_native(self) -> (Self, Self) {
         if self.abs() <= 100.0 {
             crate::geometry::sin_cos_f32(self)
