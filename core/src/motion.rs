@@ -36,7 +36,7 @@ pub struct MotionStep<T: Real, const U: usize> {
 /// Compounds `pose ⊕ increment` and returns the Jacobians with respect to the pose (A)
 /// and to the increment (W).
 pub fn compose_increment<T: Real>(pose: &Pose2<T>, inc: &OdometryIncrement<T>) -> MotionStep<T, 3> {
-    let (s, c) = pose.theta.sin_cos_native();
+    let (s, c) = pose.theta.sin_cos();
     let wrt_pose = Matrix3::new(
         T::ONE,
         T::ZERO,

@@ -50,7 +50,7 @@ impl Real for f32 {
     }
 
     // Not inlined on a microcontroller: one copy of the polynomials in the firmware's
-    // flash for the five call sites of the motion and sighting models.
+    // flash for the four call sites of the velocity motion model and the sighting model.
     #[cfg_attr(target_os = "none", inline(never))]
     #[cfg_attr(not(target_os = "none"), inline)]
     fn sin_cos_native(self) -> (Self, Self) {
