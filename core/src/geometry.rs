@@ -199,11 +199,19 @@ impl<T: Real> Pose2<T> {
     /// `self` is expressed in. The heading of the result is wrapped.
     #[inline]
     pub fn compose(&self, other: &Self) -> Self {
-        let (s, c) = self.theta.sin_cos();
+        let p = self.compose_unwrapped(other, self.theta.sin_cos());
+        Self::new(p.x, p.y, wrap_angle(p.theta))
+    }
+
+    /// [`Pose2::compose`] with `(sin θ, cos θ)` of `self`'s heading given (for a caller that
+    /// has them already, e.g. for the Jacobians of the composition) and the heading of the
+    /// result the plain sum, not wrapped.
+    #[inline]
+    pub fn compose_unwrapped(&self, other: &Self, (s, c): (T, T)) -> Self {
         Self::new(
             self.x + c * other.x - s * other.y,
             self.y + s * other.x + c * other.y,
-            wrap_angle(self.theta + other.theta),
+            self.theta + other.theta,
         )
     }
 

@@ -34,9 +34,12 @@ pub struct MotionStep<T: Real, const U: usize> {
 }
 
 /// Compounds `pose ⊕ increment` and returns the Jacobians with respect to the pose (A)
-/// and to the increment (W).
+/// and to the increment (W). The pose and the Jacobians share one `sin`/`cos` of the
+/// heading, in the scalar's own arithmetic ([`Real::sin_cos_native`]), and the heading is
+/// wrapped without trigonometry ([`wrap_near`]), as in [`integrate_velocity`].
 pub fn compose_increment<T: Real>(pose: &Pose2<T>, inc: &OdometryIncrement<T>) -> MotionStep<T, 3> {
-    let (s, c) = pose.theta.sin_cos();
+    let (s, c) = pose.theta.sin_cos_native();
+    let moved = pose.compose_unwrapped(inc, (s, c));
     let wrt_pose = Matrix3::new(
         T::ONE,
         T::ZERO,
@@ -50,7 +53,7 @@ pub fn compose_increment<T: Real>(pose: &Pose2<T>, inc: &OdometryIncrement<T>) -
     );
     let wrt_input = Matrix3::new(c, -s, T::ZERO, s, c, T::ZERO, T::ZERO, T::ZERO, T::ONE);
     MotionStep {
-        pose: pose.compose(inc),
+        pose: Pose2::new(moved.x, moved.y, wrap_near(moved.theta)),
         wrt_pose,
         wrt_input,
     }
@@ -208,6 +211,54 @@ mod tests {
     use super::*;
     use crate::testing::{assert_jacobian, central_difference};
     use nalgebra::{DVector, Vector3};
+
+    /// The increment model's pose is `Pose2::compose`'s (which uses `libm` and
+    /// `wrap_angle`), across the ±π seam too: to rounding in `f64`, and within the `f32`
+    /// sine and cosine's error in `f32`.
+    #[test]
+    fn increment_pose_is_the_composition() {
+        let poses = [
+            (0.3, -1.2, 0.4),
+            (2.0, 1.0, -2.8),
+            (-5.0, 7.0, 3.1),
+            (1.0, 1.0, -3.13),
+        ];
+        let incs = [
+            (0.5, 0.1, 0.2),
+            (-0.2, 0.3, -1.0),
+            (0.02, 0.0005, 0.1),
+            (0.0, 0.0, 0.0),
+        ];
+        for p in poses {
+            for u in incs {
+                let (pose, inc): (Pose2<f64>, Pose2<f64>) =
+                    (Pose2::new(p.0, p.1, p.2), Pose2::new(u.0, u.1, u.2));
+                let (a, b) = (compose_increment(&pose, &inc).pose, pose.compose(&inc));
+                let dt = crate::geometry::wrap_angle(a.theta - b.theta);
+                assert!(
+                    (a.x - b.x).abs() < 1e-12 && (a.y - b.y).abs() < 1e-12,
+                    "{a:?} {b:?}"
+                );
+                let pi = core::f64::consts::PI;
+                assert!(
+                    dt.abs() < 1e-12 && a.theta > -pi && a.theta <= pi,
+                    "{a:?} {b:?}"
+                );
+                let (pose, inc) = (pose.cast::<f32>(), inc.cast::<f32>());
+                let (a, b) = (compose_increment(&pose, &inc).pose, pose.compose(&inc));
+                let dt = crate::geometry::wrap_angle(a.theta - b.theta);
+                assert!(
+                    (a.x - b.x).abs() < 1e-5 && (a.y - b.y).abs() < 1e-5,
+                    "{a:?} {b:?}"
+                );
+                assert!(
+                    dt.abs() < 1e-6 && a.theta > -core::f32::consts::PI,
+                    "{a:?} {b:?}"
+                );
+                assert!(a.theta <= core::f32::consts::PI, "{a:?}");
+            }
+        }
+    }
 
     #[test]
     fn increment_jacobians_match_finite_differences() {

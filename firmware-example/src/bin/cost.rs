@@ -17,6 +17,7 @@ use cortex_m_rt::entry;
 use firmware_example::board::Serial;
 use firmware_example::cost::Ticks;
 use microslam::ekf::{EkfConfig, EkfSlam, UpdateOutcome, factor_len, state_dim};
+use microslam::geometry::Pose2;
 use microslam::sensors::range_bearing::RangeBearing;
 use panic_probe as _;
 use static_cell::ConstStaticCell;
@@ -100,6 +101,15 @@ fn measure<const N: usize, const P: usize>(
             let _ = slam.predict_velocity(0.2, 0.05, 0.1);
         });
     }
+    // Wheel odometry as increments (dx, dy, dθ) in the previous robot frame: the same
+    // motion as above (0.2 m/s, 0.05 rad/s for 0.1 s), through `predict_increment`.
+    let increment = Pose2::new(0.02, 0.0005, 0.005);
+    let mut predict_increment = 0u32;
+    for _ in 0..REPEAT {
+        predict_increment += ticks.instructions(|| {
+            let _ = slam.predict_increment(&increment);
+        });
+    }
     // Each update follows a prediction, as on a robot, and applies it to the factor.
     let mut update = 0u32;
     for k in 0..REPEAT {
@@ -118,10 +128,11 @@ fn measure<const N: usize, const P: usize>(
     }
     writeln!(
         out,
-        "ekf n={} first_predict={} predict={} update={} add_landmark={}",
+        "ekf n={} first_predict={} predict={} predict_increment={} update={} add_landmark={}",
         n,
         first_predict,
         predict / REPEAT,
+        predict_increment / REPEAT,
         update / REPEAT,
         add / REPEAT
     )
