@@ -103,7 +103,7 @@ fn measure<const N: usize, const P: usize>(
     }
     // Wheel odometry as increments (dx, dy, dθ) in the previous robot frame: the same
     // motion as above (0.2 m/s, 0.05 rad/s for 0.1 s), through `predict_increment`.
-    let increment = Pose2::new(0.02, 0.0005, 0.005);
+    let increment = Pose2::new(0.02, 0.000_05, 0.005);
     let mut predict_increment = 0u32;
     for _ in 0..REPEAT {
         predict_increment += ticks.instructions(|| {
