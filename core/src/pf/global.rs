@@ -356,14 +356,14 @@ pub struct SearchReport {
 }
 
 impl SearchReport {
-    /// Estimated Cortex-M4F instructions of the search: `nodes · (64 · beams + 50)`
-    /// (end-cell rotations and leaves folded in) — the instructions per node of the
-    /// budget-stopped relocalization scan under QEMU (`cost_relocalize`, every minimum
-    /// score at 0 so that every leaf is a hypothesis offered: 1 969 per node with 30
-    /// beams, 2 931 with 45, from 11 000 and 21 000 nodes); see
+    /// Estimated Cortex-M4F instructions of the search: `nodes · (70 · beams + 20)`
+    /// (end-cell rotations and leaves folded in), a little above the instructions per
+    /// node of the budget-stopped relocalization scan under QEMU (`cost_relocalize`,
+    /// every minimum score at 0 so that every leaf is a hypothesis offered: 2 061 per
+    /// node with 30 beams, 3 140 with 45, the slope from 11 000 to 21 000 nodes); see
     /// `docs/global-localization.md`.
     pub fn estimated_instructions(&self) -> u64 {
-        u64::from(self.nodes) * (64 * u64::from(self.beams) + 50)
+        u64::from(self.nodes) * (70 * u64::from(self.beams) + 20)
     }
 }
 
@@ -613,15 +613,12 @@ fn bound(
     let block = 1i32 << k;
     for ((cx, cy, w), e) in cells.iter().zip(row.iter()) {
         let e = i32::from(*e);
-        let size = block + 2 * e;
-        let level = (32 - (size as u32 - 1).leading_zeros()) as u8;
-        if level <= levels.top
-            && !levels.any(
-                level,
-                cx.wrapping_add(x).wrapping_sub(e),
-                cy.wrapping_add(y).wrapping_sub(e),
-            )
-        {
+        let missed = !levels.any_in_square(
+            cx.wrapping_add(x).wrapping_sub(e),
+            cy.wrapping_add(y).wrapping_sub(e),
+            block + 2 * e,
+        );
+        if missed {
             possible = possible.wrapping_sub(*w);
             if possible <= thr {
                 return possible;
@@ -654,6 +651,35 @@ impl<'a> Levels<'a> {
             height: layers.height() as i32,
             top: layers.levels(),
         }
+    }
+
+    /// `true` when a cell of the `size × size` square at `(x, y)` may be occupied (also
+    /// when the square is wider than the top level's windows: then it is not looked at).
+    ///
+    /// The square is covered by the four windows of the level below the one whose
+    /// window holds it (`2^(l−1) < size ≤ 2^l`: windows of `2^(l−1)` at its four corners),
+    /// not by one window of `2^l`, up to four times its area: on the Intel map that
+    /// halves the nodes of a search (`docs/global-localization.md`). The one window of
+    /// `2^l` is looked at first: it rules most squares out alone.
+    #[inline]
+    fn any_in_square(&self, x: i32, y: i32, size: i32) -> bool {
+        let level = (32 - (size.max(1) as u32 - 1).leading_zeros()) as u8;
+        if level > self.top.saturating_add(1) {
+            return true;
+        }
+        if level <= self.top && !self.any(level, x, y) {
+            return false;
+        }
+        let fine = level.saturating_sub(1);
+        if fine == 0 {
+            // Level 0 is the map, not a layer (the bound's squares are ≥ 3 cells wide).
+            return true;
+        }
+        let o = size - (1i32 << fine);
+        self.any(fine, x, y)
+            || self.any(fine, x.wrapping_add(o), y)
+            || self.any(fine, x, y.wrapping_add(o))
+            || self.any(fine, x.wrapping_add(o), y.wrapping_add(o))
     }
 
     /// [`MaxPoolLayers::any_occupied`] without recomputing the level's place.
