@@ -2,8 +2,9 @@
 //! a pose on the map of a host grid-SLAM run, P = 64, with a 4 000 000-node search, with
 //! and without the full turn after the heading windows, and with the device's settings
 //! and node budget; and on the simulated office with the device's settings. Deterministic:
-//! the counts are the measured ones (the bar is 19 of 20), and no trial may track
-//! a wrong pose (`tracking_a_wrong_pose`: confirmed outside the tolerance) unless stated.
+//! the counts are the measured ones (the bar is 19 of 20; trial seed 1 is the
+//! draw pinned here, the other draws are in the document), and no trial may track a
+//! wrong pose (`tracking_a_wrong_pose`: confirmed outside the tolerance) unless stated.
 
 mod common;
 
@@ -106,13 +107,16 @@ fn intel_global_localization_with_a_large_budget_and_with_the_devices() {
         ],
     );
     assert_eq!(device["search"]["node_budget"], 21_000);
-    assert_eq!(device["successes"], 17, "{:?}", device["scans_to_converge"]);
+    assert_eq!(device["successes"], 19, "{:?}", device["scans_to_converge"]);
     assert_eq!(device["searches_complete"], 17);
-    // The three starts it misses end lost, still searching: none tracks a wrong pose.
+    // 450 and 407 are found by the rest of the turn searched at the first pass's minimum
+    // (the budget of the 5 scans spent, the best found so far taken).
+    assert_eq!(full_turn_starts(&device), [407, 450]);
+    // The start it misses (389) ends lost, still searching: none tracks a wrong pose.
     assert_eq!(device["tracking_a_wrong_pose"], 0);
-    assert_eq!(device["final_states"]["lost"], 3);
+    assert_eq!(device["final_states"]["lost"], 1);
     assert_eq!(device["final_states"]["relocalized"], 1);
-    assert_eq!(device["final_states"]["tracking"], 16);
+    assert_eq!(device["final_states"]["tracking"], 18);
 }
 
 #[test]

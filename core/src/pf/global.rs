@@ -938,17 +938,30 @@ pub struct GlobalSearch<const N: usize> {
     height: i32,
     /// Farthest selected beam, cells.
     rho_max: f32,
-    windows: [(u32, u32); MAX_WINDOWS],
+    /// The heading windows around the wall-direction peaks (one window of every heading
+    /// when there are none).
+    peaks: [(u32, u32); MAX_WINDOWS],
+    n_peaks: usize,
+    /// The heading intervals of the pass under way: the windows, or every heading
+    /// outside them (at most one more interval than windows).
+    windows: [(u32, u32); MAX_WINDOWS + 1],
     n_windows: usize,
+    /// Position of the pass under way in [`pass_plan`].
+    pass_index: u8,
+    /// The lowest minimum score each heading set (windows, the rest of the turn) has
+    /// been searched at (`u32::MAX`: not yet).
+    searched_at: [u32; 2],
+    /// A pass found a hypothesis (below `full_turn_below`: the search goes on only for
+    /// a better one outside the windows).
+    found: bool,
     /// The pass's minimum score as a fraction of the total weight.
     fraction: f32,
     /// The pass's minimum score.
     pass_min: u32,
     /// Pruning threshold: a node must bound above it.
     thr: u32,
-    /// Phase 1's best score once the full turn runs (only better counts then).
+    /// The best score when the pass started: only a better hypothesis counts as found.
     beaten: u32,
-    phase_one_min: u32,
     /// Cursor: the heading window and the next top-level block of the pass.
     window: usize,
     rx: i32,
@@ -998,14 +1011,15 @@ impl<const N: usize> GlobalSearch<N> {
             .take(sel.len)
             .copied()
             .fold(0.0f32, f32::max);
-        let mut windows = [(0u32, 0u32); MAX_WINDOWS];
-        let n_windows = heading_windows(map, walls, points, config, step, headings, &mut windows);
+        let mut peaks = [(0u32, 0u32); MAX_WINDOWS];
+        let n_peaks = heading_windows(map, walls, points, config, step, headings, &mut peaks);
+        let n_windows = n_peaks;
+        let mut windows = [(0u32, 0u32); MAX_WINDOWS + 1];
+        for (w, p) in windows.iter_mut().zip(peaks.iter()) {
+            *w = *p;
+        }
         report.heading_windows = n_windows as u8;
-        report.headings_searched = windows
-            .iter()
-            .take(n_windows)
-            .map(|(lo, hi)| hi - lo + 1)
-            .sum();
+        report.headings_searched = peaks.iter().take(n_peaks).map(|(lo, hi)| hi - lo + 1).sum();
         let g = map.geometry();
         let mut run = Self {
             config: *config,
@@ -1015,13 +1029,17 @@ impl<const N: usize> GlobalSearch<N> {
             width: g.width as i32,
             height: g.height as i32,
             rho_max,
+            peaks,
+            n_peaks,
             windows,
             n_windows,
+            pass_index: 0,
+            searched_at: [u32::MAX; 2],
+            found: false,
             fraction: config.first_pass_fraction.max(config.min_score_fraction),
             pass_min: 0,
             thr: 0,
             beaten: 0,
-            phase_one_min: u32::MAX,
             window: 0,
             rx: 0,
             ry: 0,
@@ -1033,6 +1051,9 @@ impl<const N: usize> GlobalSearch<N> {
             done: false,
         };
         run.start_pass();
+        if let Some(m) = run.searched_at.first_mut() {
+            *m = run.pass_min;
+        }
         Ok(run)
     }
 
@@ -1136,53 +1157,82 @@ impl<const N: usize> GlobalSearch<N> {
             .max(self.hypotheses.floor())
     }
 
-    /// Starts a pass at the current minimum-score fraction, from the first window's first
-    /// block.
+    /// Starts a pass at the current minimum-score fraction over the current heading set,
+    /// from its first window's first block.
     fn start_pass(&mut self) {
-        // In phase 2 nothing at or below phase 1's best is looked for.
+        // Nothing at or below the best held is looked for.
         self.pass_min = (libm::ceilf(self.fraction * self.sel.total as f32) as u32)
             .max(self.beaten.saturating_add(1));
+        self.report.min_score = if self.report.passes == 0 {
+            self.pass_min
+        } else {
+            self.report.min_score.min(self.pass_min)
+        };
         self.report.passes = self.report.passes.saturating_add(1);
-        self.report.min_score = self.pass_min;
         self.thr = self.threshold();
         self.window = 0;
         self.rx = 0;
         self.ry = 0;
     }
 
-    /// After a pass: the next pass (a lower minimum score when this one found nothing),
-    /// or phase 2 (every heading, when the windows found no good match, see
-    /// [`GlobalSearchConfig::full_turn_below`]); `false` when the search is over.
+    /// `true` when the rest of the turn is searched too: there are heading windows and
+    /// [`GlobalSearchConfig::full_turn_below`] is set.
+    fn full_turn_allowed(&self) -> bool {
+        self.n_peaks > 1 && self.config.full_turn_below > 0.0
+    }
+
+    /// After a pass: the next one of [`pass_plan`] that can find something new, or
+    /// `false` when the search is over — when a pass found a hypothesis scoring
+    /// [`GlobalSearchConfig::full_turn_below`] (any hypothesis, without the full turn), or
+    /// the plan is done.
     fn next_pass(&mut self) -> bool {
         let c = self.config;
-        let beaten = self.beaten;
-        let pass_over = self.hypotheses.best().is_some_and(|b| b.score > beaten)
-            || self.fraction <= c.min_score_fraction
-            || (self.report.full_turn && self.pass_min <= beaten.saturating_add(1));
-        if !pass_over {
-            self.fraction = (self.fraction - c.pass_step).max(c.min_score_fraction);
+        let best = self.hypotheses.best().map_or(0, |b| b.score);
+        let good = libm::ceilf(c.full_turn_below * self.sel.total as f32) as u32;
+        let full_turn = self.full_turn_allowed();
+        if best > self.beaten {
+            if !full_turn || best >= good {
+                return false;
+            }
+            self.found = true;
+        }
+        self.beaten = best;
+        let fractions = pass_fractions(&c);
+        loop {
+            self.pass_index = self.pass_index.saturating_add(1);
+            let Some((rest, i)) = pass_plan(usize::from(self.pass_index), fractions, full_turn)
+            else {
+                return false;
+            };
+            // The windows searched down to a hypothesis hold no better one.
+            if !rest && self.found {
+                continue;
+            }
+            let fraction = pass_fraction(&c, i, fractions);
+            let pass_min =
+                (libm::ceilf(fraction * self.sel.total as f32) as u32).max(best.saturating_add(1));
+            let set = usize::from(rest);
+            if self.searched_at.get(set).is_some_and(|&m| pass_min >= m) {
+                continue;
+            }
+            if let Some(m) = self.searched_at.get_mut(set) {
+                *m = pass_min;
+            }
+            if rest {
+                self.n_windows =
+                    outside(&self.peaks, self.n_peaks, self.headings, &mut self.windows);
+                self.report.full_turn = true;
+                self.report.headings_searched = self.headings;
+            } else {
+                for (w, p) in self.windows.iter_mut().zip(self.peaks.iter()) {
+                    *w = *p;
+                }
+                self.n_windows = self.n_peaks;
+            }
+            self.fraction = fraction;
             self.start_pass();
             return true;
         }
-        let best = self.hypotheses.best().map_or(0, |b| b.score);
-        let good = libm::ceilf(c.full_turn_below * self.sel.total as f32) as u32;
-        if self.report.full_turn || self.n_windows == 1 || c.full_turn_below <= 0.0 || best >= good
-        {
-            return false;
-        }
-        // Every heading, as one window; only a hypothesis above phase 1's best counts
-        // as found (phase 1's are kept and still compete).
-        if let Some(first) = self.windows.first_mut() {
-            *first = (0, self.headings.saturating_sub(1));
-        }
-        self.n_windows = 1;
-        self.beaten = best;
-        self.phase_one_min = self.report.min_score;
-        self.report.full_turn = true;
-        self.report.headings_searched = self.headings;
-        self.fraction = c.first_pass_fraction.max(c.min_score_fraction);
-        self.start_pass();
-        true
     }
 
     /// Moves the cursor to the next top-level block with a free cell (in row order, then
@@ -1347,16 +1397,111 @@ impl<const N: usize> GlobalSearch<N> {
         }
     }
 
-    /// The search is over: phase 1's hypotheses stay when phase 2 finds nothing better;
-    /// those below the relative score or the last pass's minimum go.
+    /// The search is over: the hypotheses of every pass stay and compete; those below
+    /// the relative score or the lowest pass minimum go.
     fn finish(&mut self, complete: bool) {
         self.report.complete = complete;
-        self.report.min_score = self.report.min_score.min(self.phase_one_min);
         let keep = below_relative(&self.config, self.hypotheses.best())
             .max(self.report.min_score.saturating_sub(1));
         self.hypotheses.keep_above(keep);
         self.done = true;
     }
+}
+
+/// Most minimum scores a search steps through (the last one is the configured minimum).
+const MAX_PASS_FRACTIONS: usize = 64;
+
+/// How many minimum scores the passes step through: the first pass's, then one
+/// [`GlobalSearchConfig::pass_step`] lower each, down to the minimum.
+fn pass_fractions(c: &GlobalSearchConfig) -> usize {
+    let first = c.first_pass_fraction.max(c.min_score_fraction);
+    let mut n = 1;
+    while n < MAX_PASS_FRACTIONS && first - n as f32 * c.pass_step > c.min_score_fraction + 1e-6 {
+        n += 1;
+    }
+    // One more at the minimum itself, unless the first pass is already there.
+    if first > c.min_score_fraction + 1e-6 {
+        n += 1;
+    }
+    n.min(MAX_PASS_FRACTIONS)
+}
+
+/// The minimum score (fraction of the total weight) of the `i`-th of `n` steps.
+fn pass_fraction(c: &GlobalSearchConfig, i: usize, n: usize) -> f32 {
+    let first = c.first_pass_fraction.max(c.min_score_fraction);
+    if i + 1 >= n {
+        return c.min_score_fraction.min(first);
+    }
+    (first - i as f32 * c.pass_step).max(c.min_score_fraction)
+}
+
+/// The `p`-th pass of a search over `n` minimum scores: `(rest, i)`, the heading set
+/// (`false`: the windows; `true`: every heading outside them) and the minimum score's
+/// step. Without the full turn the windows alone, at each step in turn. With it, the
+/// rest of the turn follows the windows one step behind: windows 0, windows 1, rest 0,
+/// windows 2, rest 1, …, rest n − 1. A pass at a high minimum prunes hard even over
+/// the whole turn, one at a low minimum prunes little even in the windows: the whole
+/// turn at the first minimum costs about what the windows cost two steps lower, and a
+/// robot whose wall directions the windows miss is found without them first being
+/// searched down to the lowest minimum (`docs/global-localization.md`).
+fn pass_plan(p: usize, n: usize, full_turn: bool) -> Option<(bool, usize)> {
+    if !full_turn {
+        return (p < n).then_some((false, p));
+    }
+    let mut k = 0;
+    for t in 0..=n {
+        if t < n {
+            if k == p {
+                return Some((false, t));
+            }
+            k += 1;
+        }
+        if t >= 1 {
+            if k == p {
+                return Some((true, t - 1));
+            }
+            k += 1;
+        }
+    }
+    None
+}
+
+/// Writes into `out` the heading intervals outside the `n` windows `windows` (of
+/// `headings` in all); returns how many.
+fn outside(
+    windows: &[(u32, u32); MAX_WINDOWS],
+    n: usize,
+    headings: u32,
+    out: &mut [(u32, u32); MAX_WINDOWS + 1],
+) -> usize {
+    let mut sorted = *windows;
+    let sorted = sorted.get_mut(..n).unwrap_or(&mut []);
+    // Insertion sort by start: a few windows (and no sort routine in the firmware's flash).
+    for i in 1..sorted.len() {
+        let mut j = i;
+        while j > 0 && sorted.get(j - 1).map(|w| w.0) > sorted.get(j).map(|w| w.0) {
+            sorted.swap(j - 1, j);
+            j -= 1;
+        }
+    }
+    let mut k = 0;
+    let mut next = 0u32;
+    for &(lo, hi) in sorted.iter() {
+        if lo > next
+            && let Some(slot) = out.get_mut(k)
+        {
+            *slot = (next, lo - 1);
+            k += 1;
+        }
+        next = next.max(hi.saturating_add(1));
+    }
+    if next < headings
+        && let Some(slot) = out.get_mut(k)
+    {
+        *slot = (next, headings - 1);
+        k += 1;
+    }
+    k
 }
 
 /// The highest score below [`GlobalSearchConfig::relative_score`] × the best score.

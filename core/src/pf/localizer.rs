@@ -218,8 +218,8 @@ impl LocalizerStatus {
 /// For global localization give it the map's max-pooled layers
 /// ([`GridLocalizer::with_layers`]; see the module documentation).
 ///
-/// RAM: `28·P + 24·B` bytes plus ~5 600 (lost detection, relocalization, the map's wall
-/// directions, a global search spanning scans: 4 496); the map and its layers are not
+/// RAM: `28·P + 24·B` bytes plus ~6 000 (lost detection, relocalization, the map's wall
+/// directions, a global search spanning scans: 4 648); the map and its layers are not
 /// copied. A scan that runs the global search adds ≈ 3.5 KB of stack.
 ///
 /// ```
