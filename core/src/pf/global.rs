@@ -32,10 +32,12 @@
 //! within [`GlobalSearchConfig::heading_window`] of the peaks of the scan's wall
 //! directions correlated with the map's ([`super::orientation`]) are searched, best peak
 //! first (each peak `s` as `s` and `s + π`); a scan with too few line-like points searches
-//! every heading. Exact within the windows. When the windows find nothing that scores
-//! [`GlobalSearchConfig::full_turn_below`], every heading is searched for a better pose
-//! (with what is left of the node budget): a robot whose local walls the correlation does
-//! not pick out is still found.
+//! every heading. Exact within the windows. Every heading outside them is searched too,
+//! one minimum score behind the windows (windows at the first pass's minimum, windows one
+//! step lower, the rest at the first minimum, …; see [`GlobalSearchConfig::full_turn_below`]),
+//! until a pass finds a hypothesis scoring `full_turn_below`: a robot whose local walls
+//! the correlation does not pick out is still found, before the windows have been
+//! searched down to the lowest minimum, where they prune least.
 //!
 //! **Hypotheses.** The `N` best candidates that are pairwise apart by more than the
 //! configured separation (a better candidate nearby replaces a worse one), best first.
@@ -106,10 +108,11 @@ pub struct GlobalSearchConfig {
     pub heading_peaks: u8,
     /// Half-width of the heading window around each peak, radians.
     pub heading_window: f32,
-    /// When the heading windows yield no hypothesis scoring at least this fraction of
-    /// the total weight, every heading is searched for a better one (within what is left
-    /// of the node budget); 0: never. A scan whose wall directions the correlation does
-    /// not pick out then still finds its pose, and a good match costs no more.
+    /// The search is over when a pass finds a hypothesis scoring at least this fraction
+    /// of the total weight; until then the headings outside the windows are searched
+    /// too, one minimum score behind the windows (0: never, only the windows). A scan
+    /// whose wall directions the correlation does not pick out then still finds its
+    /// pose, and a good match in the windows at the first minimums costs no more.
     pub full_turn_below: f32,
 }
 
@@ -343,12 +346,12 @@ pub struct SearchReport {
     pub nodes_per_level: [u32; crate::grid::layers::MAX_LEVELS as usize + 1],
     /// Total weight of the beams used (the score of a perfect match).
     pub total_weight: u32,
-    /// Score a hypothesis needs (that of the last pass).
+    /// Score a hypothesis needs (the lowest of the passes' minimum scores).
     pub min_score: u32,
     /// Passes run (see [`GlobalSearchConfig::first_pass_fraction`]).
     pub passes: u8,
-    /// `true` when the windows found no hypothesis scoring
-    /// [`GlobalSearchConfig::full_turn_below`] and every heading was searched after them.
+    /// `true` when the headings outside the windows were searched too (the windows had
+    /// found no hypothesis scoring [`GlobalSearchConfig::full_turn_below`] by then).
     pub full_turn: bool,
     /// `false` when the node budget stopped the search: the hypotheses are the best
     /// found, not proven best.

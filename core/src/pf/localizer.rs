@@ -127,7 +127,7 @@ pub struct RelocalizationConfig {
 impl RelocalizationConfig {
     /// Automatic relocalization with [`GlobalSearchConfig::DEFAULT`] and
     /// [`LostDetection::DEFAULT`], particles over the 4 best hypotheses, a search
-    /// spanning up to 5 scans (see `docs/global-localization.md` for how that was chosen).
+    /// spanning up to 10 scans (see `docs/global-localization.md` for how that was chosen).
     pub const DEFAULT: Self = Self {
         search: GlobalSearchConfig::DEFAULT,
         lost: LostDetection::DEFAULT,
@@ -135,7 +135,7 @@ impl RelocalizationConfig {
         hypotheses: 4,
         spread_m: 0.0,
         spread_rad: 0.0,
-        search_scans: 5,
+        search_scans: 10,
         pull_in_window_cells: 4,
     };
 
