@@ -1016,12 +1016,7 @@ impl<const N: usize> GlobalSearch<N> {
             .fold(0.0f32, f32::max);
         let mut peaks = [(0u32, 0u32); MAX_WINDOWS];
         let n_peaks = heading_windows(map, walls, points, config, step, headings, &mut peaks);
-        let n_windows = n_peaks;
-        let mut windows = [(0u32, 0u32); MAX_WINDOWS + 1];
-        for (w, p) in windows.iter_mut().zip(peaks.iter()) {
-            *w = *p;
-        }
-        report.heading_windows = n_windows as u8;
+        report.heading_windows = n_peaks as u8;
         report.headings_searched = peaks.iter().take(n_peaks).map(|(lo, hi)| hi - lo + 1).sum();
         let g = map.geometry();
         let mut run = Self {
@@ -1034,8 +1029,8 @@ impl<const N: usize> GlobalSearch<N> {
             rho_max,
             peaks,
             n_peaks,
-            windows,
-            n_windows,
+            windows: [(0, 0); MAX_WINDOWS + 1],
+            n_windows: 0,
             pass_index: 0,
             searched_at: [u32::MAX; 2],
             found: false,
@@ -1053,6 +1048,7 @@ impl<const N: usize> GlobalSearch<N> {
             report,
             done: false,
         };
+        run.select(false);
         run.start_pass();
         if let Some(m) = run.searched_at.first_mut() {
             *m = run.pass_min;
@@ -1178,6 +1174,21 @@ impl<const N: usize> GlobalSearch<N> {
         self.ry = 0;
     }
 
+    /// Makes the heading windows (`rest` false) or every heading outside them the
+    /// intervals the next pass searches.
+    fn select(&mut self, rest: bool) {
+        if rest {
+            self.n_windows = outside(&self.peaks, self.n_peaks, self.headings, &mut self.windows);
+            self.report.full_turn = true;
+            self.report.headings_searched = self.headings;
+        } else {
+            for (w, p) in self.windows.iter_mut().zip(self.peaks.iter()) {
+                *w = *p;
+            }
+            self.n_windows = self.n_peaks;
+        }
+    }
+
     /// `true` when the rest of the turn is searched too: there are heading windows and
     /// [`GlobalSearchConfig::full_turn_below`] is set.
     fn full_turn_allowed(&self) -> bool {
@@ -1221,17 +1232,7 @@ impl<const N: usize> GlobalSearch<N> {
             if let Some(m) = self.searched_at.get_mut(set) {
                 *m = pass_min;
             }
-            if rest {
-                self.n_windows =
-                    outside(&self.peaks, self.n_peaks, self.headings, &mut self.windows);
-                self.report.full_turn = true;
-                self.report.headings_searched = self.headings;
-            } else {
-                for (w, p) in self.windows.iter_mut().zip(self.peaks.iter()) {
-                    *w = *p;
-                }
-                self.n_windows = self.n_peaks;
-            }
+            self.select(rest);
             self.fraction = fraction;
             self.start_pass();
             return true;
