@@ -141,9 +141,9 @@ awk '/^ekf /{
         split($2, c, "="); split($6, n, "=");
         printf "%-40s %s\n", "relocalize_" c[2] "x" c[2] "_instructions", n[2];
     }
-    /^relocalize_budget /{
-        split($2, c, "="); split($6, n, "=");
-        printf "%-40s %s\n", "relocalize_budget_" c[2] "x" c[2] "_instructions", n[2];
+    /^relocalize_budget(_b45)? /{
+        for (i = 2; i <= NF; i++) { split($i, kv, "="); f[kv[1]] = kv[2] }
+        printf "%-40s %s\n", $1 "_" f["cells"] "x" f["cells"] "_instructions", f["instructions"];
     }' "$cost_log" >>"$measured"
 
 step "report"
@@ -178,7 +178,7 @@ awk '
 awk '
     { v[$1] = $2 }
     END {
-        split("localizer_flash_bytes localizer_static_ram_bytes localizer_stm32f411_flash_bytes localizer_stack_peak_bytes localizer_p32_b90_w3_step_instructions localizer_p64_b90_w3_step_instructions localizer_p128_b90_w3_step_instructions localizer_intel_p32_b90_w3_step_instructions localizer_intel_p64_b90_w3_step_instructions localizer_intel_p128_b90_w3_step_instructions localizer_intel_p64_b90_w9_step_instructions relocalize_256x256_instructions relocalize_budget_256x256_instructions", need, " ");
+        split("localizer_flash_bytes localizer_static_ram_bytes localizer_stm32f411_flash_bytes localizer_stack_peak_bytes localizer_p32_b90_w3_step_instructions localizer_p64_b90_w3_step_instructions localizer_p128_b90_w3_step_instructions localizer_intel_p32_b90_w3_step_instructions localizer_intel_p64_b90_w3_step_instructions localizer_intel_p128_b90_w3_step_instructions localizer_intel_p64_b90_w9_step_instructions relocalize_256x256_instructions relocalize_budget_256x256_instructions relocalize_budget_b45_256x256_instructions", need, " ");
         for (i in need) if (!(need[i] in v)) { printf "FAIL: localizer figure %s missing\n", need[i]; bad = 1 }
         ram = v["localizer_static_ram_bytes"] + v["localizer_stack_peak_bytes"];
         printf "localizer firmware: flash %d bytes with the map (bar <= 524288), static RAM + stack %d bytes (bar <= 131072)\n", v["localizer_flash_bytes"], ram;
@@ -193,7 +193,9 @@ awk '
         r = v["relocalize_256x256_instructions"];
         printf "relocalization on 256x256: %d instructions (bar <= 50000000: %s)\n", r, (r <= 50000000) ? "met" : "NOT MET";
         b = v["relocalize_budget_256x256_instructions"];
-        printf "relocalization stopped by the node budget: %d instructions (bar <= 50000000: %s)\n", b, (b <= 50000000) ? "met" : "NOT MET";
+        printf "relocalization scan stopped by the work budget, every beam looked at: %d instructions (bar <= 50000000: %s)\n", b, (b <= 50000000) ? "met" : "NOT MET";
+        b = v["relocalize_budget_b45_256x256_instructions"];
+        printf "relocalization scan stopped by the work budget, 45 beams: %d instructions (bar <= 50000000: %s)\n", b, (b <= 50000000) ? "met" : "NOT MET";
         if (bad) exit 1
     }' "$measured"
 

@@ -227,11 +227,11 @@ pub struct GlobalArgs {
     /// Levels of the max-pooled map layers (windows up to 2^levels cells).
     #[arg(long, default_value_t = 6)]
     pub levels: u8,
-    /// Node budget of the global search (default: the core's); with `--search-scans`,
-    /// of each scan's slice of it.
+    /// Work budget of the global search, in beams looked at plus `NODE_WORK` per node
+    /// (default: the core's); with `--search-scans`, of each scan's slice of it.
     #[arg(long)]
-    pub node_budget: Option<u32>,
-    /// Scans one global search may span, a node budget each (default: the core's).
+    pub work_budget: Option<u32>,
+    /// Scans one global search may span, a work budget each (default: the core's).
     #[arg(long)]
     pub search_scans: Option<u8>,
     /// Smallest score of a hypothesis, a fraction of the beams' total weight (default:
@@ -278,7 +278,7 @@ impl From<&GlobalArgs> for GlobalOptions {
             trial_seed: a.trial_seed,
             max_scans: a.max_scans,
             levels: a.levels,
-            node_budget: a.node_budget,
+            work_budget: a.work_budget,
             search_scans: a.search_scans,
             min_score: a.min_score,
             search_range: a.search_range,

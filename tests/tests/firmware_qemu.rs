@@ -413,7 +413,7 @@ fn localizer_requests_are_refused_without_a_valid_map() {
 /// The localizer firmware runs the global search on the Intel map as the host does: for
 /// five starts of the Intel log, the device is reset to a wrong pose (the map's origin),
 /// asked to `Relocalize`, and fed the next 10 scans; every scan until a search succeeds
-/// runs a slice of the search over the whole map (the device's node budget a scan, up to
+/// runs a slice of the search over the whole map (the device's work budget a scan, up to
 /// 10 scans a search, the map's 5 levels) and every reply equals the host's bit for bit. A
 /// start is found when the estimate after the tenth scan is within 0.3 m / 10° of the
 /// reference (the same firmware session tracked on the host from the log's first pose):

@@ -23,7 +23,7 @@
 //! bound; a node whose bound does not exceed the acceptance threshold is dropped with all
 //! its positions, and so is a block without a free cell. Leaves (`k = 0`) are exact
 //! scores. The threshold is the larger of the minimum score and, once `N` hypotheses are
-//! held, the `N`-th best score. With the node budget not exhausted
+//! held, the `N`-th best score. With the work budget not exhausted
 //! ([`SearchReport::complete`]), the best hypothesis is the highest-scoring candidate of
 //! the whole map (the first found among equal scores) — the same answer as the
 //! brute-force reference [`search_brute_force`].
@@ -42,14 +42,19 @@
 //! **Hypotheses.** The `N` best candidates that are pairwise apart by more than the
 //! configured separation (a better candidate nearby replaces a worse one), best first.
 //!
-//! **Cost.** One node costs one load, shift and add per beam (≈ 10 Cortex-M4F instructions
-//! per beam with the bookkeeping); one heading costs a rotation and a floor per beam
-//! (≈ 30 instructions per beam). [`SearchReport`] counts both; the node budget stops the
-//! search (the best found so far is returned, [`SearchReport::complete`] is `false`).
+//! **Cost.** A node's bound looks its beams up one at a time (one to five bitmap reads
+//! each) and stops at the beam that rules the node out; a new heading costs a rotation and
+//! a floor per beam. The unit of work is one beam looked at, and a node evaluation counts
+//! [`NODE_WORK`] more for making, bounding and stacking it: so counted, a unit costs
+//! about the same on the Cortex-M4F whether the nodes look at 1 or 45 beams (48–55
+//! instructions, measured), and the work budget
+//! ([`GlobalSearchConfig::work_budget`]) bounds a search's instructions however its nodes
+//! are pruned. When the budget is spent the search stops (the best found so far is
+//! returned, [`SearchReport::complete`] is `false`).
 //!
-//! **Slices.** [`GlobalSearch`] runs the same search in slices of node evaluations, paused
+//! **Slices.** [`GlobalSearch`] runs the same search in slices of work, paused
 //! and resumed where it stopped (the depth-first stack and the node being expanded are
-//! kept): a robot spends a node budget per scan on one search over several scans
+//! kept): a robot spends a work budget per scan on one search over several scans
 //! ([`super::RelocalizationConfig::search_scans`]).
 //!
 //! No allocation: a search's state (the selected beams and the depth-first stack, ≈ 4.5 KB
@@ -63,6 +68,11 @@ use core::fmt;
 
 /// Most beams the search uses (more are thinned evenly).
 pub const MAX_SEARCH_BEAMS: usize = 128;
+/// Work a node evaluation counts besides the beams it looks at
+/// ([`GlobalSearchConfig::work_budget`]): what making, bounding and stacking a node costs
+/// besides its beams, in beams (measured on the Cortex-M4F, see
+/// `docs/global-localization.md`).
+pub const NODE_WORK: u32 = 10;
 /// Most candidate headings (a finer configured or derived step is coarsened to this).
 pub const MAX_HEADINGS: u32 = 8192;
 /// Most peaks of the wall-direction correlation a search visits.
@@ -96,8 +106,12 @@ pub struct GlobalSearchConfig {
     pub first_pass_fraction: f32,
     /// Step between the passes' minimum scores (0..1].
     pub pass_step: f32,
-    /// Node evaluations (bounds and leaf scores) after which the search stops.
-    pub node_budget: u32,
+    /// Work after which the search stops: every node evaluation (a bound or a leaf
+    /// score) counts the beams it looked at (it stops at the beam that rules the node
+    /// out) plus [`NODE_WORK`]. The instructions of a search are about proportional to
+    /// it (see [`SearchReport::estimated_instructions`]), whichever way its nodes are
+    /// pruned.
+    pub work_budget: u32,
     /// Hypotheses closer than this in position (metres) …
     pub separation_m: f32,
     /// … and in heading (radians) are the same hypothesis: the better one is kept.
@@ -127,7 +141,7 @@ impl GlobalSearchConfig {
         relative_score: 0.8,
         first_pass_fraction: 0.8,
         pass_step: 0.1,
-        node_budget: 21_000,
+        work_budget: 830_000,
         separation_m: 0.5,
         separation_rad: 0.35,
         heading_peaks: 3,
@@ -152,7 +166,7 @@ impl GlobalSearchConfig {
             && self.pass_step.is_finite()
             && self.pass_step > 0.0
             && self.pass_step <= 1.0
-            && self.node_budget > 0
+            && self.work_budget > 0
             && self.separation_m.is_finite()
             && self.separation_m >= 0.0
             && self.separation_rad.is_finite()
@@ -336,8 +350,12 @@ pub struct SearchReport {
     pub heading_windows: u8,
     /// Candidate headings inside the windows.
     pub headings_searched: u32,
-    /// Node evaluations: bounds and leaf scores (each one pass over the beams).
+    /// Node evaluations: bounds and leaf scores (each one pass over the beams, stopped
+    /// at the beam that rules the node out).
     pub nodes: u32,
+    /// Work done, the unit of [`GlobalSearchConfig::work_budget`]: the beams the node
+    /// evaluations looked at, plus [`NODE_WORK`] per node evaluation.
+    pub work: u32,
     /// Of those, leaf scores.
     pub leaves: u32,
     /// End-cell computations (one rotation of every beam each).
@@ -353,20 +371,19 @@ pub struct SearchReport {
     /// `true` when the headings outside the windows were searched too (the windows had
     /// found no hypothesis scoring [`GlobalSearchConfig::full_turn_below`] by then).
     pub full_turn: bool,
-    /// `false` when the node budget stopped the search: the hypotheses are the best
+    /// `false` when the work budget stopped the search: the hypotheses are the best
     /// found, not proven best.
     pub complete: bool,
 }
 
 impl SearchReport {
-    /// Estimated Cortex-M4F instructions of the search: `nodes · (70 · beams + 20)`
-    /// (end-cell rotations and leaves folded in), a little above the instructions per
-    /// node of the budget-stopped relocalization scan under QEMU (`cost_relocalize`,
-    /// every minimum score at 0 so that every leaf is a hypothesis offered: 2 061 per
-    /// node with 30 beams, 3 140 with 45, the slope from 11 000 to 21 000 nodes); see
-    /// `docs/global-localization.md`.
+    /// Estimated Cortex-M4F instructions of the search: 60 a unit of work
+    /// ([`SearchReport::work`]), a little above what the budget-stopped relocalization
+    /// scan under QEMU costs a unit with its fixed costs (`cost_relocalize`, every minimum
+    /// score at 0 so that no node is pruned by score: 47.5 M for 830 000 units with 30
+    /// beams, 49.3 M with 45); see `docs/global-localization.md`.
     pub fn estimated_instructions(&self) -> u64 {
-        u64::from(self.nodes) * (70 * u64::from(self.beams) + 20)
+        u64::from(self.work) * 60
     }
 }
 
@@ -577,7 +594,8 @@ impl Dilations {
 /// headings of the node. With `a = 0` and `k = 0`: the exact score.
 ///
 /// Stops as soon as the beams still to look at cannot lift the bound above `thr` (the
-/// node is dropped then): the value returned is then some number ≤ `thr`.
+/// node is dropped then): the value returned is then some number ≤ `thr`. Returns the
+/// bound and the beams looked at (the work of [`GlobalSearchConfig::work_budget`]).
 #[allow(clippy::too_many_arguments)]
 fn bound(
     map: &GridView<'_>,
@@ -590,11 +608,13 @@ fn bound(
     k: u8,
     x: i32,
     y: i32,
-) -> u32 {
+) -> (u32, u32) {
     // The most the node can still score: the total less the beams that missed.
     let mut possible = total;
+    let mut looked = 0u32;
     if a == 0 {
         for (cx, cy, w) in cells {
+            looked += 1;
             let (u, v) = (cx.wrapping_add(x), cy.wrapping_add(y));
             let hit = if k == 0 {
                 map.is_occupied(u, v)
@@ -604,18 +624,19 @@ fn bound(
             if !hit {
                 possible = possible.wrapping_sub(*w);
                 if possible <= thr {
-                    return possible;
+                    return (possible, looked);
                 }
             }
         }
-        return possible;
+        return (possible, looked);
     }
     let Some(row) = dilations.cells.get(usize::from(a)) else {
-        return total;
+        return (total, looked);
     };
     let block = 1i32 << k;
     for ((cx, cy, w), e) in cells.iter().zip(row.iter()) {
         let e = i32::from(*e);
+        looked += 1;
         let missed = !levels.any_in_square(
             cx.wrapping_add(x).wrapping_sub(e),
             cy.wrapping_add(y).wrapping_sub(e),
@@ -624,11 +645,11 @@ fn bound(
         if missed {
             possible = possible.wrapping_sub(*w);
             if possible <= thr {
-                return possible;
+                return (possible, looked);
             }
         }
     }
-    possible
+    (possible, looked)
 }
 
 /// The occupied levels' bitmaps, looked up once per search (the bound's inner loop).
@@ -893,7 +914,7 @@ pub fn search_with_walls<const N: usize>(
     out: &mut Hypotheses<N>,
 ) -> Result<SearchReport, GlobalError> {
     let mut run = GlobalSearch::<N>::start(map, layers, walls, points, config)?;
-    run.resume(map, layers, config.node_budget)?;
+    run.resume(map, layers, config.work_budget)?;
     run.conclude();
     *out = run.hypotheses;
     Ok(run.report)
@@ -926,7 +947,7 @@ struct Slice<'a> {
 /// stopped. A robot that cannot spend a whole search on one scan (a microcontroller
 /// between two scans) runs a slice per scan; the hypotheses are poses of the robot when
 /// the search's scan was taken. Split in any way, the slices visit the same nodes in the
-/// same order as one run with their sum as its [`GlobalSearchConfig::node_budget`], and
+/// same order as one run with their sum as its [`GlobalSearchConfig::work_budget`], and
 /// find the same hypotheses.
 ///
 /// About 5.6 KB (the selected beams and the depth-first stack); a slice adds about
@@ -972,6 +993,8 @@ pub struct GlobalSearch<const N: usize> {
     stack: [Node; STACK],
     sp: usize,
     pending: Option<Expansion>,
+    /// Work granted by the slices so far (their sum).
+    granted: u32,
     hypotheses: Hypotheses<N>,
     report: SearchReport,
     done: bool,
@@ -998,6 +1021,7 @@ impl<const N: usize> GlobalSearch<N> {
             heading_windows: 1,
             headings_searched: headings,
             nodes: 0,
+            work: 0,
             leaves: 0,
             rotations: 0,
             nodes_per_level: [0; crate::grid::layers::MAX_LEVELS as usize + 1],
@@ -1044,6 +1068,7 @@ impl<const N: usize> GlobalSearch<N> {
             stack: [Node::default(); STACK],
             sp: 0,
             pending: None,
+            granted: 0,
             hypotheses: Hypotheses::new(),
             report,
             done: false,
@@ -1056,16 +1081,19 @@ impl<const N: usize> GlobalSearch<N> {
         Ok(run)
     }
 
-    /// Runs the search for at most `nodes` more node evaluations; `Ok(true)` when it is
-    /// over (then [`GlobalSearchReport::complete`](SearchReport::complete) holds unless
-    /// [`GlobalSearch::conclude`] stopped it before), `Ok(false)` when the slice's nodes
-    /// are spent. Refused when `layers` do not belong to `map` or `map` is not the size
+    /// Runs the search for `work` more units of [`GlobalSearchConfig::work_budget`];
+    /// `Ok(true)` when it is over (then
+    /// [`GlobalSearchReport::complete`](SearchReport::complete) holds unless
+    /// [`GlobalSearch::conclude`] stopped it before), `Ok(false)` when the work granted
+    /// is spent. The work granted adds up over the slices: a node evaluation started at
+    /// the end of one slice (it may overrun by up to one node's work) is paid for by the
+    /// next. Refused when `layers` do not belong to `map` or `map` is not the size
     /// of the one the search started on.
     pub fn resume(
         &mut self,
         map: &GridView<'_>,
         layers: &MaxPoolLayers<'_>,
-        nodes: u32,
+        work: u32,
     ) -> Result<bool, GlobalError> {
         if self.done {
             return Ok(true);
@@ -1074,7 +1102,8 @@ impl<const N: usize> GlobalSearch<N> {
         if !layers.matches(map) || g.width as i32 != self.width || g.height as i32 != self.height {
             return Err(GlobalError::LayersMismatch);
         }
-        let limit = self.report.nodes.saturating_add(nodes);
+        self.granted = self.granted.saturating_add(work);
+        let limit = self.granted;
         let top = layers.levels();
         let mut slice = Slice {
             levels: Levels::new(layers),
@@ -1343,7 +1372,8 @@ impl<const N: usize> GlobalSearch<N> {
     }
 
     /// Evaluates the children of `e` not evaluated yet, keeping those whose bound is
-    /// above the threshold; `false` when the slice's nodes ran out first (`limit`).
+    /// above the threshold; `false` when the work granted so far ran out first (`limit`,
+    /// a total over the search).
     fn evaluate(
         &mut self,
         map: &GridView<'_>,
@@ -1355,7 +1385,7 @@ impl<const N: usize> GlobalSearch<N> {
             let Some(mut c) = e.children.get(usize::from(e.evaluated)).copied() else {
                 break;
             };
-            if self.report.nodes >= limit {
+            if self.report.work >= limit {
                 return false;
             }
             self.report.nodes += 1;
@@ -1366,7 +1396,8 @@ impl<const N: usize> GlobalSearch<N> {
                 self.report.leaves += 1;
             }
             let cells = slice.end.at(&self.sel, c.reference(), &mut self.report);
-            c.bound = bound(
+            let looked;
+            (c.bound, looked) = bound(
                 map,
                 &slice.levels,
                 &slice.dilations,
@@ -1378,6 +1409,11 @@ impl<const N: usize> GlobalSearch<N> {
                 c.x,
                 c.y,
             );
+            self.report.work = self
+                .report
+                .work
+                .saturating_add(looked)
+                .saturating_add(NODE_WORK);
             if c.bound > self.thr
                 && let Some(slot) = e.children.get_mut(usize::from(e.kept))
             {
@@ -1586,6 +1622,8 @@ pub fn search_brute_force<const N: usize>(
         heading_windows: 1,
         headings_searched: headings,
         nodes,
+        // Every beam of every leaf.
+        work: nodes.saturating_mul(sel.len as u32 + NODE_WORK),
         leaves: nodes,
         rotations: headings,
         nodes_per_level: [nodes, 0, 0, 0, 0, 0, 0, 0, 0],
@@ -1671,7 +1709,7 @@ mod tests {
     fn config() -> GlobalSearchConfig {
         GlobalSearchConfig {
             heading_step: 0.25,
-            node_budget: u32::MAX,
+            work_budget: u32::MAX,
             heading_peaks: 0,
             ..GlobalSearchConfig::DEFAULT
         }
@@ -1802,12 +1840,12 @@ mod tests {
             assert!(all.complete);
             // A budget that stops the search, or one that lets it finish.
             let budget = if trial % 4 == 3 {
-                all.nodes + 3
+                all.work + 3
             } else {
-                rng.random_range(1..=all.nodes.max(1))
+                rng.random_range(1..=all.work.max(1))
             };
             let c = GlobalSearchConfig {
-                node_budget: budget,
+                work_budget: budget,
                 ..c
             };
             let mut one = Hypotheses::<3>::new();
@@ -1831,12 +1869,14 @@ mod tests {
             assert_eq!(
                 (
                     r_run.nodes,
+                    r_run.work,
                     r_run.leaves,
                     r_run.nodes_per_level,
                     r_run.passes
                 ),
                 (
                     r_one.nodes,
+                    r_one.work,
                     r_one.leaves,
                     r_one.nodes_per_level,
                     r_one.passes
@@ -1964,11 +2004,22 @@ mod tests {
         pts.load(&LidarScan::new(&ranges, LIDAR), 1, 0.0);
         let mut out = Hypotheses::<2>::new();
         let c = GlobalSearchConfig {
-            node_budget: 50,
+            work_budget: 50,
             ..config()
         };
         let r = search(&view, &layers, pts.as_slice(), &c, &mut out).unwrap();
-        assert!(!r.complete && r.nodes == 50, "{r:?}");
+        // It stops at the first node evaluation that finds the work spent, so it
+        // overruns by less than one node's work; each node counts NODE_WORK and at
+        // least one and at most every beam.
+        let most_per_node = u32::from(r.beams) + NODE_WORK;
+        assert!(
+            !r.complete && r.work >= 50 && r.work < 50 + most_per_node,
+            "{r:?}"
+        );
+        assert!(
+            r.work >= r.nodes * (NODE_WORK + 1) && r.work <= r.nodes * most_per_node,
+            "{r:?}"
+        );
         // No beam, bad settings, layers of another map.
         assert_eq!(
             search(&view, &layers, &[], &config(), &mut out).err(),
@@ -2017,7 +2068,7 @@ mod tests {
                 ..config()
             },
             GlobalSearchConfig {
-                node_budget: 0,
+                work_budget: 0,
                 ..config()
             },
         ] {

@@ -110,11 +110,11 @@ pub struct RelocalizationConfig {
     /// Heading spread around each hypothesis, radians (0: the search's heading step).
     pub spread_rad: f32,
     /// Scans one global search may span (≥ 1): each scan runs
-    /// [`GlobalSearchConfig::node_budget`] more node evaluations of the same search (on
-    /// the scan it started with) until it is over or has run this many; the hypotheses
-    /// are then moved by the odometry since that scan. Bounds the instructions per scan
-    /// by one node budget while giving the search several (a microcontroller cannot
-    /// spend a whole search between two scans).
+    /// [`GlobalSearchConfig::work_budget`] more work of the same search (on the scan it
+    /// started with) until it is over or has run this many; the hypotheses are then
+    /// moved by the odometry since that scan. Bounds the instructions per scan by one
+    /// work budget while giving the search several (a microcontroller cannot spend a
+    /// whole search between two scans).
     pub search_scans: u8,
     /// Half-width, cells, of the shift window while the localizer is
     /// [`LocalizerState::Relocalized`] (until [`LostDetection::confirm_scans`] good
@@ -219,7 +219,7 @@ impl LocalizerStatus {
 /// ([`GridLocalizer::with_layers`]; see the module documentation).
 ///
 /// RAM: `28·P + 24·B` bytes plus ~6 000 (lost detection, relocalization, the map's wall
-/// directions, a global search spanning scans: 4 648); the map and its layers are not
+/// directions, a global search spanning scans: 4 656); the map and its layers are not
 /// copied. A scan that runs the global search adds ≈ 3.5 KB of stack.
 ///
 /// ```
@@ -608,7 +608,7 @@ impl<const P: usize, const B: usize> GridLocalizer<'_, P, B> {
         };
         if run
             .search
-            .resume(&self.map, &layers, r.search.node_budget)
+            .resume(&self.map, &layers, r.search.work_budget)
             .is_err()
         {
             self.status.failed_searches = self.status.failed_searches.wrapping_add(1);

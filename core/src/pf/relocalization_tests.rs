@@ -43,7 +43,7 @@ fn known_pose_is_found_from_a_simulated_scan() {
             // 60 beams: with 45 the room's near point symmetry makes the mirrored pose
             // of scan 111 score higher (the search is exact; the scan is ambiguous).
             &GlobalSearchConfig {
-                node_budget: u32::MAX,
+                work_budget: u32::MAX,
                 max_beams: 60,
                 ..GlobalSearchConfig::DEFAULT
             },
@@ -95,7 +95,7 @@ fn known_pose_is_found_on_the_occupied_bitmap_alone() {
         let mut pts = ScanPoints::<180>::new();
         pts.load(&LidarScan::new(&sim.scans[k], LIDAR), 1, 1.0);
         let config = GlobalSearchConfig {
-            node_budget: u32::MAX,
+            work_budget: u32::MAX,
             max_beams: 60,
             ..GlobalSearchConfig::DEFAULT
         };
@@ -161,7 +161,7 @@ fn global_localization_converges_within_ten_scans() {
     }
 }
 
-/// A search that spans scans (250 nodes a scan): the localizer stays lost and does not
+/// A search that spans scans (5 000 units of work a scan): the localizer stays lost and does not
 /// filter while it runs, then seeds the particles at the hypotheses moved by the odometry
 /// since the search's scan — where the robot is at the scan that ends the search.
 #[test]
@@ -171,7 +171,7 @@ fn a_search_spanning_scans_seeds_where_the_robot_is_now() {
     let sim = simulate(7);
     let reloc = RelocalizationConfig {
         search: GlobalSearchConfig {
-            node_budget: 250,
+            work_budget: 5_000,
             ..GlobalSearchConfig::DEFAULT
         },
         search_scans: 40,
@@ -203,7 +203,14 @@ fn a_search_spanning_scans_seeds_where_the_robot_is_now() {
             assert_eq!(s.state, LocalizerState::Lost);
             assert_eq!(loc.filter().update_count(), 0, "no update while searching");
             let report = s.last_search.expect("a slice ran");
-            assert_eq!(report.nodes, 250 * (n as u32 + 1));
+            // The work granted adds up over the slices; a slice overruns by less than
+            // one node's work.
+            let granted = 5_000 * (n as u32 + 1);
+            let node = u32::from(report.beams) + global::NODE_WORK;
+            assert!(
+                report.work >= granted && report.work < granted + node,
+                "{report:?}"
+            );
             assert!(!report.complete);
         }
         let i = seeded_at.expect("the search ends within 40 scans");

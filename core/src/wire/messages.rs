@@ -93,7 +93,7 @@ pub enum Command {
     /// settings unchanged.
     ConfigureEkf(EkfSettings),
     /// Forget the localizer's pose: it is lost, and its next scan starts the global search
-    /// over the whole map, one node budget a scan for up to
+    /// over the whole map, one work budget a scan for up to
     /// [`crate::pf::RelocalizationConfig::search_scans`] scans (refused with
     /// [`ToHost::Refused`] unless the localizer is active).
     Relocalize,
@@ -365,7 +365,7 @@ pub struct LocalizerReport {
     pub lost_events: u32,
     /// Global searches that seeded the particles.
     pub relocalizations: u32,
-    /// Scans the global search under way has run (one node budget each, at most
+    /// Scans the global search under way has run (one work budget each, at most
     /// [`crate::pf::RelocalizationConfig::search_scans`]); 0 when none runs. While it is
     /// above 0 the estimate's pose is the last one before the search, not filtered. A
     /// search that found nothing ends with this back at 0, the state still

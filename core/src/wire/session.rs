@@ -1078,11 +1078,12 @@ mod tests {
         );
         assert_ne!(report, LocalizerReport::default());
 
-        // A search spanning scans (5 nodes a scan, at most 3 scans): each estimate says
+        // A search spanning scans (5 units of work, about a node, a scan; at most 3
+        // scans): each estimate says
         // how many scans it has run, until it ends (seeded or failed) on the third.
         let slow = RelocalizationConfig {
             search: crate::pf::global::GlobalSearchConfig {
-                node_budget: 5,
+                work_budget: 5,
                 ..crate::pf::global::GlobalSearchConfig::DEFAULT
             },
             search_scans: 3,

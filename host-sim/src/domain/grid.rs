@@ -292,8 +292,8 @@ pub struct GlobalOptions {
     pub max_scans: usize,
     /// Levels of the max-pooled map layers.
     pub levels: u8,
-    /// Node budget of the search, per scan when it spans scans (`None`: the core's).
-    pub node_budget: Option<u32>,
+    /// Work budget of the search, per scan when it spans scans (`None`: the core's).
+    pub work_budget: Option<u32>,
     /// Scans one search may span (`None`: the core's).
     pub search_scans: Option<u8>,
     /// Smallest hypothesis score, a fraction of the beams' total weight.
@@ -325,7 +325,7 @@ impl Default for GlobalOptions {
             trial_seed: 1,
             max_scans: 10,
             levels: 6,
-            node_budget: None,
+            work_budget: None,
             search_scans: None,
             min_score: None,
             search_range: None,

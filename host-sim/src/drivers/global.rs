@@ -92,13 +92,15 @@ pub struct SearchSummary {
     pub heading_step_deg: f32,
     /// Node evaluations.
     pub nodes: u32,
+    /// Work done (beams looked at, plus `NODE_WORK` per node evaluation).
+    pub work: u32,
     /// Leaf scores.
     pub leaves: u32,
     /// End-cell rotations.
     pub rotations: u32,
     /// Node evaluations per level.
     pub nodes_per_level: Vec<u32>,
-    /// `false` when the node budget stopped it.
+    /// `false` when the work budget stopped it.
     pub complete: bool,
     /// Passes run (minimum scores tried, highest first).
     pub passes: u8,
@@ -122,6 +124,7 @@ impl From<&SearchReport> for SearchSummary {
             headings_searched: r.headings_searched,
             heading_step_deg: r.heading_step.to_degrees(),
             nodes: r.nodes,
+            work: r.work,
             leaves: r.leaves,
             rotations: r.rotations,
             nodes_per_level: r.nodes_per_level.to_vec(),
@@ -393,8 +396,8 @@ pub fn settings_from(
 ) -> Result<TrialSettings> {
     let mut relocalization = RelocalizationConfig::DEFAULT;
     let search = &mut relocalization.search;
-    if let Some(b) = args.node_budget {
-        search.node_budget = b;
+    if let Some(b) = args.work_budget {
+        search.work_budget = b;
     }
     if let Some(m) = args.min_score {
         search.min_score_fraction = m;

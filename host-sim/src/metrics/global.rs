@@ -50,12 +50,12 @@ pub fn metrics(
         .max()
         .unwrap_or(0);
     let r = &settings.relocalization;
-    // A search spanning scans spends at most one node budget a scan.
+    // A search spanning scans spends about one work budget a scan at most.
     let max_instr_per_scan = searches
         .iter()
         .map(|s| {
-            let nodes = u64::from(s.nodes.max(1));
-            s.estimated_m4_instructions * nodes.min(u64::from(r.search.node_budget)) / nodes
+            let work = u64::from(s.work.max(1));
+            s.estimated_m4_instructions * work.min(u64::from(r.search.work_budget)) / work
         })
         .max()
         .unwrap_or(0);
@@ -89,7 +89,7 @@ pub fn metrics(
             "max_beams": r.search.max_beams,
             "min_score_fraction": r.search.min_score_fraction,
             "relative_score": r.search.relative_score,
-            "node_budget": r.search.node_budget,
+            "work_budget": r.search.work_budget,
             "search_scans": r.search_scans,
             "hypotheses": r.hypotheses,
         },
