@@ -1058,7 +1058,7 @@ impl<const N: usize> GlobalSearch<N> {
             pass_index: 0,
             searched_at: [u32::MAX; 2],
             found: false,
-            fraction: config.first_pass_fraction.max(config.min_score_fraction),
+            fraction: first_fraction(config),
             pass_min: 0,
             thr: 0,
             beaten: 0,
@@ -1073,7 +1073,7 @@ impl<const N: usize> GlobalSearch<N> {
             report,
             done: false,
         };
-        run.select(false);
+        run.select_headings(false);
         run.start_pass();
         if let Some(m) = run.searched_at.first_mut() {
             *m = run.pass_min;
@@ -1205,7 +1205,7 @@ impl<const N: usize> GlobalSearch<N> {
 
     /// Makes the heading windows (`rest` false) or every heading outside them the
     /// intervals the next pass searches.
-    fn select(&mut self, rest: bool) {
+    fn select_headings(&mut self, rest: bool) {
         if rest {
             self.n_windows = outside(&self.peaks, self.n_peaks, self.headings, &mut self.windows);
             self.report.full_turn = true;
@@ -1261,7 +1261,7 @@ impl<const N: usize> GlobalSearch<N> {
             if let Some(m) = self.searched_at.get_mut(set) {
                 *m = pass_min;
             }
-            self.select(rest);
+            self.select_headings(rest);
             self.fraction = fraction;
             self.start_pass();
             return true;
@@ -1451,10 +1451,16 @@ impl<const N: usize> GlobalSearch<N> {
 /// Most minimum scores a search steps through (the last one is the configured minimum).
 const MAX_PASS_FRACTIONS: usize = 64;
 
+/// The first pass's minimum score (fraction of the total weight): never below the
+/// configured minimum.
+fn first_fraction(c: &GlobalSearchConfig) -> f32 {
+    c.first_pass_fraction.max(c.min_score_fraction)
+}
+
 /// How many minimum scores the passes step through: the first pass's, then one
 /// [`GlobalSearchConfig::pass_step`] lower each, down to the minimum.
 fn pass_fractions(c: &GlobalSearchConfig) -> usize {
-    let first = c.first_pass_fraction.max(c.min_score_fraction);
+    let first = first_fraction(c);
     let mut n = 1;
     while n < MAX_PASS_FRACTIONS && first - n as f32 * c.pass_step > c.min_score_fraction + 1e-6 {
         n += 1;
@@ -1468,7 +1474,7 @@ fn pass_fractions(c: &GlobalSearchConfig) -> usize {
 
 /// The minimum score (fraction of the total weight) of the `i`-th of `n` steps.
 fn pass_fraction(c: &GlobalSearchConfig, i: usize, n: usize) -> f32 {
-    let first = c.first_pass_fraction.max(c.min_score_fraction);
+    let first = first_fraction(c);
     if i + 1 >= n {
         return c.min_score_fraction.min(first);
     }
