@@ -72,12 +72,32 @@ impl<T: Real> RowMap<T> {
     }
 }
 
+/// What a run of predictions changes at each prediction: the map and the robot
+/// covariance terms it gives. (Kept apart from the run's fixed terms so that a prediction
+/// computes and copies only this.)
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct RunState<T: Real> {
+    /// Stored rows → true rows.
+    pub(crate) map: RowMap<T>,
+    /// The robot's covariance `P_RR` the run leaves: `L_rm D L_rmᵀ` of the true rows plus
+    /// the robot's own block `L_rr D_r L_rrᵀ` as the last prediction stored it. The pose
+    /// covariance read after each prediction is this copy, not a recomputation.
+    robot: Matrix3<T>,
+}
+
+impl<T: Real> RunState<T> {
+    /// The robot's covariance `P_RR` after the run (see the field).
+    pub(crate) fn robot_covariance(&self) -> Matrix3<T> {
+        self.robot
+    }
+}
+
 /// A run of predictions kept as a [`RowMap`], with what the robot's covariance needs of
 /// the stored rows.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct DeferredMotion<T: Real> {
-    /// Stored rows → true rows.
-    pub(crate) map: RowMap<T>,
+    /// The map and the covariance terms after the run's last prediction.
+    pub(crate) state: RunState<T>,
     /// `M = L_rm D L_rmᵀ` of the stored rows.
     stored_coupled: Matrix3<T>,
     /// `C Bᵀ`-ready: the stored rows' columns 0 and 1 times their pivots `D₀`, `D₁` (last
@@ -87,15 +107,17 @@ pub(crate) struct DeferredMotion<T: Real> {
     near_pivots: Matrix3<T>,
     /// Largest |entry| of the stored rows (non-finite when an entry is).
     stored_largest: T,
-    /// `L_rm D L_rmᵀ` of the true rows, computed once per prediction: the prediction
-    /// after it and the pose covariance in between read it.
-    coupled: Matrix3<T>,
 }
 
 impl<T: Real> DeferredMotion<T> {
     /// The start of a run: the stored rows are the true ones. `rows` are the robot's
-    /// three rows over the columns left of the robot, `pivots` the `D` of those columns.
-    pub(crate) fn start(rows: [&[T]; 3], pivots: impl Iterator<Item = T>) -> Self {
+    /// three rows over the columns left of the robot, `pivots` the `D` of those columns,
+    /// `own` the robot's own block `L_rr D_r L_rrᵀ`.
+    pub(crate) fn start(
+        rows: [&[T]; 3],
+        pivots: impl Iterator<Item = T>,
+        own: &Matrix3<T>,
+    ) -> Self {
         let mut acc = [T::ZERO; 6];
         let mut largest = T::ZERO;
         let mut near = Matrix3::zeros();
@@ -126,27 +148,34 @@ impl<T: Real> DeferredMotion<T> {
             acc[0], acc[1], acc[2], acc[1], acc[3], acc[4], acc[2], acc[4], acc[5],
         );
         Self {
-            map: RowMap {
-                a: Matrix3::identity(),
-                b: Matrix3::zeros(),
+            state: RunState {
+                map: RowMap {
+                    a: Matrix3::identity(),
+                    b: Matrix3::zeros(),
+                },
+                robot: stored_coupled + own,
             },
             stored_coupled,
             stored_near: near,
             near_pivots,
             stored_largest: largest,
-            coupled: stored_coupled,
         }
     }
 
-    /// `L_rm D L_rmᵀ` of the true rows.
-    pub(crate) fn coupled(&self) -> Matrix3<T> {
-        self.coupled
+    /// The map from the stored rows to the true ones.
+    pub(crate) fn map(&self) -> RowMap<T> {
+        self.state.map
     }
 
-    /// [`DeferredMotion::coupled`] from the map and the stored rows' terms (O(1)):
+    /// The robot's covariance `P_RR` after the run.
+    pub(crate) fn robot_covariance(&self) -> Matrix3<T> {
+        self.state.robot
+    }
+
+    /// `L_rm D L_rmᵀ` of the true rows under `map`, from the stored rows' terms (O(1)):
     /// `A M Aᵀ + A C Bᵀ + B Cᵀ Aᵀ + B D₀₁ Bᵀ`.
-    fn compute_coupled(&self) -> Matrix3<T> {
-        let RowMap { a, b } = &self.map;
+    fn coupled(&self, map: &RowMap<T>) -> Matrix3<T> {
+        let RowMap { a, b } = map;
         let cross = product(a, &product(&self.stored_near, &b.transpose()));
         congruence(a, &self.stored_coupled)
             + cross
@@ -157,28 +186,46 @@ impl<T: Real> DeferredMotion<T> {
     /// A bound on the largest |entry| of the true rows: `3 · max|A| · max|stored| +
     /// max|B|` (non-finite when an entry may be).
     pub(crate) fn largest(&self) -> T {
-        let RowMap { a, b } = &self.map;
+        self.largest_under(&self.state.map)
+    }
+
+    fn largest_under(&self, map: &RowMap<T>) -> T {
+        let RowMap { a, b } = map;
         T::lit(3.0) * super::max_abs(a.iter().copied()) * self.stored_largest
             + super::max_abs(b.iter().copied())
     }
 
-    /// The run with one more prediction: true rows `f · rows + [added | 0]` (`added`: the
-    /// odometry scale states' term in columns 0 and 1, last column zero).
-    pub(crate) fn then(&self, f: &Matrix3<T>, added: Option<&Matrix3<T>>) -> Self {
-        let mut next = *self;
-        next.map.a = product(f, &self.map.a);
-        next.map.b = product(f, &self.map.b);
+    /// The run's state after one more prediction: true rows `f · rows + [added | 0]`
+    /// (`added`: the odometry scale states' term in columns 0 and 1, last column zero),
+    /// and `own` the robot's own block `L_rr D_r L_rrᵀ` that the prediction stores.
+    /// Nothing changes until [`DeferredMotion::advance`].
+    pub(crate) fn then(
+        &self,
+        f: &Matrix3<T>,
+        added: Option<&Matrix3<T>>,
+        own: &Matrix3<T>,
+    ) -> RunState<T> {
+        let mut map = RowMap {
+            a: product(f, &self.state.map.a),
+            b: product(f, &self.state.map.b),
+        };
         if let Some(t) = added {
-            next.map.b += t;
+            map.b += t;
         }
-        next.coupled = next.compute_coupled();
-        next
+        let robot = self.coupled(&map) + own;
+        RunState { map, robot }
     }
 
-    /// `true` when the run's map and the bound on the rows it gives are finite, with
-    /// room for the rounding of applying it (the bound doubled stays finite).
-    pub(crate) fn is_finite(&self) -> bool {
-        (self.largest() * T::lit(2.0)).finite() && self.map.a.iter().all(|v| v.finite())
+    /// `true` when `state`'s map and the bound on the rows it gives are finite, with room
+    /// for the rounding of applying it (the bound doubled stays finite).
+    pub(crate) fn is_finite(&self, state: &RunState<T>) -> bool {
+        (self.largest_under(&state.map) * T::lit(2.0)).finite()
+            && state.map.a.iter().all(|v| v.finite())
+    }
+
+    /// Makes `state` (from [`DeferredMotion::then`]) the run's.
+    pub(crate) fn advance(&mut self, state: RunState<T>) {
+        self.state = state;
     }
 }
 

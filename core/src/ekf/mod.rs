@@ -615,7 +615,10 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// Covariance of the robot pose, `P_RR` (O(1) after a prediction, O(n) after any
     /// other step).
     pub fn pose_covariance(&self) -> Matrix3<T> {
-        self.robot_summary().0
+        match &self.deferred {
+            Some(run) => run.robot_covariance(),
+            None => self.start_deferral().robot_covariance(),
+        }
     }
 
     /// Position of landmark `index`, or `None` when there is no such landmark.
@@ -649,7 +652,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         CovarianceView::new(
             &self.factor,
             self.active_dim(),
-            self.deferred.map(|run| run.map),
+            self.deferred.as_ref().map(|run| run.map()),
         )
     }
 
@@ -711,7 +714,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// otherwise one pass over the robot's three rows.
     fn robot_summary(&self) -> (Matrix3<T>, T) {
         let run = self.deferred.unwrap_or_else(|| self.start_deferral());
-        (run.coupled() + self.own_covariance(), run.largest())
+        (run.robot_covariance(), run.largest())
     }
 
     /// `L_rr D_r L_rrᵀ`: the robot's own block's part of `P_RR`.
@@ -738,7 +741,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             diag += c + 2;
             d
         });
-        DeferredMotion::start(rows, pivots)
+        DeferredMotion::start(rows, pivots, &self.own_covariance())
     }
 
     /// Applies the predictions made since the last update or new landmark to the stored
@@ -772,7 +775,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     #[inline(never)]
     fn apply_deferred(&mut self) {
         // The map only (not `take`: the whole run is ten times its size).
-        let Some(map) = self.deferred.as_ref().map(|run| run.map) else {
+        let Some(map) = self.deferred.as_ref().map(|run| run.map()) else {
             return;
         };
         self.deferred = None;
@@ -942,7 +945,14 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         q: &[T; 3],
         wrt_scale: Option<&[[T; 2]; 3]>,
     ) -> Result<(), EkfError> {
-        let run = self.deferred.unwrap_or_else(|| self.start_deferral());
+        // A run that starts here starts with the identity map: the true rows are the
+        // stored ones, so starting it changes nothing the filter shows.
+        if self.deferred.is_none() {
+            self.deferred = Some(self.start_deferral());
+        }
+        let Some(run) = self.deferred.as_ref() else {
+            return Err(EkfError::NumericalFailure);
+        };
         let (lrr, dr) = self.robot_block();
         let lrr = Matrix3::from_fn(|i, j| lrr[i][j]);
         let l10 = self.factor.get(1).copied().unwrap_or(T::ZERO);
@@ -974,12 +984,12 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
                     }
                 })
             });
-            let next = run.then(&f, scale_terms.as_ref().filter(|_| estimated));
             let own = congruence(
                 &Matrix3::from_fn(|i, j| l[i][j]),
                 &Matrix3::from_diagonal(&d.into()),
             );
-            (l, d, next, next.coupled() + own, scale_terms)
+            let next = run.then(&f, scale_terms.as_ref().filter(|_| estimated), &own);
+            (l, d, next, next.robot_covariance(), scale_terms)
         };
         let (mut l, mut d, mut next, p_rr, mut scale_terms) = step([T::ONE; 3]);
         let scale = capped([
@@ -991,12 +1001,17 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
             (l, d, next, _, scale_terms) = step(scale);
         }
         let scale_ok = scale_terms.is_none_or(|t| t.iter().all(|v| v.finite()));
-        if !p_rr.iter().all(|v| v.finite()) || !all_finite(&l, &d) || !next.is_finite() || !scale_ok
+        if !p_rr.iter().all(|v| v.finite())
+            || !all_finite(&l, &d)
+            || !run.is_finite(&next)
+            || !scale_ok
         {
             return Err(EkfError::NumericalFailure);
         }
         self.set_robot_block(&l, &d);
-        self.deferred = Some(next);
+        if let Some(run) = self.deferred.as_mut() {
+            run.advance(next);
+        }
         Ok(())
     }
 
@@ -1032,7 +1047,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     fn project(&self, h: &SparseRow<T>, f: &mut [T]) {
         f.fill(T::ZERO);
         let r0 = self.active_dim() - 3;
-        let deferred = self.deferred.as_ref().map(|run| run.map);
+        let deferred = self.deferred.as_ref().map(|run| run.map());
         let mut robot = [T::ZERO; 3];
         for &(s, hs) in h {
             if deferred.is_some()
