@@ -5,22 +5,24 @@ use microslam::geometry::{Pose2, wrap_near};
 /// Least-squares rotation + translation (no scale) taking `estimated` points onto
 /// `truth` points (Umeyama / Kabsch in 2-D), as the pose of the estimate's frame in the
 /// truth frame. `None` for fewer than two pairs.
-pub fn se2_least_squares(estimated: &[[f64; 2]], truth: &[[f64; 2]]) -> Option<Pose2<f64>> {
+pub fn se2_least_squares<E: Planar, G: Planar>(estimated: &[E], truth: &[G]) -> Option<Pose2<f64>> {
     let n = estimated.len().min(truth.len());
     if n < 2 {
         return None;
     }
-    let mean = |pts: &[[f64; 2]]| {
-        let (sx, sy) = pts[..n]
-            .iter()
-            .fold((0.0, 0.0), |(x, y), p| (x + p[0], y + p[1]));
+    fn mean<P: Planar>(pts: &[P], n: usize) -> [f64; 2] {
+        let (sx, sy) = pts[..n].iter().fold((0.0, 0.0), |(x, y), p| {
+            let [px, py] = p.xy();
+            (x + px, y + py)
+        });
         [sx / n as f64, sy / n as f64]
-    };
-    let (me, mt) = (mean(estimated), mean(truth));
+    }
+    let (me, mt) = (mean(estimated, n), mean(truth, n));
     let (mut dot, mut cross) = (0.0, 0.0);
     for (e, t) in estimated[..n].iter().zip(&truth[..n]) {
-        let (ex, ey) = (e[0] - me[0], e[1] - me[1]);
-        let (tx, ty) = (t[0] - mt[0], t[1] - mt[1]);
+        let ([ex, ey], [tx, ty]) = (e.xy(), t.xy());
+        let (ex, ey) = (ex - me[0], ey - me[1]);
+        let (tx, ty) = (tx - mt[0], ty - mt[1]);
         dot += ex * tx + ey * ty;
         cross += ex * ty - ey * tx;
     }
@@ -31,6 +33,24 @@ pub fn se2_least_squares(estimated: &[[f64; 2]], truth: &[[f64; 2]]) -> Option<P
         mt[1] - (s * me[0] + c * me[1]),
         phi,
     ))
+}
+
+/// Something with a position in the plane: a point `[x, y]` or a pose.
+pub trait Planar {
+    /// `[x, y]`.
+    fn xy(&self) -> [f64; 2];
+}
+
+impl Planar for [f64; 2] {
+    fn xy(&self) -> [f64; 2] {
+        *self
+    }
+}
+
+impl Planar for Pose2<f64> {
+    fn xy(&self) -> [f64; 2] {
+        [self.x, self.y]
+    }
 }
 
 /// The transform that puts the estimate's first pose onto the truth's first pose:

@@ -28,7 +28,7 @@ pub mod relations;
 pub use alignment::{Rigid, apply, first_pose, se2_least_squares};
 pub use assignment::{max_gain, min_cost};
 
-use crate::domain::recording::{Recording, TruthCursor};
+use crate::domain::recording::{Recording, TruePose, TruthCursor};
 use crate::drivers::ekf::ReplayRun;
 use microslam::geometry::{Pose2, wrap_near};
 use nalgebra::{Matrix3, Vector2, Vector3};
@@ -121,6 +121,38 @@ pub struct Metrics {
 /// Scores a replay against the recording's ground truth.
 pub fn evaluate(recording: &Recording, run: &ReplayRun) -> Metrics {
     let truth = &recording.ground_truth;
+    // Dead reckoning is scored on another core meanwhile.
+    std::thread::scope(|s| {
+        let dead_reckoning = s.spawn(|| dead_reckoning_ate(truth, &run.dead_reckoning));
+        let mut m = evaluate_filter(recording, run);
+        m.dead_reckoning_ate_rmse_m = dead_reckoning
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        m
+    })
+}
+
+/// ATE of the dead reckoning `(stamp, pose)` against `truth`, under both alignments.
+fn dead_reckoning_ate(truth: &[TruePose], dead_reckoning: &[(f64, Pose2<f64>)]) -> Aligned {
+    let mut dr_est = Vec::with_capacity(dead_reckoning.len());
+    let mut dr_gt = Vec::with_capacity(dead_reckoning.len());
+    let mut cursor = TruthCursor::new(truth);
+    for (t, p) in dead_reckoning {
+        if let Some(g) = cursor.at(*t) {
+            dr_est.push(*p);
+            dr_gt.push(g);
+        }
+    }
+    let dr = transforms(&dr_est, &dr_gt);
+    Aligned {
+        first_pose: dr.0.and_then(|t| position_rmse(&t, &dr_est, &dr_gt)),
+        se2: dr.1.and_then(|t| position_rmse(&t, &dr_est, &dr_gt)),
+    }
+}
+
+/// [`evaluate`] but the dead reckoning's figures.
+fn evaluate_filter(recording: &Recording, run: &ReplayRun) -> Metrics {
+    let truth = &recording.ground_truth;
     // Sized up front: growing these by doubling copied and faulted in megabytes.
     let n = run.trajectory.len();
     let mut est = Vec::with_capacity(n);
@@ -142,15 +174,6 @@ pub fn evaluate(recording: &Recording, run: &ReplayRun) -> Metrics {
             && let Some(v) = pose_nees(&s.pose, &g, &s.covariance)
         {
             nees.push(v);
-        }
-    }
-    let mut dr_est = Vec::with_capacity(run.dead_reckoning.len());
-    let mut dr_gt = Vec::with_capacity(run.dead_reckoning.len());
-    let mut cursor = TruthCursor::new(truth);
-    for (t, p) in &run.dead_reckoning {
-        if let Some(g) = cursor.at(*t) {
-            dr_est.push(*p);
-            dr_gt.push(g);
         }
     }
     let transforms = transforms(&est, &gt);
@@ -187,11 +210,6 @@ pub fn evaluate(recording: &Recording, run: &ReplayRun) -> Metrics {
         m.landmark_rmse_m.se2 = landmark_rmse(&t, recording, run);
         m.landmark_alignment = Some("landmarks".to_owned());
     }
-    let dr = self::transforms(&dr_est, &dr_gt);
-    m.dead_reckoning_ate_rmse_m = Aligned {
-        first_pose: dr.0.and_then(|t| position_rmse(&t, &dr_est, &dr_gt)),
-        se2: dr.1.and_then(|t| position_rmse(&t, &dr_est, &dr_gt)),
-    };
     m.nees_pose_mean = mean(&nees);
     let bound = microslam::gate::chi_square_quantile(0.95, 3);
     m.nees_pose_within_95 = (!nees.is_empty())
@@ -207,50 +225,50 @@ pub fn transforms(
     gt: &[Pose2<f64>],
 ) -> (Option<Pose2<f64>>, Option<Pose2<f64>>) {
     let fp = est.first().zip(gt.first()).map(|(e, g)| first_pose(e, g));
-    let pe: Vec<[f64; 2]> = est.iter().map(|p| [p.x, p.y]).collect();
-    let pg: Vec<[f64; 2]> = gt.iter().map(|p| [p.x, p.y]).collect();
-    (fp, se2_least_squares(&pe, &pg))
+    (fp, se2_least_squares(est, gt))
 }
 
 fn mean(v: &[f64]) -> Option<f64> {
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
 
+/// The mean of `n` values given one by one (no vector of them: the long runs' per-pose
+/// figures would each fault in a megabyte); the same sum as [`mean`] of them.
+fn mean_of(values: impl Iterator<Item = f64>, n: usize) -> Option<f64> {
+    (n > 0).then(|| values.sum::<f64>() / n as f64)
+}
+
 /// Position RMSE of `t · est` against `gt`.
 pub fn position_rmse(t: &Pose2<f64>, est: &[Pose2<f64>], gt: &[Pose2<f64>]) -> Option<f64> {
     let r = Rigid::new(t);
-    let sq: Vec<f64> = est
-        .iter()
-        .zip(gt)
-        .map(|(e, g)| {
-            let [x, y] = r.point(e.x, e.y);
-            (x - g.x).powi(2) + (y - g.y).powi(2)
-        })
-        .collect();
-    mean(&sq).map(f64::sqrt)
+    let sq = est.iter().zip(gt).map(|(e, g)| {
+        let [x, y] = r.point(e.x, e.y);
+        (x - g.x).powi(2) + (y - g.y).powi(2)
+    });
+    mean_of(sq, est.len().min(gt.len())).map(f64::sqrt)
 }
 
 pub(crate) fn yaw_rmse_deg(t: &Pose2<f64>, est: &[Pose2<f64>], gt: &[Pose2<f64>]) -> Option<f64> {
     let r = Rigid::new(t);
-    let sq: Vec<f64> = est
+    let sq = est
         .iter()
         .zip(gt)
-        .map(|(e, g)| wrap_near(r.apply(e).theta - g.theta).powi(2))
-        .collect();
-    mean(&sq).map(|v| v.sqrt().to_degrees())
+        .map(|(e, g)| wrap_near(r.apply(e).theta - g.theta).powi(2));
+    mean_of(sq, est.len().min(gt.len())).map(|v| v.sqrt().to_degrees())
 }
 
 /// NEES of a pose estimate with covariance `p` against the truth; `None` when `p` is not
 /// invertible (e.g. at the known start).
 pub fn pose_nees(est: &Pose2<f64>, truth: &Pose2<f64>, p: &[[f64; 3]; 3]) -> Option<f64> {
     let p = Matrix3::from_fn(|r, c| p[r][c]);
-    let inv = p.cholesky()?.inverse();
     let e = Vector3::new(
         truth.x - est.x,
         truth.y - est.y,
         wrap_near(truth.theta - est.theta),
     );
-    let v = (e.transpose() * inv * e)[(0, 0)];
+    // eᵀ P⁻¹ e = |L⁻¹ e|² for P = L Lᵀ: one triangular solve, no inverse (this runs once
+    // per pose sample, 61 785 times on MRCLAM ds6 robot 1).
+    let v = p.cholesky()?.l().solve_lower_triangular(&e)?.norm_squared();
     v.is_finite().then_some(v)
 }
 
