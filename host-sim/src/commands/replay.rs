@@ -6,7 +6,7 @@ use crate::domain::config::Settings;
 use crate::domain::grid::{GRID_BITMAP, GRID_CELLS, GridOptions, Preset, carmen_lidar};
 use crate::domain::recording::Recording;
 use crate::domain::{AssociationMode, FilterKind, Precision};
-use crate::drivers::ekf::replay;
+use crate::drivers::ekf::{PoseSample, replay_with};
 use crate::drivers::grid::{GridRun, GridRunOptions, carmen_inputs, run_slam_observed};
 use crate::inputs::faults::{FaultRates, FaultReport};
 use crate::inputs::readers::carmen::{
@@ -129,21 +129,34 @@ pub fn run_and_report(
     mcap: Option<(&mut crate::output::mcap::McapFile, &str)>,
 ) -> Result<()> {
     let progress = (!quiet).then(|| super::progress_bar(recording.events.len() as u64));
-    // The ground truth is written while the filter runs, the trajectory while the metrics
-    // are computed.
+    // The ground truth and the trajectory are written while the filter runs (on the core
+    // it leaves free), the trajectory from the samples the filter hands over in chunks.
     let metrics = std::thread::scope(|s| -> Result<_> {
         let truth = s.spawn(|| crate::output::write_truth(out, recording));
-        let run = replay(recording, settings, mode, precision, progress.as_ref())?;
+        let (chunks, received) = std::sync::mpsc::channel::<Vec<(f64, Pose2<f64>)>>();
+        let trajectory =
+            s.spawn(move || crate::output::write_trajectory(out, received.into_iter().flatten()));
+        // A failed writer drops its receiver: the samples are then dropped here and its
+        // error comes from joining it.
+        let mut hand_over = |samples: &[PoseSample]| {
+            let _ = chunks.send(samples.iter().map(|p| (p.stamp, p.pose)).collect());
+        };
+        let run = replay_with(
+            recording,
+            settings,
+            mode,
+            precision,
+            progress.as_ref(),
+            &mut hand_over,
+        );
+        drop(chunks); // the writer's end of the samples
+        let run = run?;
         if let Some(p) = &progress {
             p.finish_and_clear();
         }
-        let mut metrics = std::thread::scope(|inner| -> Result<_> {
-            let trajectory = inner.spawn(|| crate::output::write_trajectory(out, &run));
-            let metrics = crate::metrics::evaluate(recording, &run);
-            crate::output::join_writer(trajectory)?;
-            Ok(metrics)
-        })?;
+        let mut metrics = crate::metrics::evaluate(recording, &run);
         metrics.faults = faults;
+        crate::output::join_writer(trajectory)?;
         crate::output::join_writer(truth)?;
         crate::output::write_all(out, recording, &run, &mut metrics, plots, started)?;
         if let Some((file, prefix)) = mcap {

@@ -150,6 +150,24 @@ pub fn replay(
     precision: Precision,
     progress: Option<&ProgressBar>,
 ) -> Result<ReplayRun> {
+    replay_with(recording, settings, mode, precision, progress, &mut |_| {})
+}
+
+/// Pose samples handed to a [`replay_with`] observer at a time.
+pub const SAMPLE_CHUNK: usize = 4096;
+
+/// [`replay`], handing the pose samples to `on_samples` while the filter runs: each call
+/// gets the samples recorded since the previous one, in order, [`SAMPLE_CHUNK`] at a time
+/// and the rest at the end. (`host-sim replay` writes `trajectory.tum` from them on
+/// another core while the filter goes on.)
+pub fn replay_with(
+    recording: &Recording,
+    settings: &Settings,
+    mode: AssociationMode,
+    precision: Precision,
+    progress: Option<&ProgressBar>,
+    on_samples: &mut (dyn FnMut(&[PoseSample]) + Send),
+) -> Result<ReplayRun> {
     // Dead reckoning runs beside the filter (it only needs the events).
     let max_gap = settings.odometry.max_gap_s;
     std::thread::scope(|s| {
@@ -158,13 +176,12 @@ pub fn replay(
             settings.odometry.max_turn_rate_radps,
         );
         let dr = s.spawn(move || dead_reckoning(recording, max_gap, limits));
-        let mut run =
-            match precision {
-                Precision::F32 => Replayer::<f32>::new(settings, mode, recording)?
-                    .run(recording, progress, precision),
-                Precision::F64 => Replayer::<f64>::new(settings, mode, recording)?
-                    .run(recording, progress, precision),
-            }?;
+        let mut run = match precision {
+            Precision::F32 => Replayer::<f32>::new(settings, mode, recording)?
+                .run(recording, progress, precision, on_samples),
+            Precision::F64 => Replayer::<f64>::new(settings, mode, recording)?
+                .run(recording, progress, precision, on_samples),
+        }?;
         run.dead_reckoning = dr
             .join()
             .map_err(|_| anyhow::anyhow!("dead-reckoning thread panicked"))?;
@@ -293,6 +310,7 @@ impl<T: Real> Replayer<T> {
         recording: &Recording,
         progress: Option<&ProgressBar>,
         precision: Precision,
+        on_samples: &mut (dyn FnMut(&[PoseSample]) + Send),
     ) -> Result<ReplayRun> {
         let events = &recording.events;
         let max_gap = self.settings.odometry.max_gap_s;
@@ -307,6 +325,8 @@ impl<T: Real> Replayer<T> {
         let snapshot_every = span / MAP_SNAPSHOTS as f64;
         let mut next_snapshot = f64::NEG_INFINITY;
         let mut map_history = Vec::new();
+        // Samples already handed to `on_samples`.
+        let mut handed = 0;
         // One clock around the whole loop: a clock read per step cost as much as a
         // prediction.
         let clock = Instant::now();
@@ -341,6 +361,10 @@ impl<T: Real> Replayer<T> {
                     }
                     steps += 1;
                     trajectory.push(self.sample(t));
+                    if trajectory.len() - handed >= SAMPLE_CHUNK {
+                        on_samples(trajectory.get(handed..).unwrap_or(&[]));
+                        handed = trajectory.len();
+                    }
                     i += 1;
                 }
                 EventKind::Sighting(_) => {
@@ -379,6 +403,9 @@ impl<T: Real> Replayer<T> {
             }
         }
         self.filter_time = clock.elapsed();
+        if handed < trajectory.len() {
+            on_samples(trajectory.get(handed..).unwrap_or(&[]));
+        }
         if let Some(p) = progress {
             p.set_position(events.len() as u64);
         }
@@ -549,5 +576,70 @@ impl<T: Real> Replayer<T> {
             Pairing::Ambiguous => self.counts.ambiguous += 1,
             Pairing::Invalid => self.counts.dropped += 1,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use microslam::event::Event;
+
+    /// A drive of `n` odometry samples at 50 Hz on a gentle arc, no sightings.
+    fn drive(n: usize) -> Recording {
+        let events = (0..n)
+            .map(|i| {
+                let t = 100.0 + i as f64 * 0.02;
+                Event::new(
+                    t,
+                    EventKind::Velocity {
+                        v: 0.2,
+                        omega: 0.1 * (t * 0.3).sin(),
+                    },
+                )
+            })
+            .collect();
+        Recording {
+            name: "drive".into(),
+            events,
+            ground_truth: Vec::new(),
+            landmarks: Vec::new(),
+            initial_pose: Some(Pose2::new(1.0, -2.0, 0.5)),
+            dropped_sightings: 0,
+        }
+    }
+
+    #[test]
+    fn samples_are_handed_over_in_order_in_chunks_then_the_rest() {
+        let n = 2 * SAMPLE_CHUNK + 1234;
+        let recording = drive(n);
+        let settings = Settings::load_for("mrclam", None, None).unwrap();
+        let mut handed: Vec<PoseSample> = Vec::new();
+        let mut sizes = Vec::new();
+        let run = replay_with(
+            &recording,
+            &settings,
+            AssociationMode::Known,
+            Precision::F64,
+            None,
+            &mut |samples| {
+                sizes.push(samples.len());
+                handed.extend_from_slice(samples);
+            },
+        )
+        .unwrap();
+        assert_eq!(sizes, [SAMPLE_CHUNK, SAMPLE_CHUNK, 1234]);
+        assert_eq!(run.trajectory.len(), n);
+        assert_eq!(handed, run.trajectory);
+        // The same samples as the replay without an observer.
+        let plain = replay(
+            &recording,
+            &settings,
+            AssociationMode::Known,
+            Precision::F64,
+            None,
+        )
+        .unwrap();
+        assert_eq!(plain.trajectory, run.trajectory);
+        assert!(run.trajectory.last().unwrap().pose.x > 1.0);
     }
 }

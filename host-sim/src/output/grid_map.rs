@@ -46,7 +46,7 @@ fn write_map_server(out: &Path, cells: &[i8], g: &GridGeometry, log_odds: &LogOd
     }
     let mut pgm = format!("P5\n{w} {h}\n255\n").into_bytes();
     pgm.extend_from_slice(&grey);
-    std::fs::write(out.join("map.pgm"), pgm)?;
+    super::write_file(&out.join("map.pgm"), pgm)?;
     let origin_x = f64::from(g.origin_x) + x0 as f64 * f64::from(g.resolution);
     let origin_y = f64::from(g.origin_y) + y0 as f64 * f64::from(g.resolution);
     let yaml = format!(
@@ -55,7 +55,7 @@ fn write_map_server(out: &Path, cells: &[i8], g: &GridGeometry, log_odds: &LogOd
         probability(log_odds.occupied_above, log_odds),
         probability(log_odds.free_below, log_odds),
     );
-    std::fs::write(out.join("map.yaml"), yaml)?;
+    super::write_file(&out.join("map.yaml"), yaml)?;
     Ok(())
 }
 
@@ -95,8 +95,8 @@ pub fn write_outputs(
         &out.join("trajectory.tum"),
         run.trajectory.iter().map(|(t, p)| (*t, p.cast())),
     )?;
-    std::fs::write(
-        out.join("metrics.json"),
+    super::write_file(
+        &out.join("metrics.json"),
         serde_json::to_string_pretty(metrics)? + "\n",
     )?;
     Ok(())

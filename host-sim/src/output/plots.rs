@@ -27,7 +27,7 @@ fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
 
 /// Writes an 8-bit RGB image (`w · h · 3` bytes, rows top to bottom) as a PNG.
 pub fn write_png(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<()> {
-    let file = std::fs::File::create(path).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let file = super::create_file(path)?;
     let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);
     enc.set_color(png::ColorType::Rgb);
     enc.set_depth(png::BitDepth::Eight);
