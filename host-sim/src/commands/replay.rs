@@ -150,7 +150,15 @@ pub fn run_and_report(
             &mut hand_over,
         );
         drop(chunks); // the writer's end of the samples
-        let run = run?;
+        let run = match run {
+            Ok(run) => run,
+            Err(e) => {
+                // Refused before its first sample (settings): no trajectory to leave.
+                let _ = crate::output::join_writer(trajectory);
+                let _ = std::fs::remove_file(out.join("trajectory.tum"));
+                return Err(e);
+            }
+        };
         if let Some(p) = &progress {
             p.finish_and_clear();
         }
