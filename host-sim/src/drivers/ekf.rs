@@ -166,7 +166,7 @@ pub fn replay_with(
     mode: AssociationMode,
     precision: Precision,
     progress: Option<&ProgressBar>,
-    on_samples: &mut (dyn FnMut(&[PoseSample]) + Send),
+    on_samples: &mut dyn FnMut(&[PoseSample]),
 ) -> Result<ReplayRun> {
     // Dead reckoning runs beside the filter (it only needs the events).
     let max_gap = settings.odometry.max_gap_s;
@@ -310,7 +310,7 @@ impl<T: Real> Replayer<T> {
         recording: &Recording,
         progress: Option<&ProgressBar>,
         precision: Precision,
-        on_samples: &mut (dyn FnMut(&[PoseSample]) + Send),
+        on_samples: &mut dyn FnMut(&[PoseSample]),
     ) -> Result<ReplayRun> {
         let events = &recording.events;
         let max_gap = self.settings.odometry.max_gap_s;

@@ -229,11 +229,11 @@ pub fn transforms(
 }
 
 fn mean(v: &[f64]) -> Option<f64> {
-    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    mean_of(v.iter().copied(), v.len())
 }
 
 /// The mean of `n` values given one by one (no vector of them: the long runs' per-pose
-/// figures would each fault in a megabyte); the same sum as [`mean`] of them.
+/// figures would each fault in a megabyte).
 fn mean_of(values: impl Iterator<Item = f64>, n: usize) -> Option<f64> {
     (n > 0).then(|| values.sum::<f64>() / n as f64)
 }
