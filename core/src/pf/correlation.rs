@@ -388,6 +388,10 @@ pub fn search_window_sparse_rows<const S: usize>(
     half_width: u8,
     scores: &mut [u32; MAX_SHIFTS],
 ) -> ShiftScore {
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    if let Some(best) = masked::search_rows::<S>(map, pose, points, half_width, scores) {
+        return best;
+    }
     search_rows::<SeedWindow, S>(map, pose, points, half_width, scores)
 }
 
@@ -408,6 +412,9 @@ pub fn search_window_packed<const N: usize, const S: usize>(
 
 /// The search with accumulator `A` (for windows of `A::ROWS` rows) when the window is
 /// `A::ROWS` wide and the map's bitmap rows `S` bytes long, else the general sparse path.
+/// (Inlined on a host CPU, so that [`masked`] compiles it with the vector unit's
+/// instructions; the microcontroller keeps one copy.)
+#[cfg_attr(not(target_os = "none"), inline(always))]
 fn search_rows<A: WindowSums, const S: usize>(
     map: &GridView<'_>,
     pose: &Pose2<f32>,
@@ -443,6 +450,9 @@ const ROW: usize = 16;
 trait WindowSums: Sized {
     /// Rows of the window this accumulator is built for, at most.
     const ROWS: usize;
+    /// Whether [`Self::add_rows`] takes each row with the bits beyond the window's `n`
+    /// (bit `t`: column `x0 + t`, for every `t` up to 16) instead of exactly `n` bits.
+    const WIDE_ROWS: bool = false;
     /// Zero sums.
     fn new() -> Self;
     /// Adds `weight` for the occupied cells of one `n × n` window; `rows(r)` is row `r`
@@ -600,19 +610,7 @@ impl WindowSums for WideSums {
 
     #[inline(always)]
     fn add_rows(&mut self, weight: u32, rows: impl Fn(usize) -> u32) {
-        let (mut lo, mut hi) = (0u64, 0u64);
-        for r in 0..Self::N {
-            let m = u64::from(rows(r));
-            let at = r * Self::N;
-            if at < 64 {
-                lo |= m << at;
-                if at + Self::N > 64 {
-                    hi |= m >> (64 - at);
-                }
-            } else {
-                hi |= m << (at - 64);
-            }
-        }
+        let (lo, hi) = pack_9x9(rows);
         if lo | hi == 0 {
             return;
         }
@@ -632,6 +630,137 @@ impl WindowSums for WideSums {
     }
 }
 
+/// A 9 × 9 window's rows (`rows(r)`: row `r` as 9 bits) packed row-major into 81 bits
+/// held as two words: row `r` at bits `9r .. 9r + 9` of `lo` and, from bit 64 on, `hi`.
+#[cfg(not(target_os = "none"))]
+#[inline(always)]
+fn pack_9x9(rows: impl Fn(usize) -> u32) -> (u64, u64) {
+    const N: usize = 9;
+    let (mut lo, mut hi) = (0u64, 0u64);
+    for r in 0..N {
+        let m = u64::from(rows(r));
+        let at = r * N;
+        if at < 64 {
+            lo |= m << at;
+            if at + N > 64 {
+                hi |= m >> (64 - at);
+            }
+        } else {
+            hi |= m << (at - 64);
+        }
+    }
+    (lo, hi)
+}
+
+/// The seed's 9 × 9 window on an x86-64 CPU with AVX-512: the sums stay in nine 16-lane
+/// vector registers, one per window row, and an end point adds its weight to the shifts
+/// of its window's occupied cells with one masked addition per row (the row's bits are
+/// the mask) — no loop over the set bits, no branch that follows the map, and the rows
+/// need not be cut to their 9 bits: lanes 9–15 collect what lies beyond the window and
+/// are never read. Chosen when the program runs (`is_x86_feature_detected!`), so one
+/// binary runs on any x86-64 CPU; the same integer sums as every other accumulator.
+#[cfg(all(feature = "std", target_arch = "x86_64"))]
+mod masked {
+    use super::{
+        GridView, MAX_SHIFTS, Pose2, ROW, RowSums, ScanPoint, ShiftScore, WindowSums,
+        search_rows as search_rows_with,
+    };
+    use core::arch::x86_64::{
+        __m512i, _mm512_mask_add_epi32, _mm512_set1_epi32, _mm512_setzero_si512,
+    };
+
+    /// Rows and columns of the window.
+    const N: usize = 9;
+
+    /// Sums of the 81 shifts: register `r` holds row `r`, lane `t` column `t` (the
+    /// layout of [`RowSums<9>`], whose cell-by-cell and output code it borrows).
+    struct MaskedSums([__m512i; N]);
+
+    /// Adds `weight` to lane `t` of `acc[r]` for every set bit `t` of `rows[r]`.
+    #[target_feature(enable = "avx512f,bmi2")]
+    fn add_masked(acc: &mut [__m512i; N], rows: [u16; N], weight: u32) {
+        let w = _mm512_set1_epi32(weight as i32);
+        for (a, m) in acc.iter_mut().zip(rows) {
+            *a = _mm512_mask_add_epi32(*a, m, *a, w);
+        }
+    }
+
+    impl MaskedSums {
+        /// The sums as [`RowSums<9>`].
+        fn rows(&self) -> RowSums<N> {
+            #[allow(unsafe_code)]
+            // SAFETY: `[__m512i; 9]` and `[[u32; 16]; 9]` have the same size, and every
+            // bit pattern is a valid value of both.
+            RowSums(unsafe { core::mem::transmute::<[__m512i; N], [[u32; ROW]; N]>(self.0) })
+        }
+    }
+
+    impl WindowSums for MaskedSums {
+        const ROWS: usize = N;
+        const WIDE_ROWS: bool = true;
+
+        fn new() -> Self {
+            #[allow(unsafe_code)]
+            // SAFETY: a `MaskedSums` is only made inside `search_rows_avx512`, which runs
+            // only on a CPU with AVX-512F (checked in `search_rows`).
+            Self(unsafe { [_mm512_setzero_si512(); N] })
+        }
+
+        #[inline(always)]
+        fn add_rows(&mut self, weight: u32, rows: impl Fn(usize) -> u32) {
+            let masks: [u16; N] = core::array::from_fn(|r| rows(r) as u16);
+            #[allow(unsafe_code)]
+            // SAFETY: as in `new`: only on a CPU with AVX-512F.
+            unsafe {
+                add_masked(&mut self.0, masks, weight);
+            }
+        }
+
+        fn add_checked(&mut self, map: &GridView<'_>, x0: i32, y0: i32, n: usize, weight: u32) {
+            let mut sums = self.rows();
+            sums.add_checked(map, x0, y0, n, weight);
+            #[allow(unsafe_code)]
+            // SAFETY: as in `rows`.
+            {
+                self.0 = unsafe { core::mem::transmute::<[[u32; ROW]; N], [__m512i; N]>(sums.0) };
+            }
+        }
+
+        fn write(&self, n: usize, scores: &mut [u32; MAX_SHIFTS]) {
+            self.rows().write(n, scores);
+        }
+    }
+
+    /// [`super::search_window_sparse_rows`] with [`MaskedSums`], or `None` when the CPU
+    /// has no AVX-512F.
+    pub(super) fn search_rows<const S: usize>(
+        map: &GridView<'_>,
+        pose: &Pose2<f32>,
+        points: &[ScanPoint],
+        half_width: u8,
+        scores: &mut [u32; MAX_SHIFTS],
+    ) -> Option<ShiftScore> {
+        if !(std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("bmi2")) {
+            return None;
+        }
+        #[allow(unsafe_code)]
+        // SAFETY: the CPU has AVX-512F (tested above).
+        Some(unsafe { search_rows_avx512::<S>(map, pose, points, half_width, scores) })
+    }
+
+    /// The search compiled with AVX-512F, so that [`add_masked`] inlines into its loop.
+    #[target_feature(enable = "avx512f,bmi2")]
+    fn search_rows_avx512<const S: usize>(
+        map: &GridView<'_>,
+        pose: &Pose2<f32>,
+        points: &[ScanPoint],
+        half_width: u8,
+        scores: &mut [u32; MAX_SHIFTS],
+    ) -> ShiftScore {
+        search_rows_with::<MaskedSums, S>(map, pose, points, half_width, scores)
+    }
+}
+
 /// [`search_window`] over a map with an occupied-cell bitmap: for each end point, each of
 /// the `n = 2k+1` window rows is cut out of the bitmap as `n` bits (one 4-byte read and
 /// two shifts) and only its set bits — the occupied cells — add the point's weight to
@@ -647,6 +776,7 @@ impl WindowSums for WideSums {
 ///
 /// `S` is the bitmap's stride in bytes when the caller has checked it equals
 /// `⌈width / 8⌉`, so that the compiler sees the row offsets; 0 reads it from the map.
+#[cfg_attr(not(target_os = "none"), inline(always))]
 fn search_sparse<A: WindowSums, const S: usize>(
     map: &GridView<'_>,
     bits: Option<&[u8]>,
@@ -694,10 +824,18 @@ fn search_sparse<A: WindowSums, const S: usize>(
             return;
         };
         let up = down - (x0 as u32 & 7);
+        let first_bit = x0 as u32 & 7;
         acc.add_rows(p.weight, |r| {
             let offset = r * stride;
             match window.get(offset..offset + 4) {
-                Some(&[a, b, c, d]) if r < n => (u32::from_le_bytes([a, b, c, d]) << up) >> down,
+                Some(&[a, b, c, d]) if r < n => {
+                    let word = u32::from_le_bytes([a, b, c, d]);
+                    if A::WIDE_ROWS {
+                        word >> first_bit
+                    } else {
+                        (word << up) >> down
+                    }
+                }
                 _ => 0,
             }
         });
