@@ -273,6 +273,12 @@ pub fn run_slam<const N: usize, const BITMAP: usize>(
 /// [`run_slam`] with every step shown to `observer` and, when `snapshot_every` is not 0,
 /// the map recorded every `snapshot_every` scans and after the last one
 /// ([`GridRun::snapshots`]: what `--animate` draws).
+///
+/// The run goes on a thread of its own rayon pool (as many threads as the global pool,
+/// `RAYON_NUM_THREADS`), so that the thread that steps the filter also scores particles:
+/// each scan wakes the other workers, but the stepping thread never sleeps waiting for
+/// them, as a thread outside the pool would (on the Intel log, 36 000 context switches a
+/// run otherwise; `docs/speed.md`).
 pub fn run_slam_observed<const N: usize, const BITMAP: usize>(
     inputs: &[GridInput<'_>],
     start: Pose2<f32>,
@@ -281,25 +287,23 @@ pub fn run_slam_observed<const N: usize, const BITMAP: usize>(
     observer: Option<&mut dyn GridObserver>,
     snapshot_every: usize,
 ) -> Result<GridRun> {
-    std::thread::scope(|scope| {
-        let worker = std::thread::Builder::new()
-            .stack_size(64 << 20)
-            .spawn_scoped(scope, || -> Result<GridRun> {
-                dispatch_particles!(
-                    options.particles,
-                    slam_p,
-                    [N, BITMAP,],
-                    inputs,
-                    start,
-                    options,
-                    progress,
-                    observer,
-                    snapshot_every
-                )
-            })?;
-        worker
-            .join()
-            .map_err(|_| anyhow!("grid SLAM thread panicked"))?
+    let pool = rayon::ThreadPoolBuilder::new()
+        .stack_size(64 << 20)
+        .thread_name(|i| format!("grid-slam-{i}"))
+        .build()
+        .map_err(|e| anyhow!("grid SLAM: cannot start its threads: {e}"))?;
+    pool.install(|| -> Result<GridRun> {
+        dispatch_particles!(
+            options.particles,
+            slam_p,
+            [N, BITMAP,],
+            inputs,
+            start,
+            options,
+            progress,
+            observer,
+            snapshot_every
+        )
     })
 }
 
