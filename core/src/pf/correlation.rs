@@ -565,7 +565,8 @@ impl<const N: usize> WindowSums for PackedSums<N> {
 /// bits of each row ([`RowSums`]): the fewest instructions, and a branch costs a cycle or
 /// three there. On a host CPU the exit of each such loop is a branch its predictor often
 /// misses (a row's bit count follows the map, not a pattern), so [`WideSums`] packs the
-/// window into two words and runs two loops whatever the rows hold.
+/// window into two words and runs two loops whatever the rows hold; a CPU with AVX-512
+/// takes [`masked`] instead, without any loop.
 #[cfg(target_os = "none")]
 type SeedWindow = RowSums<9>;
 /// The accumulator of the seed's 9 × 9 window on a host CPU (see the microcontroller's).
