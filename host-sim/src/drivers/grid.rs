@@ -274,11 +274,7 @@ pub fn run_slam<const N: usize, const BITMAP: usize>(
 /// the map recorded every `snapshot_every` scans and after the last one
 /// ([`GridRun::snapshots`]: what `--animate` draws).
 ///
-/// The run goes on a thread of its own rayon pool (as many threads as the global pool,
-/// `RAYON_NUM_THREADS`), so that the thread that steps the filter also scores particles:
-/// each scan wakes the other workers, but the stepping thread never sleeps waiting for
-/// them, as a thread outside the pool would (on the Intel log, 36 000 context switches a
-/// run otherwise; `docs/speed.md`).
+/// Runs on [`on_own_pool`].
 pub fn run_slam_observed<const N: usize, const BITMAP: usize>(
     inputs: &[GridInput<'_>],
     start: Pose2<f32>,
@@ -287,12 +283,7 @@ pub fn run_slam_observed<const N: usize, const BITMAP: usize>(
     observer: Option<&mut dyn GridObserver>,
     snapshot_every: usize,
 ) -> Result<GridRun> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .stack_size(64 << 20)
-        .thread_name(|i| format!("grid-slam-{i}"))
-        .build()
-        .map_err(|e| anyhow!("grid SLAM: cannot start its threads: {e}"))?;
-    pool.install(|| -> Result<GridRun> {
+    on_own_pool("grid SLAM", || {
         dispatch_particles!(
             options.particles,
             slam_p,
@@ -340,37 +331,55 @@ fn slam_p<const N: usize, const BITMAP: usize, const P: usize>(
     Ok(run)
 }
 
+/// Runs `run` on a thread of a rayon pool of its own (as many threads as the global pool,
+/// `RAYON_NUM_THREADS`; 64 MB stacks, as a large grid is built on the stack in
+/// unoptimised builds), so that the thread that steps the filter also scores particles:
+/// each scan wakes the other workers, but the stepping thread never sleeps waiting for
+/// them, as a thread outside the pool would (on the Intel log, 36 000 context switches a
+/// run otherwise, and 0.8 s more on one thread; `docs/speed.md`). `what` names the run
+/// in the error when the threads cannot start.
+fn on_own_pool<R: Send>(what: &str, run: impl FnOnce() -> Result<R> + Send) -> Result<R> {
+    rayon::ThreadPoolBuilder::new()
+        .stack_size(64 << 20)
+        .thread_name(|i| format!("grid-{i}"))
+        .build()
+        .map_err(|e| anyhow!("{what}: cannot start its threads: {e}"))?
+        .install(run)
+}
+
 /// Localization on the fixed `map` over `inputs`, from `start` (in the map's frame).
 pub fn run_localizer(
     inputs: &[GridInput<'_>],
     map: &GridView<'_>,
     start: Pose2<f32>,
     options: &GridRunOptions,
-    progress: &dyn Fn(usize),
+    progress: &(dyn Fn(usize) + Sync),
 ) -> Result<GridRun> {
     run_localizer_observed(inputs, map, start, options, progress, None)
 }
 
-/// [`run_localizer`] with every step shown to `observer`.
+/// [`run_localizer`] with every step shown to `observer`; runs on [`on_own_pool`].
 pub fn run_localizer_observed(
     inputs: &[GridInput<'_>],
     map: &GridView<'_>,
     start: Pose2<f32>,
     options: &GridRunOptions,
-    progress: &dyn Fn(usize),
+    progress: &(dyn Fn(usize) + Sync),
     observer: Option<&mut dyn GridObserver>,
 ) -> Result<GridRun> {
-    dispatch_particles!(
-        options.particles,
-        localize_p,
-        [],
-        inputs,
-        map,
-        start,
-        options,
-        progress,
-        observer
-    )
+    on_own_pool("grid localizer", || {
+        dispatch_particles!(
+            options.particles,
+            localize_p,
+            [],
+            inputs,
+            map,
+            start,
+            options,
+            progress,
+            observer
+        )
+    })
 }
 
 fn localize_p<const P: usize>(
