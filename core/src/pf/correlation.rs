@@ -703,7 +703,7 @@ mod masked {
         fn new() -> Self {
             #[allow(unsafe_code)]
             // SAFETY: a `MaskedSums` is only made inside `search_rows_avx512`, which runs
-            // only on a CPU with AVX-512F (checked in `search_rows`).
+            // only on a CPU with AVX-512F and BMI2 (checked in `search_rows`).
             Self(unsafe { [_mm512_setzero_si512(); N] })
         }
 
@@ -711,7 +711,7 @@ mod masked {
         fn add_rows(&mut self, weight: u32, rows: impl Fn(usize) -> u32) {
             let masks: [u16; N] = core::array::from_fn(|r| rows(r) as u16);
             #[allow(unsafe_code)]
-            // SAFETY: as in `new`: only on a CPU with AVX-512F.
+            // SAFETY: as in `new`: only on a CPU with AVX-512F and BMI2.
             unsafe {
                 add_masked(&mut self.0, masks, weight);
             }
@@ -733,7 +733,8 @@ mod masked {
     }
 
     /// [`super::search_window_sparse_rows`] with [`MaskedSums`], or `None` when the CPU
-    /// has no AVX-512F.
+    /// lacks AVX-512F or BMI2 (every CPU with AVX-512 has BMI2; the search uses its
+    /// shifts).
     pub(super) fn search_rows<const S: usize>(
         map: &GridView<'_>,
         pose: &Pose2<f32>,
@@ -745,11 +746,12 @@ mod masked {
             return None;
         }
         #[allow(unsafe_code)]
-        // SAFETY: the CPU has AVX-512F (tested above).
+        // SAFETY: the CPU has AVX-512F and BMI2 (tested above).
         Some(unsafe { search_rows_avx512::<S>(map, pose, points, half_width, scores) })
     }
 
-    /// The search compiled with AVX-512F, so that [`add_masked`] inlines into its loop.
+    /// The search compiled with AVX-512F and BMI2, so that [`add_masked`] inlines into its
+    /// loop.
     #[target_feature(enable = "avx512f,bmi2")]
     fn search_rows_avx512<const S: usize>(
         map: &GridView<'_>,
