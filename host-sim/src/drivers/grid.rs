@@ -274,7 +274,8 @@ pub fn run_slam<const N: usize, const BITMAP: usize>(
 /// the map recorded every `snapshot_every` scans and after the last one
 /// ([`GridRun::snapshots`]: what `--animate` draws).
 ///
-/// Runs on [`on_own_pool`].
+/// Runs on a rayon pool of its own, whose thread that steps the filter scores particles
+/// too (see `on_own_pool`).
 pub fn run_slam_observed<const N: usize, const BITMAP: usize>(
     inputs: &[GridInput<'_>],
     start: Pose2<f32>,
@@ -358,7 +359,8 @@ pub fn run_localizer(
     run_localizer_observed(inputs, map, start, options, progress, None)
 }
 
-/// [`run_localizer`] with every step shown to `observer`; runs on [`on_own_pool`].
+/// [`run_localizer`] with every step shown to `observer`; runs on a rayon pool of its
+/// own, as [`run_slam_observed`] does.
 pub fn run_localizer_observed(
     inputs: &[GridInput<'_>],
     map: &GridView<'_>,
