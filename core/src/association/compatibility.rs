@@ -1,5 +1,5 @@
 //! Individual compatibility of a sighting with the landmarks in the filter, and the
-//! shared settings of the geometric associations ([`super::icnn`], [`super::jcbb`]).
+//! shared settings of the geometric associations ([`super::icnn()`], [`super::jcbb`]).
 
 use crate::ekf::{EkfSlam, Innovation};
 use crate::gate::{ChiSquareGate, chi_square_quantile};

@@ -611,7 +611,22 @@ impl WindowSums for WideSums {
 
     #[inline(always)]
     fn add_rows(&mut self, weight: u32, rows: impl Fn(usize) -> u32) {
-        let (lo, hi) = pack_9x9(rows);
+        // The 9 × 9 window's rows packed row-major into 81 bits held as two words: row
+        // `r` at bits `9r .. 9r + 9` of `lo` and, from bit 64 on, `hi`.
+        const N: usize = WideSums::N;
+        let (mut lo, mut hi) = (0u64, 0u64);
+        for r in 0..N {
+            let m = u64::from(rows(r));
+            let at = r * N;
+            if at < 64 {
+                lo |= m << at;
+                if at + N > 64 {
+                    hi |= m >> (64 - at);
+                }
+            } else {
+                hi |= m << (at - 64);
+            }
+        }
         if lo | hi == 0 {
             return;
         }
@@ -629,28 +644,6 @@ impl WindowSums for WideSums {
             dst.copy_from_slice(src);
         }
     }
-}
-
-/// A 9 × 9 window's rows (`rows(r)`: row `r` as 9 bits) packed row-major into 81 bits
-/// held as two words: row `r` at bits `9r .. 9r + 9` of `lo` and, from bit 64 on, `hi`.
-#[cfg(not(target_os = "none"))]
-#[inline(always)]
-fn pack_9x9(rows: impl Fn(usize) -> u32) -> (u64, u64) {
-    const N: usize = 9;
-    let (mut lo, mut hi) = (0u64, 0u64);
-    for r in 0..N {
-        let m = u64::from(rows(r));
-        let at = r * N;
-        if at < 64 {
-            lo |= m << at;
-            if at + N > 64 {
-                hi |= m >> (64 - at);
-            }
-        } else {
-            hi |= m << (at - 64);
-        }
-    }
-    (lo, hi)
 }
 
 /// The seed's 9 × 9 window on an x86-64 CPU with AVX-512: the sums stay in nine 16-lane
@@ -826,7 +819,7 @@ fn search_sparse<A: WindowSums, const S: usize>(
             acc.add_checked(map, x0, y0, n, p.weight);
             return;
         };
-        let up = down - (x0 as u32 & 7);
+        // Bit `first_bit` of a row read is column `x0`.
         let first_bit = x0 as u32 & 7;
         acc.add_rows(p.weight, |r| {
             let offset = r * stride;
@@ -836,7 +829,7 @@ fn search_sparse<A: WindowSums, const S: usize>(
                     if A::WIDE_ROWS {
                         word >> first_bit
                     } else {
-                        (word << up) >> down
+                        (word << (down - first_bit)) >> down
                     }
                 }
                 _ => 0,

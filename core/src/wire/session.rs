@@ -127,7 +127,7 @@ pub struct Session<'a, const N: usize, const P: usize, const L: usize> {
     decoder: FrameDecoder<MAX_FRAME_LEN>,
     ekf: &'a mut EkfSlam<f32, N, P>,
     ekf_config: EkfConfig<f32>,
-    /// Self-calibration priors applied at each reset ([`EkfSettings::calibration`]).
+    /// Self-calibration priors applied at each reset ([`super::messages::EkfSettings::calibration`]).
     calibration: [f32; 4],
     ids: KnownIds<L>,
     supervisor: Supervisor<f32>,
