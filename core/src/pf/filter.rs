@@ -133,6 +133,22 @@ impl<const P: usize> ParticleFilter<P> {
         &self.poses
     }
 
+    /// Moves every particle by the rigid motion `correction` of the world frame
+    /// (`pose ← correction ⊕ pose`), weights unchanged: what a loop closure does to a
+    /// particle set whose map it has moved. A non-finite result is refused
+    /// ([`PfError::NonFiniteInput`]) and nothing changes.
+    pub fn transform(&mut self, correction: &Pose2<f32>) -> Result<(), PfError> {
+        let mut moved = self.poses;
+        for p in moved.iter_mut() {
+            *p = correction.compose(p);
+        }
+        if !moved.iter().all(|p| p.is_finite()) {
+            return Err(PfError::NonFiniteInput);
+        }
+        self.poses = moved;
+        Ok(())
+    }
+
     /// Normalised log-weights (`log Σ exp = 0` after every update).
     pub fn log_weights(&self) -> &[f32; P] {
         &self.log_weights

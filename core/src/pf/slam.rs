@@ -169,6 +169,39 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const B
         self.filter.predict_odometry(from, to)
     }
 
+    /// Moves the particles and the estimate by the rigid motion `correction` of the world
+    /// frame (`pose ← correction ⊕ pose`), for a loop closure that has re-placed the map
+    /// ([`GridSlam::rebuild_map`]). A non-finite result is refused and nothing changes.
+    pub fn correct(&mut self, correction: &Pose2<f32>) -> Result<(), PfError> {
+        let pose = correction.compose(&self.pose);
+        if !pose.is_finite() {
+            return Err(PfError::NonFiniteInput);
+        }
+        self.filter.transform(correction)?;
+        self.pose = pose;
+        Ok(())
+    }
+
+    /// Clears the map and writes `scans` into it, each at its pose (for a loop closure
+    /// that has moved the poses of the scans the map was built from). Scans without a
+    /// usable beam are skipped; a non-finite pose stops the rebuild with
+    /// [`PfError::NonFiniteInput`] (the map then holds the scans before it).
+    pub fn rebuild_map<'s>(
+        &mut self,
+        scans: impl IntoIterator<Item = (Pose2<f32>, LidarScan<'s>)>,
+    ) -> Result<(), PfError> {
+        self.map.reset();
+        for (pose, scan) in scans {
+            if self.config.load_scan(&mut self.points, &scan).is_err() {
+                continue;
+            }
+            self.map
+                .integrate_points(&pose, &scan.geometry.mount, self.points.robot_points())
+                .map_err(|_| PfError::NonFiniteInput)?;
+        }
+        Ok(())
+    }
+
     /// Processes one scan: scores all particles (except for the first scan), moves them
     /// to their best shifts, resamples if needed, and writes the scan into the map at the
     /// estimate.

@@ -386,3 +386,56 @@ fn pose_covariance_is_the_cloud_spread_across_the_heading_seam() {
         assert!(cross.abs() < 0.0015, "{c:?}");
     }
 }
+
+#[test]
+fn a_correction_moves_every_particle_and_a_rebuild_redraws_the_map() {
+    let sim = simulate(3);
+    let config = GridPfConfig::DEFAULT;
+    let mut grid = Box::new(Grid::centred(config.resolution, config.log_odds));
+    let mut slam = GridSlam::<256, 256, 32, 180>::new(&mut grid, config, sim.truth[0]).unwrap();
+    for i in 0..20 {
+        if i > 0 {
+            slam.predict_odometry(&sim.odometry[i - 1], &sim.odometry[i])
+                .unwrap();
+        }
+        slam.observe(&LidarScan::new(&sim.scans[i], LIDAR)).unwrap();
+    }
+    // A quarter turn about the origin and a shift.
+    let correction = Pose2::new(0.5, -0.25, core::f32::consts::FRAC_PI_2);
+    let before = *slam.filter().poses();
+    let estimate = slam.pose();
+    slam.correct(&correction).unwrap();
+    for (p, q) in before.iter().zip(slam.filter().poses()) {
+        // (x, y) → (0.5 − y, −0.25 + x), heading + 90°.
+        assert!((q.x - (0.5 - p.y)).abs() < 1e-5 && (q.y - (-0.25 + p.x)).abs() < 1e-5);
+        assert!(
+            crate::geometry::wrap_angle(q.theta - p.theta - core::f32::consts::FRAC_PI_2).abs()
+                < 1e-5
+        );
+    }
+    assert!((slam.pose().x - (0.5 - estimate.y)).abs() < 1e-5);
+    // Refused when it would not be finite; nothing moves.
+    let poses = *slam.filter().poses();
+    assert_eq!(
+        slam.correct(&Pose2::new(f32::NAN, 0.0, 0.0)),
+        Err(PfError::NonFiniteInput)
+    );
+    assert_eq!(*slam.filter().poses(), poses);
+
+    // The map rebuilt from the first scan alone at its true pose holds the end points that
+    // scan wrote, and none of the others'.
+    let occupied = |g: &Grid| g.cells().iter().filter(|&&c| c > 0).count();
+    let all = occupied(slam.map());
+    slam.rebuild_map([(sim.truth[0], LidarScan::new(&sim.scans[0], LIDAR))])
+        .unwrap();
+    let one = occupied(slam.map());
+    assert!(one > 50 && one < all, "{one} of {all}");
+    // A non-finite pose stops the rebuild with an error.
+    assert_eq!(
+        slam.rebuild_map([(
+            Pose2::new(f32::NAN, 0.0, 0.0),
+            LidarScan::new(&sim.scans[0], LIDAR)
+        )]),
+        Err(PfError::NonFiniteInput)
+    );
+}
