@@ -174,6 +174,11 @@ pub struct GridArgs {
     /// against `intel-raw-part.clf`).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub reference_offset: f64,
+    /// Grid SLAM closes loops: keyframes, a match of each against the map built near it
+    /// long before, a pose graph; the trajectory written is the graph's. Settings: the
+    /// `[loop_closure]` table of `--config` (which also turns it on).
+    #[arg(long)]
+    pub loop_closure: bool,
 }
 
 /// Options of `host-sim localize`.
@@ -550,6 +555,7 @@ impl From<&GridArgs> for GridOptions {
             preset: a.preset,
             reference: a.reference.clone(),
             reference_offset: a.reference_offset,
+            loop_closure: a.loop_closure,
             role: FilterRole::Slam,
         }
     }

@@ -61,6 +61,7 @@ fn an_intel_grid_slam_recording_reads_back() {
         particles: 32,
         config: GridPfConfig::MICROCONTROLLER,
         lidar: carmen_lidar(180),
+        loop_closure: None,
     };
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("intel.mcap");

@@ -31,6 +31,7 @@ fn options(rec: &LidarRecording, particles: usize, config: GridPfConfig) -> Grid
         particles,
         config,
         lidar: rec.lidar,
+        loop_closure: None,
     }
 }
 

@@ -3,7 +3,9 @@
 //! and pictures; `thor:` runs give the encoder + IMU dead reckoning.
 
 use crate::domain::config::Settings;
-use crate::domain::grid::{GRID_BITMAP, GRID_CELLS, GridOptions, Preset, carmen_lidar};
+use crate::domain::grid::{
+    GRID_BITMAP, GRID_CELLS, GridOptions, Preset, carmen_lidar, loop_closure_settings,
+};
 use crate::domain::recording::Recording;
 use crate::domain::{AssociationMode, FilterKind, Precision};
 use crate::drivers::ekf::{PoseSample, replay_with};
@@ -222,6 +224,7 @@ pub(crate) fn options_for_beams(
         particles: grid.particles,
         config: c,
         lidar: carmen_lidar(n),
+        loop_closure: loop_closure_settings(config, grid.loop_closure, grid.role)?,
     })
 }
 
@@ -258,6 +261,10 @@ pub(crate) fn metrics_json(
         "range_weight_exponent": options.config.range_weight_exponent,
         "seed": options.config.filter.seed,
         "localizer": run.localizer,
+        "loop_closure": run.loop_closure.map(|summary| serde_json::json!({
+            "settings": options.loop_closure,
+            "summary": summary,
+        })),
     })
 }
 

@@ -116,10 +116,16 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
             })
     });
     let (config, localizer) = (config?, localizer?);
+    let loop_closure = crate::domain::grid::loop_closure_settings(
+        args.grid_config.as_deref(),
+        false,
+        FilterRole::Slam,
+    )?;
     let out = args.out.join("grid");
     let (slam, loc) = run_and_write(
         &rec,
         [config, localizer],
+        loop_closure,
         args.grid_particles,
         &out,
         mcap.as_mut(),
@@ -159,8 +165,8 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
 /// Particle counts `host-sim sim --grid-particles` accepts.
 pub const SIM_PARTICLES: [usize; 4] = [16, 32, 64, 200];
 
-/// Runs SLAM and the localizer with `particles` particles and their settings `configs`
-/// (SLAM's, the localizer's), writing
+/// Runs SLAM (closing loops with `loop_closure` when given) and the localizer with
+/// `particles` particles and their settings `configs` (SLAM's, the localizer's), writing
 /// `out/slam/` and `out/localize/` (map.pgm, map.yaml, map.png, trajectory.tum,
 /// groundtruth.tum, metrics.json), recording both into `mcap` (under `/grid_slam` and
 /// `/grid_localize`) and drawing `animate` (an animated GIF of SLAM) when given. Returns
@@ -168,6 +174,7 @@ pub const SIM_PARTICLES: [usize; 4] = [16, 32, 64, 200];
 pub fn run_and_write(
     rec: &LidarRecording,
     configs: [GridPfConfig; 2],
+    loop_closure: Option<crate::domain::grid::LoopClosureConfig>,
     particles: usize,
     out: &Path,
     mut mcap: Option<&mut crate::output::mcap::McapFile>,
@@ -185,6 +192,7 @@ pub fn run_and_write(
         particles,
         config,
         lidar: rec.lidar,
+        loop_closure,
     };
     let animation = AnimationSettings::default();
     let every = animate.map_or(0, |_| animation.snapshot_every(inputs.len()));
@@ -215,6 +223,7 @@ pub fn run_and_write(
     let started = Instant::now();
     let localizer_options = GridRunOptions {
         config: localizer,
+        loop_closure: None,
         ..options.clone()
     };
     let loc = super::recorded_grid_run(mcap, "grid_localize", n, lo, &truth_poses, false, |o| {
@@ -265,6 +274,10 @@ pub fn run_and_write(
             "range_weight_exponent": config.range_weight_exponent,
             "seed": config.filter.seed,
             "localizer": run.localizer,
+            "loop_closure": run.loop_closure.map(|summary| serde_json::json!({
+                "settings": options.loop_closure,
+                "summary": summary,
+            })),
         });
         write_outputs(&dir, run, &config, &metrics, Some(&truth))?;
         write_tum(

@@ -57,12 +57,176 @@ pub struct GridToml {
     /// `"seed"` starts from [`GridPfConfig::SEED`], `"microcontroller"` from
     /// [`GridPfConfig::MICROCONTROLLER`], otherwise [`GridPfConfig::DEFAULT`].
     base: Option<String>,
+    /// `[loop_closure]`: grid SLAM's loop closure ([`LoopClosureToml`]).
+    loop_closure: Option<LoopClosureToml>,
+}
+
+/// The `[loop_closure]` table of a grid settings file: `enabled` (default `true` when
+/// the table is there) and any [`LoopClosureConfig`] field by its name.
+#[derive(Clone, Debug, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoopClosureToml {
+    enabled: Option<bool>,
+    keyframe_distance_m: Option<f64>,
+    keyframe_turn_rad: Option<f64>,
+    min_age_keyframes: Option<usize>,
+    search_radius_m: Option<f64>,
+    submap_radius_m: Option<f64>,
+    window_m: Option<f64>,
+    heading_window_rad: Option<f64>,
+    heading_step_rad: Option<f64>,
+    min_score_fraction: Option<f64>,
+    score_temperature: Option<f64>,
+    sequential_std_m: Option<f64>,
+    sequential_std_per_m: Option<f64>,
+    sequential_heading_std: Option<f64>,
+    loop_std_m: Option<f64>,
+    loop_heading_std: Option<f64>,
+    beam_stride: Option<usize>,
+}
+
+/// Settings of grid SLAM's loop closure on the host (`host_sim::drivers::loop_closure`
+/// describes the method): keyframes, the correlative match of a keyframe against the map
+/// of the keyframes taken near it long before, and the pose graph's noise.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct LoopClosureConfig {
+    /// Distance driven that makes a new keyframe, m.
+    pub keyframe_distance_m: f64,
+    /// Turn that makes a new keyframe, rad.
+    pub keyframe_turn_rad: f64,
+    /// A keyframe is matched only against keyframes at least this many keyframes older …
+    pub min_age_keyframes: usize,
+    /// … the nearest of them within this distance, m.
+    pub search_radius_m: f64,
+    /// The old map it is matched against: the scans of the keyframes this old or older
+    /// within this distance, m.
+    pub submap_radius_m: f64,
+    /// Half-width of the window of positions searched, m.
+    pub window_m: f64,
+    /// Half-width of the window of headings searched, rad.
+    pub heading_window_rad: f64,
+    /// Heading step of the search, rad.
+    pub heading_step_rad: f64,
+    /// A match counts when it scores at least this fraction of the most a scan can score.
+    pub min_score_fraction: f64,
+    /// Temperature of the match's spread (its covariance: every candidate weighted by
+    /// `exp((score − best) / τ)`), as a fraction of the most a scan can score.
+    pub score_temperature: f64,
+    /// Standard deviation of the position of a keyframe-to-keyframe edge, m, plus …
+    pub sequential_std_m: f64,
+    /// … this many metres per metre between the two keyframes.
+    pub sequential_std_per_m: f64,
+    /// Standard deviation of its heading, rad.
+    pub sequential_heading_std: f64,
+    /// Floor of a loop edge's position standard deviation (added to the match's spread), m.
+    pub loop_std_m: f64,
+    /// Floor of a loop edge's heading standard deviation, rad.
+    pub loop_heading_std: f64,
+    /// Every `beam_stride`-th beam is matched.
+    pub beam_stride: usize,
+}
+
+impl LoopClosureConfig {
+    /// Settings for a 2-D lidar indoors on a 5 cm map, chosen on the Intel log
+    /// (`docs/results-grid.md`, "Loop closure").
+    pub const DEFAULT: Self = Self {
+        keyframe_distance_m: 0.5,
+        keyframe_turn_rad: 0.3,
+        min_age_keyframes: 40,
+        search_radius_m: 2.0,
+        submap_radius_m: 6.0,
+        window_m: 1.0,
+        heading_window_rad: 0.2,
+        heading_step_rad: 0.01,
+        min_score_fraction: 0.7,
+        score_temperature: 0.02,
+        sequential_std_m: 0.005,
+        sequential_std_per_m: 0.005,
+        sequential_heading_std: 0.001,
+        loop_std_m: 0.05,
+        loop_heading_std: 0.01,
+        beam_stride: 2,
+    };
+
+    /// `true` when every value is in range (positive distances, steps and deviations,
+    /// fractions in (0, 1], a stride of at least 1).
+    pub fn is_valid(&self) -> bool {
+        let positive = [
+            self.keyframe_distance_m,
+            self.keyframe_turn_rad,
+            self.search_radius_m,
+            self.submap_radius_m,
+            self.window_m,
+            self.heading_step_rad,
+            self.score_temperature,
+            self.sequential_std_m,
+            self.sequential_heading_std,
+            self.loop_std_m,
+            self.loop_heading_std,
+        ];
+        positive.iter().all(|v| v.is_finite() && *v > 0.0)
+            && self.sequential_std_per_m.is_finite()
+            && self.sequential_std_per_m >= 0.0
+            && self.heading_window_rad.is_finite()
+            && self.heading_window_rad >= 0.0
+            && self.min_score_fraction > 0.0
+            && self.min_score_fraction <= 1.0
+            && self.beam_stride >= 1
+            && self.min_age_keyframes >= 1
+            // The search's work: positions × headings, kept to what a replay can afford.
+            && (self.window_m / 0.05) <= 100.0
+            && (self.heading_window_rad / self.heading_step_rad) <= 200.0
+    }
+}
+
+impl LoopClosureToml {
+    /// The settings this table gives over [`LoopClosureConfig::DEFAULT`], or `None` when
+    /// it says `enabled = false`.
+    pub fn apply(&self) -> Result<Option<LoopClosureConfig>> {
+        if self.enabled == Some(false) {
+            return Ok(None);
+        }
+        let mut c = LoopClosureConfig::DEFAULT;
+        macro_rules! set {
+            ($($field:ident),* $(,)?) => {$(if let Some(v) = self.$field { c.$field = v; })*};
+        }
+        set!(
+            keyframe_distance_m,
+            keyframe_turn_rad,
+            min_age_keyframes,
+            search_radius_m,
+            submap_radius_m,
+            window_m,
+            heading_window_rad,
+            heading_step_rad,
+            min_score_fraction,
+            score_temperature,
+            sequential_std_m,
+            sequential_std_per_m,
+            sequential_heading_std,
+            loop_std_m,
+            loop_heading_std,
+            beam_stride
+        );
+        if !c.is_valid() {
+            bail!("[loop_closure] settings out of range: {c:?}");
+        }
+        Ok(Some(c))
+    }
 }
 
 impl GridToml {
     /// `true` when the file sets the shift window (`shift_window_cells`).
     pub fn sets_window(&self) -> bool {
         self.shift_window_cells.is_some()
+    }
+
+    /// The loop closure the file asks for: its `[loop_closure]` table over
+    /// [`LoopClosureConfig::DEFAULT`], `None` without the table or with `enabled = false`.
+    pub fn loop_closure(&self) -> Result<Option<LoopClosureConfig>> {
+        self.loop_closure
+            .as_ref()
+            .map_or(Ok(None), LoopClosureToml::apply)
     }
 
     /// Reads a TOML file.
@@ -147,6 +311,9 @@ pub struct GridOptions {
     pub preset: Option<Preset>,
     /// Reference trajectory for ATE (TUM or a corrected CARMEN log).
     pub reference: Option<std::path::PathBuf>,
+    /// Grid SLAM closes loops ([`LoopClosureConfig::DEFAULT`], or the settings file's
+    /// `[loop_closure]` table, which also turns it on by itself).
+    pub loop_closure: bool,
     /// Seconds added to the reference's stamps.
     pub reference_offset: f64,
 }
@@ -227,6 +394,28 @@ impl Preset {
     }
 }
 
+/// The loop closure of a grid run: the settings file's `[loop_closure]` table (which
+/// turns it on unless it says `enabled = false`), else [`LoopClosureConfig::DEFAULT`]
+/// when `requested` (`--loop-closure`), else none. A localizer has a fixed map and no
+/// loops to close: asking for one is an error.
+pub fn loop_closure_settings(
+    config: Option<&Path>,
+    requested: bool,
+    role: FilterRole,
+) -> Result<Option<LoopClosureConfig>> {
+    let from_file = match config {
+        Some(path) => GridToml::read(path)?
+            .loop_closure()
+            .with_context(|| format!("in {}", path.display()))?,
+        None => None,
+    };
+    let chosen = from_file.or(requested.then_some(LoopClosureConfig::DEFAULT));
+    if chosen.is_some() && role == FilterRole::Localizer {
+        bail!("loop closure is for grid SLAM; a localizer's map is fixed");
+    }
+    Ok(chosen)
+}
+
 /// Beams the `microcontroller` preset uses when no beam count is given: the firmware's
 /// (its settings were tuned with 90 of the Intel log's 180 beams).
 pub const MICROCONTROLLER_BEAMS: usize = 90;
@@ -276,6 +465,52 @@ mod tests {
             many.contains("--beams 1000") && many.contains("180 beams"),
             "{many}"
         );
+    }
+
+    #[test]
+    fn the_loop_closure_table_turns_it_on_and_sets_its_values() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("lc.toml");
+        let settings = |text: &str, requested, role| {
+            std::fs::write(&file, text).unwrap();
+            loop_closure_settings(Some(&file), requested, role)
+        };
+        let slam = FilterRole::Slam;
+        // No table: only the flag turns it on, with the defaults.
+        assert_eq!(settings("seed = 1\n", false, slam).unwrap(), None);
+        assert_eq!(
+            settings("seed = 1\n", true, slam).unwrap(),
+            Some(LoopClosureConfig::DEFAULT)
+        );
+        assert_eq!(
+            loop_closure_settings(None, true, slam).unwrap(),
+            Some(LoopClosureConfig::DEFAULT)
+        );
+        // The table turns it on by itself and sets values over the defaults.
+        let c = settings("[loop_closure]\nwindow_m = 0.5\n", false, slam)
+            .unwrap()
+            .expect("on");
+        assert_eq!(c.window_m, 0.5);
+        assert_eq!(
+            c.keyframe_distance_m,
+            LoopClosureConfig::DEFAULT.keyframe_distance_m
+        );
+        assert_eq!(
+            settings("[loop_closure]\nenabled = false\n", false, slam).unwrap(),
+            None
+        );
+        // Errors name what is wrong.
+        let unknown = settings("[loop_closure]\nwindow = 0.5\n", false, slam).unwrap_err();
+        assert!(
+            format!("{unknown:#}").contains("unknown field `window`"),
+            "{unknown:#}"
+        );
+        let range =
+            settings("[loop_closure]\nmin_score_fraction = 1.5\n", false, slam).unwrap_err();
+        assert!(format!("{range:#}").contains("out of range"), "{range:#}");
+        let localizer = loop_closure_settings(None, true, FilterRole::Localizer).unwrap_err();
+        assert!(localizer.to_string().contains("grid SLAM"), "{localizer}");
+        assert!(settings("[loop_closure]\n", false, FilterRole::Localizer).is_err());
     }
 }
 

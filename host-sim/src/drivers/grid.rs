@@ -8,7 +8,8 @@
 //! ([`GridRun::refused_odometry`]), and the next good one predicts the whole motion; a scan
 //! with no usable beam is counted ([`GridRun::skipped_scans`]) and the pose held.
 
-use crate::domain::grid::{MAX_BEAMS, SUPPORTED_PARTICLES};
+use super::loop_closure::{Correction, LoopCloser, LoopClosureSummary};
+use crate::domain::grid::{LoopClosureConfig, MAX_BEAMS, SUPPORTED_PARTICLES};
 use crate::inputs::readers::carmen::LaserMessage;
 use crate::inputs::sim::lidar_world::LidarRecording;
 use anyhow::{Result, anyhow, bail};
@@ -38,6 +39,9 @@ pub struct GridRunOptions {
     pub config: GridPfConfig,
     /// Lidar geometry of the scans.
     pub lidar: LidarGeometry,
+    /// Grid SLAM closes loops with these settings ([`super::loop_closure`]); `None` for
+    /// none (and always for a localizer).
+    pub loop_closure: Option<LoopClosureConfig>,
 }
 
 /// Result of a run: the estimate at each processed scan, the map, and timing.
@@ -65,6 +69,9 @@ pub struct GridRun {
     pub snapshots: Vec<MapChanges>,
     /// A localizer's lost detection at the end of the run (`None` for SLAM).
     pub localizer: Option<LocalizerSummary>,
+    /// What the loop closure did (`None` without one). With one, [`GridRun::trajectory`]
+    /// is the graph's: every scan at its keyframe's final pose.
+    pub loop_closure: Option<LoopClosureSummary>,
 }
 
 /// What a localizer's lost detection saw over a run ([`microslam::pf::LocalizerStatus`]).
@@ -116,6 +123,7 @@ impl GridRun {
             non_finite_beams: 0,
             snapshots: Vec::new(),
             localizer: None,
+            loop_closure: None,
         }
     }
 }
@@ -155,6 +163,15 @@ pub trait GridObserver: Send {
 /// and its map, for the observer and the map snapshots.
 trait GridFilter: GridEstimator {
     fn particles(&self) -> &[Pose2<f32>];
+    /// Re-places the map and the particles after a loop closure.
+    fn close_loop(
+        &mut self,
+        _correction: &Correction,
+        _inputs: &[GridInput<'_>],
+        _lidar: &LidarGeometry,
+    ) -> Result<()> {
+        bail!("loop closure needs grid SLAM")
+    }
     fn view(&self) -> GridView<'_>;
     fn cells(&self) -> &[i8] {
         self.view().cells()
@@ -169,6 +186,21 @@ impl<const W: usize, const H: usize, const P: usize, const B: usize, const BITMA
     }
     fn view(&self) -> GridView<'_> {
         self.map().view()
+    }
+    fn close_loop(
+        &mut self,
+        correction: &Correction,
+        inputs: &[GridInput<'_>],
+        lidar: &LidarGeometry,
+    ) -> Result<()> {
+        self.rebuild_map(correction.scans.iter().filter_map(|&(scan, pose)| {
+            inputs
+                .get(scan)
+                .map(|input| (pose, LidarScan::new(input.ranges, *lidar)))
+        }))
+        .map_err(|e| anyhow!("loop closure: {e}"))?;
+        self.correct(&correction.correction)
+            .map_err(|e| anyhow!("loop closure: {e}"))
     }
 }
 
@@ -187,13 +219,20 @@ impl<const P: usize, const B: usize> GridFilter for GridLocalizer<'_, P, B> {
 fn drive(
     filter: &mut impl GridFilter,
     inputs: &[GridInput<'_>],
-    lidar: &LidarGeometry,
+    options: &GridRunOptions,
     run: &mut GridRun,
     progress: &dyn Fn(usize),
     mut observer: Option<&mut dyn GridObserver>,
     snapshot_every: usize,
 ) -> Result<()> {
+    let lidar = &options.lidar;
     let mut previous: Option<Pose2<f32>> = None;
+    let mut closer = options.loop_closure.map(|c| LoopCloser::new(c, *lidar));
+    let ranges: Vec<&[f32]> = if closer.is_some() {
+        inputs.iter().map(|input| input.ranges).collect()
+    } else {
+        Vec::new()
+    };
     let mut shadow = Vec::new();
     if snapshot_every > 0 {
         shadow = vec![0; filter.cells().len()];
@@ -217,6 +256,13 @@ fn drive(
                 run.trajectory.push((input.stamp, filter.pose()));
             }
         }
+        if let Some(c) = closer.as_mut()
+            && let Some(correction) = c.add_scan(i, filter.pose(), &ranges)
+        {
+            filter
+                .close_loop(&correction, inputs, lidar)
+                .map_err(|e| e.context(format!("scan {i}")))?;
+        }
         if let Some(o) = observer.as_deref_mut() {
             let t0 = Instant::now();
             o.step(&GridStep {
@@ -237,6 +283,12 @@ fn drive(
                 .push(changes(&mut shadow, filter.cells(), i + 1));
         }
         progress(i);
+    }
+    if let Some(c) = closer {
+        for ((_, p), q) in run.trajectory.iter_mut().zip(c.trajectory()) {
+            *p = q;
+        }
+        run.loop_closure = Some(c.summary());
     }
     Ok(())
 }
@@ -320,7 +372,7 @@ fn slam_p<const N: usize, const BITMAP: usize, const P: usize>(
         drive(
             &mut slam,
             inputs,
-            &options.lidar,
+            options,
             &mut run,
             progress,
             observer,
@@ -392,19 +444,14 @@ fn localize_p<const P: usize>(
     progress: &dyn Fn(usize),
     observer: Option<&mut dyn GridObserver>,
 ) -> Result<GridRun> {
+    if options.loop_closure.is_some() {
+        bail!("loop closure is for grid SLAM; a localizer's map is fixed");
+    }
     let mut run = GridRun::empty(map.cells().to_vec(), *map.geometry(), inputs.len());
     let t0 = Instant::now();
     let mut loc = GridLocalizer::<P, MAX_BEAMS>::new(*map, options.config, start)
         .map_err(|e| anyhow!("grid localizer: {e}"))?;
-    drive(
-        &mut loc,
-        inputs,
-        &options.lidar,
-        &mut run,
-        progress,
-        observer,
-        0,
-    )?;
+    drive(&mut loc, inputs, options, &mut run, progress, observer, 0)?;
     run.filter_time_s = t0.elapsed().as_secs_f64() - run.observer_time_s;
     let s = loc.status();
     run.localizer = Some(LocalizerSummary {

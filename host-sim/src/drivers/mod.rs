@@ -4,6 +4,8 @@
 //! - [`ekf`]: a [`crate::domain::recording::Recording`]'s events → the landmark EKF-SLAM.
 //! - [`grid`]: lidar scans with odometry → grid SLAM or the grid localizer (the one grid
 //!   drive loop of `replay`, `localize` and `sim`).
+//! - [`loop_closure`]: grid SLAM's loop closure on the host: keyframes, a correlative match
+//!   against the map built long before, a pose graph.
 //! - [`detections`]: sign detections → range/bearing → EKF-SLAM with class hints.
 //! - [`hil`]: the host's side of hardware in the loop: the wire frames of a recording,
 //!   the QEMU and serial links, the bit-for-bit comparison of the replies.
@@ -15,4 +17,5 @@ pub mod global;
 pub mod grid;
 pub mod hil;
 pub mod hil_localizer;
+pub mod loop_closure;
 pub mod texture;
