@@ -16,17 +16,6 @@ pub const GRID_BITMAP: usize = microslam::grid::occupancy_bytes(GRID_CELLS, GRID
 /// Most beams a scan may use (the Intel/ACES SICK has 180; more are decimated).
 pub const MAX_BEAMS: usize = 361;
 
-/// Settings of a grid run besides [`GridPfConfig`].
-#[derive(Clone, Debug)]
-pub struct GridRunOptions {
-    /// Particles (one of [`SUPPORTED_PARTICLES`]).
-    pub particles: usize,
-    /// Filter settings.
-    pub config: GridPfConfig,
-    /// Lidar geometry of the log.
-    pub lidar: LidarGeometry,
-}
-
 /// Particle counts compiled in (the count is a type parameter of the filter).
 pub const SUPPORTED_PARTICLES: [usize; 8] = [8, 16, 32, 64, 100, 128, 200, 400];
 
