@@ -17,6 +17,7 @@ use microslam::geometry::Pose2;
 use microslam::grid::{GridGeometry, GridView, OccupancyGrid};
 use microslam::pf::{GridEstimator, GridLocalizer, GridPfConfig, GridSlam, LocalizerState};
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
 
 /// One scan as the driver consumes it.
@@ -387,17 +388,60 @@ fn slam_p<const N: usize, const BITMAP: usize, const P: usize>(
 /// Runs `run` on a thread of a rayon pool of its own (as many threads as the global pool,
 /// `RAYON_NUM_THREADS`; 64 MB stacks, as a large grid is built on the stack in
 /// unoptimised builds), so that the thread that steps the filter also scores particles:
-/// each scan wakes the other workers, but the stepping thread never sleeps waiting for
-/// them, as a thread outside the pool would (on the Intel log, 36 000 context switches a
-/// run otherwise, and 0.8 s more on one thread; `docs/speed.md`). `what` names the run
-/// in the error when the threads cannot start.
+/// it never sleeps waiting for the other workers, as a thread outside the pool would (on
+/// the Intel log, 36 000 context switches a run otherwise, and 0.8 s more on one thread;
+/// `docs/speed.md`). The other workers are kept awake between scans (`stay_awake`). `what`
+/// names the run in the error when the threads cannot start.
 fn on_own_pool<R: Send>(what: &str, run: impl FnOnce() -> Result<R> + Send) -> Result<R> {
     rayon::ThreadPoolBuilder::new()
         .stack_size(64 << 20)
         .thread_name(|i| format!("grid-{i}"))
         .build()
         .map_err(|e| anyhow!("{what}: cannot start its threads: {e}"))?
-        .install(run)
+        .install(|| {
+            let helpers = rayon::current_num_threads().saturating_sub(1);
+            if helpers == 0 {
+                return run();
+            }
+            let stepper = rayon::current_thread_index();
+            let done = AtomicBool::new(false);
+            let awake = AtomicUsize::new(0);
+            rayon::scope(|s| {
+                for _ in 0..helpers {
+                    s.spawn(|_| stay_awake(stepper, &done, &awake));
+                }
+                // Every helper picked up by another worker before the run starts: the
+                // stepping thread then never finds one in its queue while it waits for
+                // its particles.
+                while awake.load(Ordering::Acquire) < helpers {
+                    std::thread::yield_now();
+                }
+                let result = run();
+                done.store(true, Ordering::Release);
+                result
+            })
+        })
+}
+
+/// Keeps a worker of the run's pool awake until `done`: it takes every job the stepping
+/// thread shares (a scan's particles) as soon as there is one, instead of sleeping
+/// between scans and being woken for each. Between scans a grid step's serial part (map
+/// update, resampling, ≈ 60 µs on the Intel log) outlasts rayon's own spinning, and
+/// waking a sleeping thread takes tens of microseconds on a VM: on the Intel log with the
+/// seed's settings the replay takes 1.03 s instead of 1.38 s on two cores
+/// (`docs/speed.md`). When there is no job it yields its core to any other thread that
+/// wants it. Same particles scored, same results: only who scores them changes.
+fn stay_awake(stepper: Option<usize>, done: &AtomicBool, awake: &AtomicUsize) {
+    awake.fetch_add(1, Ordering::AcqRel);
+    if rayon::current_thread_index() == stepper {
+        // Only if the stepping thread found it in its own queue: never spin there.
+        return;
+    }
+    while !done.load(Ordering::Acquire) {
+        if rayon::yield_now() != Some(rayon::Yield::Executed) {
+            std::thread::yield_now();
+        }
+    }
 }
 
 /// Localization on the fixed `map` over `inputs`, from `start` (in the map's frame).
