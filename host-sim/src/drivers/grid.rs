@@ -393,7 +393,17 @@ fn slam_p<const N: usize, const BITMAP: usize, const P: usize>(
 /// `docs/speed.md`). The other workers are kept awake between scans (`stay_awake`). `what`
 /// names the run in the error when the threads cannot start.
 fn on_own_pool<R: Send>(what: &str, run: impl FnOnce() -> Result<R> + Send) -> Result<R> {
+    on_pool(rayon::current_num_threads(), what, run)
+}
+
+/// [`on_own_pool`] with `threads` threads.
+fn on_pool<R: Send>(
+    threads: usize,
+    what: &str,
+    run: impl FnOnce() -> Result<R> + Send,
+) -> Result<R> {
     rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
         .stack_size(64 << 20)
         .thread_name(|i| format!("grid-{i}"))
         .build()
@@ -544,4 +554,68 @@ pub fn sim_inputs(rec: &LidarRecording) -> Vec<GridInput<'_>> {
 /// A pose narrowed to `f32`, as the grid filters take it.
 pub fn f32_pose(p: &Pose2<f64>) -> Pose2<f32> {
     Pose2::new(p.x as f32, p.y as f32, p.theta as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rayon::prelude::*;
+
+    /// A run that shares work with the pool many times, as a grid run shares each scan's
+    /// particles, and counts the items done off the stepping thread.
+    fn shared_work(rounds: usize) -> Result<(u64, usize)> {
+        let mut total = 0u64;
+        let mut helped = 0;
+        let stepper = rayon::current_thread_index();
+        for round in 0..rounds as u64 {
+            let (sum, others): (u64, usize) = (0..200u32)
+                .into_par_iter()
+                .with_min_len(8)
+                .map(|i| {
+                    let other = usize::from(rayon::current_thread_index() != stepper);
+                    (u64::from(i) * round, other)
+                })
+                .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+            total += sum;
+            helped += others;
+        }
+        Ok((total, helped))
+    }
+
+    /// `f`'s result, on a thread of its own, so that a run that never ends (helpers
+    /// never let go) fails the test instead of hanging it.
+    fn within_a_minute<R: Send + 'static>(what: &str, f: impl FnOnce() -> R + Send + 'static) -> R {
+        let (sender, receiver) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = sender.send(f());
+        });
+        match receiver.recv_timeout(std::time::Duration::from_secs(60)) {
+            Ok(r) => r,
+            Err(_) => panic!("{what}: the run did not end within 60 s"),
+        }
+    }
+
+    /// The run ends (the helpers kept awake let go of their threads) with its result,
+    /// with and without helpers; with one thread nothing is done off it. How much the
+    /// helpers take depends on the machine's load: `docs/speed.md` measures it.
+    #[test]
+    fn a_run_on_its_pool_ends_with_its_result_on_any_number_of_threads() {
+        let expected: u64 = (0..300u64).map(|r| r * (0..200u64).sum::<u64>()).sum();
+        for threads in [1, 2, 4] {
+            let what = format!("{threads} threads");
+            let (total, helped) =
+                within_a_minute(&what, move || on_pool(threads, "test", || shared_work(300)))
+                    .unwrap();
+            assert_eq!(total, expected, "{what}");
+            if threads == 1 {
+                assert_eq!(helped, 0);
+            }
+        }
+    }
+
+    #[test]
+    fn an_error_of_the_run_is_returned() {
+        let r: Result<()> = within_a_minute("error", || on_pool(2, "test", || bail!("refused")));
+        assert_eq!(r.unwrap_err().to_string(), "refused");
+    }
 }
