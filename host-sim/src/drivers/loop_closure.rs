@@ -380,21 +380,34 @@ impl ScoreMap {
         (x >= 0 && y >= 0 && x < self.side && y < self.side).then(|| (y * self.side + x) as usize)
     }
 
+    /// The `n` marks from `(x, y)` along x, when they are all on the map.
+    fn row(&self, x: i64, y: i64, n: usize) -> Option<&[u8]> {
+        let start = self.index(x, y)?;
+        (x + n as i64 <= self.side).then(|| self.cells.get(start..start + n))?
+    }
+
     fn score(&self, x: i64, y: i64) -> u32 {
         self.index(x, y).map_or(0, |i| u32::from(self.cells[i]))
     }
 }
 
-/// Scores robot-frame `points` at every pose of the window around `around` against
-/// `map`; the best pose and its spread, or `None` when it scores too little.
-fn search(
+/// Half-widths of the match's window: cells each way, heading steps each way.
+fn window(c: &LoopClosureConfig) -> (i64, i64) {
+    (
+        (c.window_m / MATCH_CELL_M).round() as i64,
+        (c.heading_window_rad / c.heading_step_rad).round() as i64,
+    )
+}
+
+/// The score of `points` at every pose of the window around `around`: heading-major,
+/// then rows (y), then columns (x), each `2 · half + 1` long ([`window`]).
+fn window_scores(
     map: &ScoreMap,
     points: &[[f64; 2]],
     around: &Pose2<f64>,
     c: &LoopClosureConfig,
-) -> Option<Match> {
-    let half = (c.window_m / MATCH_CELL_M).round() as i64;
-    let steps = (c.heading_window_rad / c.heading_step_rad).round() as i64;
+) -> Vec<u32> {
+    let (half, steps) = window(c);
     let side = (2 * half + 1) as usize;
     let mut scores = vec![0u32; (2 * steps + 1) as usize * side * side];
     let mut cells = Vec::with_capacity(points.len());
@@ -408,13 +421,41 @@ fn search(
                 around.y + s * p[0] + co * p[1],
             ])
         }));
+        // Point by point, each row of the window at once: the row's `side` cells are
+        // contiguous in the map, so one slice is added to one row of scores (integer sums,
+        // the same in any order); a row over the map's edge is read cell by cell.
         let block = &mut scores[hi * side * side..(hi + 1) * side * side];
-        for (yi, sy) in (-half..=half).enumerate() {
-            for (xi, sx) in (-half..=half).enumerate() {
-                block[yi * side + xi] = cells.iter().map(|[x, y]| map.score(x + sx, y + sy)).sum();
+        for &[x, y] in &cells {
+            for (row, sy) in block.chunks_exact_mut(side).zip(-half..=half) {
+                match map.row(x - half, y + sy, side) {
+                    Some(marks) => {
+                        for (s, &m) in row.iter_mut().zip(marks) {
+                            *s += u32::from(m);
+                        }
+                    }
+                    None => {
+                        for (s, sx) in row.iter_mut().zip(-half..=half) {
+                            *s += map.score(x + sx, y + sy);
+                        }
+                    }
+                }
             }
         }
     }
+    scores
+}
+
+/// Scores robot-frame `points` at every pose of the window around `around` against
+/// `map`; the best pose and its spread, or `None` when it scores too little.
+fn search(
+    map: &ScoreMap,
+    points: &[[f64; 2]],
+    around: &Pose2<f64>,
+    c: &LoopClosureConfig,
+) -> Option<Match> {
+    let (half, steps) = window(c);
+    let side = (2 * half + 1) as usize;
+    let scores = window_scores(map, points, around, c);
     let unpack = |i: usize| {
         let h = (i / (side * side)) as i64 - steps;
         let r = i % (side * side);
@@ -796,6 +837,82 @@ mod tests {
         // A room with a pillar pins every direction: the spread is a few centimetres.
         assert!(m.position_weight[0][0] > 1.0 / 0.1f64.powi(2), "{m:?}");
         assert!(m.position_weight[1][1] > 1.0 / 0.1f64.powi(2), "{m:?}");
+    }
+
+    #[test]
+    fn the_window_scores_are_the_sums_of_each_pose_cell_by_cell() {
+        // A map of 6 m, smaller than the room: the windows of the end points on the far
+        // wall lie off it and those on the pillar's far side hang over its edge (the
+        // cell-by-cell path), the others lie inside (rows).
+        let c = LoopClosureConfig {
+            window_m: 0.3,
+            heading_window_rad: 0.03,
+            ..LoopClosureConfig::DEFAULT
+        };
+        let old_pose = Pose2::new(2.0, 2.0, 0.0);
+        let mut map = ScoreMap::new([-0.1, -0.5], 6.0);
+        for p in room_scan(&old_pose, 360) {
+            map.mark(old_pose.transform_point(&nalgebra::Vector2::new(p[0], p[1])));
+        }
+        // Marks on the map's first columns, and an end point whose window reaches over
+        // its last ones: a row read past the edge would take them.
+        for k in 0..=20 {
+            map.mark(nalgebra::Vector2::new(-0.05, 2.5 + 0.05 * f64::from(k)));
+        }
+        let around = Pose2::new(2.1, 2.05, 0.12);
+        let mut points = room_scan(&Pose2::new(2.2, 1.9, 0.1), 90);
+        let edge = around
+            .inverse()
+            .transform_point(&nalgebra::Vector2::new(5.75, 3.0));
+        points.push([edge[0], edge[1]]);
+        let scores = window_scores(&map, &points, &around, &c);
+        let (half, steps) = window(&c);
+        let mut expected = Vec::new();
+        let (mut inside, mut over) = (0, 0);
+        let side = (2 * half + 1) as usize;
+        let mut rows = [0, 0];
+        for h in -steps..=steps {
+            let theta = around.theta + h as f64 * c.heading_step_rad;
+            let (s, co) = theta.sin_cos();
+            for p in &points {
+                let [x, y] = map.cell([
+                    around.x + co * p[0] - s * p[1],
+                    around.y + s * p[0] + co * p[1],
+                ]);
+                for sy in -half..=half {
+                    rows[usize::from(map.row(x - half, y + sy, side).is_some())] += 1;
+                }
+            }
+            for sy in -half..=half {
+                for sx in -half..=half {
+                    let mut sum = 0;
+                    for p in &points {
+                        let [x, y] = map.cell([
+                            around.x + co * p[0] - s * p[1],
+                            around.y + s * p[0] + co * p[1],
+                        ]);
+                        match map.index(x + sx, y + sy) {
+                            Some(i) => {
+                                sum += u32::from(map.cells[i]);
+                                inside += 1;
+                            }
+                            None => over += 1,
+                        }
+                    }
+                    expected.push(sum);
+                }
+            }
+        }
+        assert!(
+            inside > 0 && over > 0,
+            "{inside} cells on the map, {over} off it"
+        );
+        assert!(
+            rows[0] > 0 && rows[1] > 0,
+            "window rows off / on the map: {rows:?}"
+        );
+        assert!(expected.iter().any(|&v| v > 0));
+        assert_eq!(scores, expected);
     }
 
     #[test]
