@@ -52,10 +52,10 @@ const MATCH_CELL_M: f64 = 0.05;
 /// Farthest end point used for matching, m.
 const MATCH_MAX_RANGE_M: f64 = 30.0;
 
-/// A keyframe: a scan, its pose in the graph, and the filter's estimate of it.
+/// A keyframe (a scan, whose end points [`LoopCloser`] keeps beside it): its pose in the
+/// graph, and the filter's estimate of it.
 #[derive(Clone, Copy, Debug)]
 struct Keyframe {
-    scan: usize,
     /// Its pose in the graph (optimised).
     pose: Pose2<f64>,
     /// The filter's estimate of it, in the filter's frame: what the edge to the next
@@ -106,6 +106,9 @@ pub struct LoopCloser {
     config: LoopClosureConfig,
     lidar: LidarGeometry,
     keyframes: Vec<Keyframe>,
+    /// Per keyframe: its scan's robot-frame end points ([`LoopCloser::points`]), made
+    /// once instead of at every match that reads it.
+    keyframe_points: Vec<Vec<[f64; 2]>>,
     edges: Vec<Edge>,
     /// Per scan: its keyframe and its pose relative to the keyframe's estimate.
     offsets: Vec<(usize, Pose2<f64>)>,
@@ -119,6 +122,7 @@ impl LoopCloser {
             config,
             lidar,
             keyframes: Vec::new(),
+            keyframe_points: Vec::new(),
             edges: Vec::new(),
             offsets: Vec::new(),
             summary: LoopClosureSummary::default(),
@@ -146,10 +150,10 @@ impl LoopCloser {
         let c = self.config;
         let Some(last) = self.keyframes.last().copied() else {
             self.keyframes.push(Keyframe {
-                scan: index,
                 pose,
                 estimate: pose,
             });
+            self.keyframe_points.push(self.scan_points(scans, index));
             self.offsets.push((0, Pose2::IDENTITY));
             return None;
         };
@@ -171,14 +175,14 @@ impl LoopCloser {
         // Its graph pose: the last keyframe's composed with the filter's motion since (the
         // filter's frame and the graph's differ by what was not corrected).
         self.keyframes.push(Keyframe {
-            scan: index,
             pose: last.pose.compose(&motion),
             estimate: pose,
         });
+        self.keyframe_points.push(self.scan_points(scans, index));
         self.offsets.push((k, Pose2::IDENTITY));
         let old = self.candidate(k)?;
         self.summary.attempts += 1;
-        let m = self.match_keyframe(k, scans)?;
+        let m = self.match_keyframe(k)?;
         self.edges.push(Edge {
             i: old,
             j: k,
@@ -230,6 +234,11 @@ impl LoopCloser {
             .map(|(j, _)| j)
     }
 
+    /// [`LoopCloser::points`] of scan `index` of `scans` (none when there is no such scan).
+    fn scan_points(&self, scans: &[&[f32]], index: usize) -> Vec<[f64; 2]> {
+        scans.get(index).map_or_else(Vec::new, |r| self.points(r))
+    }
+
     /// Robot-frame end points of a scan: every `beam_stride`-th beam with a return
     /// closer than [`MATCH_MAX_RANGE_M`].
     fn points(&self, ranges: &[f32]) -> Vec<[f64; 2]> {
@@ -256,28 +265,28 @@ impl LoopCloser {
     }
 
     /// Matches keyframe `k`'s scan against the old map around its graph pose.
-    fn match_keyframe(&self, k: usize, scans: &[&[f32]]) -> Option<Match> {
+    fn match_keyframe(&self, k: usize) -> Option<Match> {
         let c = self.config;
         let pose = self.keyframes[k].pose;
-        let points = self.points(scans.get(self.keyframes[k].scan)?);
+        let points = self.keyframe_points.get(k)?;
         if points.len() < 10 {
             return None;
         }
         let newest_old = k.checked_sub(c.min_age_keyframes)?;
         let reach = MATCH_MAX_RANGE_M + c.window_m + MATCH_CELL_M;
         let mut map = ScoreMap::new([pose.x - reach, pose.y - reach], 2.0 * reach);
-        for kf in &self.keyframes[..=newest_old] {
+        for (kf, kf_points) in self.keyframes[..=newest_old]
+            .iter()
+            .zip(&self.keyframe_points)
+        {
             if (kf.pose.x - pose.x).hypot(kf.pose.y - pose.y) > c.submap_radius_m {
                 continue;
             }
-            let Some(ranges) = scans.get(kf.scan) else {
-                continue;
-            };
-            for p in self.points(ranges) {
+            for p in kf_points {
                 map.mark(kf.pose.transform_point(&nalgebra::Vector2::new(p[0], p[1])));
             }
         }
-        search(&map, &points, &pose, &c)
+        search(&map, points, &pose, &c)
     }
 
     /// Solves the pose graph (headings, then positions), keyframe 0 held.
@@ -668,9 +677,7 @@ mod tests {
         let mut c = LoopCloser::new(LoopClosureConfig::DEFAULT, LidarGeometry::CARMEN_SICK_180);
         c.keyframes = keyframes
             .iter()
-            .enumerate()
-            .map(|(scan, &p)| Keyframe {
-                scan,
+            .map(|&p| Keyframe {
                 pose: p,
                 estimate: p,
             })
