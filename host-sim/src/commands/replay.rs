@@ -16,6 +16,7 @@ use crate::inputs::readers::carmen::{
 };
 use crate::inputs::readers::rosbag::{self, BagOptions};
 use crate::inputs::readers::{DatasetSpec, thor};
+use crate::metrics::PosePairs;
 use crate::metrics::relations::RelationError;
 use crate::output::animation::{Animation, AnimationSettings, write_gif};
 use crate::output::grid_map::write_outputs;
@@ -131,17 +132,26 @@ pub fn run_and_report(
     mcap: Option<(&mut crate::output::mcap::McapFile, &str)>,
 ) -> Result<()> {
     let progress = (!quiet).then(|| super::progress_bar(recording.events.len() as u64));
-    // The ground truth and the trajectory are written while the filter runs (on the core
-    // it leaves free), the trajectory from the samples the filter hands over in chunks.
+    // While the filter runs, one thread on the core it leaves free writes the ground
+    // truth, then takes the samples the filter hands over in chunks: it writes the
+    // trajectory and pairs each pose with the ground truth for the metrics. (Two writer
+    // threads beside the filter took turns with it on two cores.)
     let metrics = std::thread::scope(|s| -> Result<_> {
-        let truth = s.spawn(|| crate::output::write_truth(out, recording));
-        let (chunks, received) = std::sync::mpsc::channel::<Vec<(f64, Pose2<f64>)>>();
-        let trajectory =
-            s.spawn(move || crate::output::write_trajectory(out, received.into_iter().flatten()));
+        let (chunks, received) = std::sync::mpsc::channel::<Vec<PoseSample>>();
+        let writer = s.spawn(move || {
+            crate::output::write_truth(out, recording)?;
+            let mut pairs = PosePairs::new(recording, recording.events.len());
+            let poses = received.into_iter().flat_map(|chunk| {
+                pairs.extend(&chunk);
+                chunk.into_iter().map(|p| (p.stamp, p.pose))
+            });
+            crate::output::write_trajectory(out, poses)?;
+            Ok(pairs)
+        });
         // A failed writer drops its receiver: the samples are then dropped here and its
         // error comes from joining it.
         let mut hand_over = |samples: &[PoseSample]| {
-            let _ = chunks.send(samples.iter().map(|p| (p.stamp, p.pose)).collect());
+            let _ = chunks.send(samples.to_vec());
         };
         let run = replay_with(
             recording,
@@ -156,7 +166,7 @@ pub fn run_and_report(
             Ok(run) => run,
             Err(e) => {
                 // Refused before its first sample (settings): no trajectory to leave.
-                let _ = crate::output::join_writer(trajectory);
+                let _ = crate::output::join_writer(writer);
                 let _ = std::fs::remove_file(out.join("trajectory.tum"));
                 return Err(e);
             }
@@ -164,10 +174,9 @@ pub fn run_and_report(
         if let Some(p) = &progress {
             p.finish_and_clear();
         }
-        let mut metrics = crate::metrics::evaluate(recording, &run);
+        let pairs = crate::output::join_writer(writer)?;
+        let mut metrics = crate::metrics::evaluate_paired(recording, &run, pairs);
         metrics.faults = faults;
-        crate::output::join_writer(trajectory)?;
-        crate::output::join_writer(truth)?;
         crate::output::write_all(out, recording, &run, &mut metrics, plots, started)?;
         if let Some((file, prefix)) = mcap {
             crate::output::mcap::scene::record_ekf_run(file, prefix, recording, &run, 0.1)?;

@@ -29,7 +29,7 @@ pub use alignment::{Rigid, apply, first_pose, se2_least_squares};
 pub use assignment::{max_gain, min_cost};
 
 use crate::domain::recording::{Recording, TruePose, TruthCursor};
-use crate::drivers::ekf::ReplayRun;
+use crate::drivers::ekf::{PoseSample, ReplayRun};
 use microslam::geometry::{Pose2, wrap_near};
 use nalgebra::{Matrix3, Vector2, Vector3};
 use serde::Serialize;
@@ -120,11 +120,19 @@ pub struct Metrics {
 
 /// Scores a replay against the recording's ground truth.
 pub fn evaluate(recording: &Recording, run: &ReplayRun) -> Metrics {
+    let mut pairs = PosePairs::new(recording, run.trajectory.len());
+    pairs.extend(&run.trajectory);
+    evaluate_paired(recording, run, pairs)
+}
+
+/// [`evaluate`] with the pose samples already paired with the ground truth (`pairs` of
+/// every sample of `run.trajectory`, in order): a replay pairs them while the filter runs.
+pub fn evaluate_paired(recording: &Recording, run: &ReplayRun, pairs: PosePairs<'_>) -> Metrics {
     let truth = &recording.ground_truth;
     // Dead reckoning is scored on another core meanwhile.
     std::thread::scope(|s| {
         let dead_reckoning = s.spawn(|| dead_reckoning_ate(truth, &run.dead_reckoning));
-        let mut m = evaluate_filter(recording, run);
+        let mut m = evaluate_filter(recording, run, pairs);
         m.dead_reckoning_ate_rmse_m = dead_reckoning
             .join()
             .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
@@ -150,32 +158,56 @@ fn dead_reckoning_ate(truth: &[TruePose], dead_reckoning: &[(f64, Pose2<f64>)]) 
     }
 }
 
-/// [`evaluate`] but the dead reckoning's figures.
-fn evaluate_filter(recording: &Recording, run: &ReplayRun) -> Metrics {
-    let truth = &recording.ground_truth;
-    // Sized up front: growing these by doubling copied and faulted in megabytes.
-    let n = run.trajectory.len();
-    let mut est = Vec::with_capacity(n);
-    let mut gt = Vec::with_capacity(n);
-    let mut nees = Vec::with_capacity(n);
-    let mut cursor = TruthCursor::new(truth);
-    for s in &run.trajectory {
-        let Some(g) = cursor.at(s.stamp) else {
-            continue;
-        };
-        est.push(s.pose);
-        gt.push(g);
-        // The filter starts at the true pose with zero covariance; while it claims less
-        // than NEES_MIN_POSITION_STD of position uncertainty in some direction, the
-        // ground truth's own noise dominates the error there and the NEES says nothing
-        // about the filter.
-        if recording.initial_pose.is_some()
-            && smallest_position_variance(&s.covariance) >= NEES_MIN_POSITION_STD.powi(2)
-            && let Some(v) = pose_nees(&s.pose, &g, &s.covariance)
-        {
-            nees.push(v);
+/// Each pose estimate paired with the ground truth at its stamp (estimates outside the
+/// ground truth's span are left out), and the NEES of those it can say something about.
+/// Filled sample by sample, in stamp order.
+pub struct PosePairs<'a> {
+    cursor: TruthCursor<'a>,
+    /// The NEES is scored only when the filter starts at the true pose.
+    nees_scored: bool,
+    est: Vec<Pose2<f64>>,
+    gt: Vec<Pose2<f64>>,
+    nees: Vec<f64>,
+}
+
+impl<'a> PosePairs<'a> {
+    /// No pairs yet, room for `capacity` (sized up front: growing these by doubling
+    /// copied and faulted in megabytes).
+    pub fn new(recording: &'a Recording, capacity: usize) -> Self {
+        Self {
+            cursor: TruthCursor::new(&recording.ground_truth),
+            nees_scored: recording.initial_pose.is_some(),
+            est: Vec::with_capacity(capacity),
+            gt: Vec::with_capacity(capacity),
+            nees: Vec::with_capacity(capacity),
         }
     }
+
+    /// Pairs the next samples of the trajectory.
+    pub fn extend(&mut self, samples: &[PoseSample]) {
+        for s in samples {
+            let Some(g) = self.cursor.at(s.stamp) else {
+                continue;
+            };
+            self.est.push(s.pose);
+            self.gt.push(g);
+            // The filter starts at the true pose with zero covariance; while it claims
+            // less than NEES_MIN_POSITION_STD of position uncertainty in some direction,
+            // the ground truth's own noise dominates the error there and the NEES says
+            // nothing about the filter.
+            if self.nees_scored
+                && smallest_position_variance(&s.covariance) >= NEES_MIN_POSITION_STD.powi(2)
+                && let Some(v) = pose_nees(&s.pose, &g, &s.covariance)
+            {
+                self.nees.push(v);
+            }
+        }
+    }
+}
+
+/// [`evaluate_paired`] but the dead reckoning's figures.
+fn evaluate_filter(recording: &Recording, run: &ReplayRun, pairs: PosePairs<'_>) -> Metrics {
+    let PosePairs { est, gt, nees, .. } = pairs;
     let transforms = transforms(&est, &gt);
     let se2_alignment = transforms.1.map(|t| [t.x, t.y, t.theta]);
     let mut m = Metrics {
@@ -369,7 +401,37 @@ fn purity(recording: &Recording, run: &ReplayRun) -> (Option<f64>, Option<f64>) 
 
 #[cfg(test)]
 mod tests {
-    use crate::metrics::smallest_position_variance;
+    use crate::domain::config::Settings;
+    use crate::domain::{AssociationMode, Precision};
+    use crate::metrics::{PosePairs, evaluate, evaluate_paired, smallest_position_variance};
+
+    #[test]
+    fn poses_paired_chunk_by_chunk_score_as_when_paired_at_once() {
+        let settings = Settings::load_for("sim", None, None).unwrap();
+        let recording = crate::inputs::sim::simulate(&settings, 3).unwrap();
+        let run = crate::drivers::ekf::replay(
+            &recording,
+            &settings,
+            AssociationMode::Known,
+            Precision::F64,
+            None,
+        )
+        .unwrap();
+        let whole = evaluate(&recording, &run);
+        assert!(whole.evaluated_poses > 1000, "{}", whole.evaluated_poses);
+        assert!(whole.nees_pose_mean.is_some() && whole.ate_rmse_m.se2.is_some());
+        for chunk in [1, 7, 4096] {
+            let mut pairs = PosePairs::new(&recording, 0);
+            for samples in run.trajectory.chunks(chunk) {
+                pairs.extend(samples);
+            }
+            assert_eq!(evaluate_paired(&recording, &run, pairs), whole, "chunks of {chunk}");
+        }
+        // Pairing only a part scores something else: the comparison can fail.
+        let mut part = PosePairs::new(&recording, 0);
+        part.extend(&run.trajectory[..run.trajectory.len() / 2]);
+        assert_ne!(evaluate_paired(&recording, &run, part), whole);
+    }
 
     #[test]
     fn smallest_position_variance_of_a_thin_rotated_covariance() {

@@ -85,7 +85,7 @@ pub fn write_all(
 }
 
 /// The result of a scoped writer thread (a panic in it becomes an error).
-pub fn join_writer(writer: std::thread::ScopedJoinHandle<'_, Result<()>>) -> Result<()> {
+pub fn join_writer<T>(writer: std::thread::ScopedJoinHandle<'_, Result<T>>) -> Result<T> {
     writer
         .join()
         .unwrap_or_else(|_| Err(anyhow::anyhow!("writer thread panicked")))
