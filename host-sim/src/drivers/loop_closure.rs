@@ -40,6 +40,7 @@
 use crate::domain::grid::LoopClosureConfig;
 use microslam::geometry::{Pose2, wrap_angle};
 use microslam::sensors::lidar::LidarGeometry;
+use rayon::prelude::*;
 
 /// A closure that moves the newest keyframe less than this from the filter's estimate
 /// (m) …
@@ -419,38 +420,41 @@ fn window_scores(
     let (half, steps) = window(c);
     let side = (2 * half + 1) as usize;
     let mut scores = vec![0u32; (2 * steps + 1) as usize * side * side];
-    let mut cells = Vec::with_capacity(points.len());
-    for (hi, h) in (-steps..=steps).enumerate() {
-        let theta = around.theta + h as f64 * c.heading_step_rad;
-        let (s, co) = theta.sin_cos();
-        cells.clear();
-        cells.extend(points.iter().map(|p| {
-            map.cell([
-                around.x + co * p[0] - s * p[1],
-                around.y + s * p[0] + co * p[1],
-            ])
-        }));
-        // Point by point, each row of the window at once: the row's `side` cells are
-        // contiguous in the map, so one slice is added to one row of scores (integer sums,
-        // the same in any order); a row over the map's edge is read cell by cell.
-        let block = &mut scores[hi * side * side..(hi + 1) * side * side];
-        for &[x, y] in &cells {
-            for (row, sy) in block.chunks_exact_mut(side).zip(-half..=half) {
-                match map.row(x - half, y + sy, side) {
-                    Some(marks) => {
-                        for (s, &m) in row.iter_mut().zip(marks) {
-                            *s += u32::from(m);
+    // One heading a job: on the grid run's pool the worker that waits for the next scan
+    // takes half of them (integer sums: the same scores whoever adds them).
+    scores
+        .par_chunks_mut(side * side)
+        .enumerate()
+        .for_each(|(hi, block)| {
+            let h = hi as i64 - steps;
+            let theta = around.theta + h as f64 * c.heading_step_rad;
+            let (s, co) = theta.sin_cos();
+            let cells = points.iter().map(|p| {
+                map.cell([
+                    around.x + co * p[0] - s * p[1],
+                    around.y + s * p[0] + co * p[1],
+                ])
+            });
+            // Point by point, each row of the window at once: the row's `side` cells are
+            // contiguous in the map, so one slice is added to one row of scores (integer
+            // sums, the same in any order); a row over the map's edge is read cell by cell.
+            for [x, y] in cells {
+                for (row, sy) in block.chunks_exact_mut(side).zip(-half..=half) {
+                    match map.row(x - half, y + sy, side) {
+                        Some(marks) => {
+                            for (s, &m) in row.iter_mut().zip(marks) {
+                                *s += u32::from(m);
+                            }
                         }
-                    }
-                    None => {
-                        for (s, sx) in row.iter_mut().zip(-half..=half) {
-                            *s += map.score(x + sx, y + sy);
+                        None => {
+                            for (s, sx) in row.iter_mut().zip(-half..=half) {
+                                *s += map.score(x + sx, y + sy);
+                            }
                         }
                     }
                 }
             }
-        }
-    }
+        });
     scores
 }
 

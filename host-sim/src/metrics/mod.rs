@@ -425,7 +425,11 @@ mod tests {
             for samples in run.trajectory.chunks(chunk) {
                 pairs.extend(samples);
             }
-            assert_eq!(evaluate_paired(&recording, &run, pairs), whole, "chunks of {chunk}");
+            assert_eq!(
+                evaluate_paired(&recording, &run, pairs),
+                whole,
+                "chunks of {chunk}"
+            );
         }
         // Pairing only a part scores something else: the comparison can fail.
         let mut part = PosePairs::new(&recording, 0);
