@@ -134,8 +134,8 @@ pub fn run_and_report(
     let progress = (!quiet).then(|| super::progress_bar(recording.events.len() as u64));
     // While the filter runs, one thread on the core it leaves free writes the ground
     // truth, then takes the samples the filter hands over in chunks: it writes the
-    // trajectory and pairs each pose with the ground truth for the metrics. (Two writer
-    // threads beside the filter took turns with it on two cores.)
+    // trajectory and pairs each pose with the ground truth for the metrics. One thread,
+    // not one per file: on two cores a second one takes turns with the filter.
     let metrics = std::thread::scope(|s| -> Result<_> {
         let (chunks, received) = std::sync::mpsc::channel::<Vec<PoseSample>>();
         let writer = s.spawn(move || {
