@@ -23,18 +23,63 @@
 use crate::scalar::Real;
 use nalgebra::Matrix3;
 
+/// `Some([a, b])` when `m` is the shear `[[1, 0, a], [0, 1, b], [0, 0, 1]]`: the form of
+/// every motion step's Jacobian with respect to the pose (a move along the heading), and
+/// so of every product of them, the run's `A` included, unless a variance cap scaled a step.
+#[inline]
+fn shear<T: Real>(m: &Matrix3<T>) -> Option<[T; 2]> {
+    let (one, zero) = (T::ONE, T::ZERO);
+    let unit = m[(0, 0)] == one && m[(1, 1)] == one && m[(2, 2)] == one;
+    let off = m[(1, 0)] == zero && m[(2, 0)] == zero && m[(0, 1)] == zero && m[(2, 1)] == zero;
+    (unit && off).then(|| [m[(0, 2)], m[(1, 2)]])
+}
+
 /// `a · b`. Not inlined on a microcontroller, like [`congruence`]: the firmware's flash
 /// holds one copy of the 3 × 3 products every prediction runs (a host inlines them).
+///
+/// A shear `a` (see [`shear`]) adds multiples of `b`'s last row to its first two: 6
+/// products instead of 27, and the same values, since the terms left out are `1 · x`
+/// and `0 · x`.
 #[cfg_attr(target_os = "none", inline(never))]
 pub(crate) fn product<T: Real>(a: &Matrix3<T>, b: &Matrix3<T>) -> Matrix3<T> {
+    if let Some([s0, s1]) = shear(a) {
+        let mut p = *b;
+        for j in 0..3 {
+            p[(0, j)] += s0 * b[(2, j)];
+            p[(1, j)] += s1 * b[(2, j)];
+        }
+        return p;
+    }
     Matrix3::from_fn(|i, j| a[(i, 0)] * b[(0, j)] + a[(i, 1)] * b[(1, j)] + a[(i, 2)] * b[(2, j)])
 }
 
-/// `a · m · aᵀ` (not inlined on a microcontroller, see [`product`]).
+/// `a · m · aᵀ` (not inlined on a microcontroller, see [`product`]; a shear `a` costs 12
+/// products instead of 54, with the same values).
 #[cfg_attr(target_os = "none", inline(never))]
 pub(crate) fn congruence<T: Real>(a: &Matrix3<T>, m: &Matrix3<T>) -> Matrix3<T> {
     let t = product(a, m);
+    if let Some([s0, s1]) = shear(a) {
+        let mut c = t;
+        for i in 0..3 {
+            c[(i, 0)] += s0 * t[(i, 2)];
+            c[(i, 1)] += s1 * t[(i, 2)];
+        }
+        return c;
+    }
     Matrix3::from_fn(|i, j| t[(i, 0)] * a[(j, 0)] + t[(i, 1)] * a[(j, 1)] + t[(i, 2)] * a[(j, 2)])
+}
+
+/// `L diag(d) Lᵀ` for a unit lower triangular `L`: the terms of [`congruence`] that are
+/// not products with the zeros above `L`'s diagonal, in the same order (the same values).
+#[cfg_attr(target_os = "none", inline(never))]
+pub(crate) fn ldlt<T: Real>(l: &[[T; 3]; 3], d: &[T; 3]) -> Matrix3<T> {
+    Matrix3::from_fn(|i, j| {
+        let mut sum = l[i][0] * d[0] * l[j][0];
+        for k in 1..=i.min(j) {
+            sum += l[i][k] * d[k] * l[j][k];
+        }
+        sum
+    })
 }
 
 /// The map from the stored robot coupling rows to the true ones: true entry `(r, c)` is
@@ -103,8 +148,8 @@ pub(crate) struct DeferredMotion<T: Real> {
     /// `C Bᵀ`-ready: the stored rows' columns 0 and 1 times their pivots `D₀`, `D₁` (last
     /// column zero).
     stored_near: Matrix3<T>,
-    /// `diag(D₀, D₁, 0)` (zero when the state has no columns 0 and 1 left of the robot).
-    near_pivots: Matrix3<T>,
+    /// `D₀`, `D₁` (zero when the state has no columns 0 and 1 left of the robot).
+    near_pivots: [T; 2],
     /// Largest |entry| of the stored rows (non-finite when an entry is).
     stored_largest: T,
 }
@@ -121,7 +166,7 @@ impl<T: Real> DeferredMotion<T> {
         let mut acc = [T::ZERO; 6];
         let mut largest = T::ZERO;
         let mut near = Matrix3::zeros();
-        let mut near_pivots = Matrix3::zeros();
+        let mut near_pivots = [T::ZERO; 2];
         for (c, (((&x, &y), &z), d)) in rows[0]
             .iter()
             .zip(rows[1])
@@ -140,7 +185,7 @@ impl<T: Real> DeferredMotion<T> {
                 near[(0, c)] = dx;
                 near[(1, c)] = dy;
                 near[(2, c)] = dz;
-                near_pivots[(c, c)] = d;
+                near_pivots[c] = d;
             }
             largest = super::max_abs([largest, x, y, z].into_iter());
         }
@@ -176,11 +221,13 @@ impl<T: Real> DeferredMotion<T> {
     /// `A M Aᵀ + A C Bᵀ + B Cᵀ Aᵀ + B D₀₁ Bᵀ`.
     fn coupled(&self, map: &RowMap<T>) -> Matrix3<T> {
         let RowMap { a, b } = map;
-        let cross = product(a, &product(&self.stored_near, &b.transpose()));
-        congruence(a, &self.stored_coupled)
-            + cross
-            + cross.transpose()
-            + congruence(b, &self.near_pivots)
+        // `C Bᵀ` and `B D₀₁ Bᵀ` over columns 0 and 1 only: `C`'s and `B`'s last columns
+        // and `D₀₁`'s last pivot are zero, so the terms left out add nothing.
+        let (near, [d0, d1]) = (&self.stored_near, self.near_pivots);
+        let near_b = Matrix3::from_fn(|i, j| near[(i, 0)] * b[(j, 0)] + near[(i, 1)] * b[(j, 1)]);
+        let cross = product(a, &near_b);
+        let bdb = Matrix3::from_fn(|i, j| b[(i, 0)] * d0 * b[(j, 0)] + b[(i, 1)] * d1 * b[(j, 1)]);
+        congruence(a, &self.stored_coupled) + cross + cross.transpose() + bdb
     }
 
     /// A bound on the largest |entry| of the true rows: `3 · max|A| · max|stored| +
@@ -191,8 +238,14 @@ impl<T: Real> DeferredMotion<T> {
 
     fn largest_under(&self, map: &RowMap<T>) -> T {
         let RowMap { a, b } = map;
-        T::lit(3.0) * super::max_abs(a.iter().copied()) * self.stored_largest
-            + super::max_abs(b.iter().copied())
+        // A shear's entries are its two free ones, ones and zeros.
+        let largest_a = match shear(a) {
+            Some([s0, s1]) => super::max_abs([T::ONE, s0, s1].into_iter()),
+            None => super::max_abs(a.iter().copied()),
+        };
+        // `B`'s last column is zero.
+        let largest_b = super::max_abs(b.iter().take(6).copied());
+        T::lit(3.0) * largest_a * self.stored_largest + largest_b
     }
 
     /// The run's state after one more prediction: true rows `f · rows + [added | 0]`
@@ -239,4 +292,57 @@ pub(crate) fn pull_back<T: Real>(map: &RowMap<T>, h: [T; 3]) -> ([T; 3], [T; 2])
         [on_stored[0], on_stored[1], on_stored[2]],
         [on_near[0], on_near[1]],
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every term of the 3 × 3 product, in the order the shear path claims to reproduce.
+    fn full_product(a: &Matrix3<f64>, b: &Matrix3<f64>) -> Matrix3<f64> {
+        Matrix3::from_fn(|i, j| {
+            a[(i, 0)] * b[(0, j)] + a[(i, 1)] * b[(1, j)] + a[(i, 2)] * b[(2, j)]
+        })
+    }
+
+    fn full_congruence(a: &Matrix3<f64>, m: &Matrix3<f64>) -> Matrix3<f64> {
+        full_product(&full_product(a, m), &a.transpose())
+    }
+
+    fn shear_of(a: f64, b: f64) -> Matrix3<f64> {
+        Matrix3::new(1.0, 0.0, a, 0.0, 1.0, b, 0.0, 0.0, 1.0)
+    }
+
+    fn dense() -> Matrix3<f64> {
+        Matrix3::new(0.31, -0.027, 0.0113, 0.05, 1.7e-3, -0.4, 2.2, 0.9, 0.0071)
+    }
+
+    #[test]
+    fn the_shear_paths_give_the_full_products_bit_for_bit() {
+        let m = dense();
+        let sym = m * m.transpose();
+        for (a, b) in [(0.0, 0.0), (-0.0123, 0.0456), (3.7e-5, -1.9), (1e6, -2e-7)] {
+            let s = shear_of(a, b);
+            assert!(shear(&s).is_some());
+            assert_eq!(product(&s, &m), full_product(&s, &m));
+            assert_eq!(congruence(&s, &sym), full_congruence(&s, &sym));
+            // A product of shears is a shear, the run's `A` included.
+            assert!(shear(&product(&s, &shear_of(0.3, -0.2))).is_some());
+        }
+        // A scaled step is not a shear and takes the full product.
+        let scaled = Matrix3::from_fn(|i, j| [0.5, 1.0, 1.0][i] * shear_of(0.1, 0.2)[(i, j)]);
+        assert!(shear(&scaled).is_none());
+        assert_eq!(product(&scaled, &m), full_product(&scaled, &m));
+        assert_eq!(congruence(&scaled, &sym), full_congruence(&scaled, &sym));
+        assert_eq!(congruence(&m, &sym), full_congruence(&m, &sym));
+    }
+
+    #[test]
+    fn ldlt_gives_the_full_congruence_bit_for_bit() {
+        let l = [[1.0, 0.0, 0.0], [0.37, 1.0, 0.0], [-1.3, 0.021, 1.0]];
+        let d = [0.04, 2.5e-3, 1.1e-5];
+        let lm = Matrix3::from_fn(|i, j| l[i][j]);
+        let expected = full_congruence(&lm, &Matrix3::from_diagonal(&d.into()));
+        assert_eq!(ldlt(&l, &d), expected);
+    }
 }

@@ -74,9 +74,9 @@
 //!
 //! | landmarks | N | P | bytes |
 //! | --- | --- | --- | --- |
-//! | 16 | 35 | 630 | 2 968 |
-//! | 32 | 67 | 2 278 | 9 688 |
-//! | 64 | 131 | 8 646 | 35 416 |
+//! | 16 | 35 | 630 | 2 940 |
+//! | 32 | 67 | 2 278 | 9 660 |
+//! | 64 | 131 | 8 646 | 35 388 |
 //!
 //! Such a filter belongs in a `static` on a microcontroller: [`EkfSlam::new`] is a
 //! `const fn`, so `static`s are laid out by the linker (`.bss`/`.data`) and never pass
@@ -110,7 +110,7 @@ use crate::motion::{
 };
 use crate::scalar::Real;
 use crate::sensors::range_bearing::{RangeBearing, RangeBearingSensor};
-use deferred::{DeferredMotion, congruence, product, pull_back};
+use deferred::{DeferredMotion, ldlt, product, pull_back};
 use nalgebra::{ArrayStorage, Matrix2, Matrix2x3, Matrix3, SVector, Vector2};
 
 pub mod covariance;
@@ -156,7 +156,7 @@ const MAX_CALIBRATION_SLOTS: usize = 2;
 
 /// Bytes an `f32` filter uses beyond its mean and covariance factor (configuration,
 /// counters, the deferred predictions).
-pub const EKF_OVERHEAD_BYTES_F32: usize = 308;
+pub const EKF_OVERHEAD_BYTES_F32: usize = 280;
 
 /// Settings of the landmark EKF: noise, sensor mount and gate.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -720,10 +720,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// `L_rr D_r L_rrᵀ`: the robot's own block's part of `P_RR`.
     fn own_covariance(&self) -> Matrix3<T> {
         let (lrr, dr) = self.robot_block();
-        congruence(
-            &Matrix3::from_fn(|i, j| lrr[i][j]),
-            &Matrix3::from_diagonal(&dr.into()),
-        )
+        ldlt(&lrr, &dr)
     }
 
     /// A run of deferred predictions starting from the factor as stored (one pass over the
@@ -984,10 +981,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
                     }
                 })
             });
-            let own = congruence(
-                &Matrix3::from_fn(|i, j| l[i][j]),
-                &Matrix3::from_diagonal(&d.into()),
-            );
+            let own = ldlt(&l, &d);
             let next = run.then(&f, scale_terms.as_ref().filter(|_| estimated), &own);
             (l, d, next, next.robot_covariance(), scale_terms)
         };
