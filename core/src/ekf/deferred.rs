@@ -243,7 +243,8 @@ impl<T: Real> DeferredMotion<T> {
             Some([s0, s1]) => super::max_abs([T::ONE, s0, s1].into_iter()),
             None => super::max_abs(a.iter().copied()),
         };
-        // `B`'s last column is zero.
+        // `B`'s last column is zero: a non-finite `F` that would make it NaN makes `A`
+        // non-finite too, and `is_finite` tests `A` on its own.
         let largest_b = super::max_abs(b.iter().take(6).copied());
         T::lit(3.0) * largest_a * self.stored_largest + largest_b
     }
