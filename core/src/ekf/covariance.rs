@@ -22,7 +22,7 @@
 
 use super::deferred::RowMap;
 use crate::scalar::Real;
-use nalgebra::SMatrix;
+use nalgebra::{Matrix3, SMatrix};
 
 /// Packed length of the covariance factor for a maximum of `max_landmarks` landmarks:
 /// `N (N + 1) / 2` with `N = 3 + 2 · max_landmarks` (the second const parameter of
@@ -116,6 +116,21 @@ pub(crate) fn mwgs<T: Real, const R: usize, const C: usize>(
         }
     }
     (l, d)
+}
+
+/// `L diag(d) Lᵀ` for a unit lower triangular 3 × 3 `L` (the inverse of [`ldl`]): the
+/// terms of the full product that are not products with the zeros above `L`'s diagonal,
+/// in the full product's order, so the same values. (Not inlined on a microcontroller:
+/// one copy for the predictions that call it.)
+#[cfg_attr(target_os = "none", inline(never))]
+pub(crate) fn ldl_product<T: Real>(l: &[[T; 3]; 3], d: &[T; 3]) -> Matrix3<T> {
+    Matrix3::from_fn(|i, j| {
+        let mut sum = l[i][0] * d[0] * l[j][0];
+        for k in 1..=i.min(j) {
+            sum += l[i][k] * d[k] * l[j][k];
+        }
+        sum
+    })
 }
 
 /// `A = L diag(D) Lᵀ` for a symmetric `R × R` matrix given by its lower triangle (the
@@ -258,7 +273,7 @@ impl<'a, T: Real> CovarianceView<'a, T> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{DMatrix, Matrix3};
+    use nalgebra::DMatrix;
 
     fn dense<const R: usize>(l: &[[f64; R]; R], d: &[f64; R]) -> DMatrix<f64> {
         let l = DMatrix::from_fn(R, R, |i, j| l[i][j]);

@@ -57,29 +57,25 @@ pub(crate) fn product<T: Real>(a: &Matrix3<T>, b: &Matrix3<T>) -> Matrix3<T> {
 /// products instead of 54, with the same values).
 #[cfg_attr(target_os = "none", inline(never))]
 pub(crate) fn congruence<T: Real>(a: &Matrix3<T>, m: &Matrix3<T>) -> Matrix3<T> {
-    let t = product(a, m);
-    if let Some([s0, s1]) = shear(a) {
+    if let Some(s) = shear(a) {
+        // `a · m`: rows 0 and 1 gain multiples of row 2; then `· aᵀ`: columns 0 and 1
+        // gain multiples of column 2.
+        let mut t = *m;
+        for j in 0..3 {
+            for (r, sr) in s.iter().enumerate() {
+                t[(r, j)] += *sr * m[(2, j)];
+            }
+        }
         let mut c = t;
         for i in 0..3 {
-            c[(i, 0)] += s0 * t[(i, 2)];
-            c[(i, 1)] += s1 * t[(i, 2)];
+            for (r, sr) in s.iter().enumerate() {
+                c[(i, r)] += *sr * t[(i, 2)];
+            }
         }
         return c;
     }
+    let t = product(a, m);
     Matrix3::from_fn(|i, j| t[(i, 0)] * a[(j, 0)] + t[(i, 1)] * a[(j, 1)] + t[(i, 2)] * a[(j, 2)])
-}
-
-/// `L diag(d) Lᵀ` for a unit lower triangular `L`: the terms of [`congruence`] that are
-/// not products with the zeros above `L`'s diagonal, in the same order (the same values).
-#[cfg_attr(target_os = "none", inline(never))]
-pub(crate) fn ldlt<T: Real>(l: &[[T; 3]; 3], d: &[T; 3]) -> Matrix3<T> {
-    Matrix3::from_fn(|i, j| {
-        let mut sum = l[i][0] * d[0] * l[j][0];
-        for k in 1..=i.min(j) {
-            sum += l[i][k] * d[k] * l[j][k];
-        }
-        sum
-    })
 }
 
 /// The map from the stored robot coupling rows to the true ones: true entry `(r, c)` is
@@ -339,11 +335,11 @@ mod tests {
     }
 
     #[test]
-    fn ldlt_gives_the_full_congruence_bit_for_bit() {
+    fn ldl_product_gives_the_full_congruence_bit_for_bit() {
         let l = [[1.0, 0.0, 0.0], [0.37, 1.0, 0.0], [-1.3, 0.021, 1.0]];
         let d = [0.04, 2.5e-3, 1.1e-5];
         let lm = Matrix3::from_fn(|i, j| l[i][j]);
         let expected = full_congruence(&lm, &Matrix3::from_diagonal(&d.into()));
-        assert_eq!(ldlt(&l, &d), expected);
+        assert_eq!(crate::ekf::covariance::ldl_product(&l, &d), expected);
     }
 }

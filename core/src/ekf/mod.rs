@@ -110,7 +110,7 @@ use crate::motion::{
 };
 use crate::scalar::Real;
 use crate::sensors::range_bearing::{RangeBearing, RangeBearingSensor};
-use deferred::{DeferredMotion, ldlt, product, pull_back};
+use deferred::{DeferredMotion, product, pull_back};
 use nalgebra::{ArrayStorage, Matrix2, Matrix2x3, Matrix3, SVector, Vector2};
 
 pub mod covariance;
@@ -118,7 +118,7 @@ mod deferred;
 pub mod health;
 
 pub use covariance::{CovarianceView, factor_len};
-use covariance::{internal_entry, ldl, mwgs, pivot, row_start, strict_row};
+use covariance::{internal_entry, ldl, ldl_product, mwgs, pivot, row_start, strict_row};
 
 /// State dimension for a maximum of `max_landmarks` point landmarks: `3 + 2 · max_landmarks`.
 ///
@@ -720,7 +720,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// `L_rr D_r L_rrᵀ`: the robot's own block's part of `P_RR`.
     fn own_covariance(&self) -> Matrix3<T> {
         let (lrr, dr) = self.robot_block();
-        ldlt(&lrr, &dr)
+        ldl_product(&lrr, &dr)
     }
 
     /// A run of deferred predictions starting from the factor as stored (one pass over the
@@ -981,7 +981,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
                     }
                 })
             });
-            let own = ldlt(&l, &d);
+            let own = ldl_product(&l, &d);
             let next = run.then(&f, scale_terms.as_ref().filter(|_| estimated), &own);
             (l, d, next, next.robot_covariance(), scale_terms)
         };
