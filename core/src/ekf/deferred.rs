@@ -34,6 +34,20 @@ fn shear<T: Real>(m: &Matrix3<T>) -> Option<[T; 2]> {
     (unit && off).then(|| [m[(0, 2)], m[(1, 2)]])
 }
 
+/// `a · b` for the shear `a` with free entries `s` ([`shear`]): `b` with multiples of its
+/// last row added to its first two, the terms of the full product that are not `1 · x`
+/// or `0 · x`.
+#[inline]
+fn sheared_rows<T: Real>(s: [T; 2], b: &Matrix3<T>) -> Matrix3<T> {
+    let mut p = *b;
+    for j in 0..3 {
+        for (r, sr) in s.iter().enumerate() {
+            p[(r, j)] += *sr * b[(2, j)];
+        }
+    }
+    p
+}
+
 /// `a · b`. Not inlined on a microcontroller, like [`congruence`]: the firmware's flash
 /// holds one copy of the 3 × 3 products every prediction runs (a host inlines them).
 ///
@@ -42,13 +56,8 @@ fn shear<T: Real>(m: &Matrix3<T>) -> Option<[T; 2]> {
 /// and `0 · x`.
 #[cfg_attr(target_os = "none", inline(never))]
 pub(crate) fn product<T: Real>(a: &Matrix3<T>, b: &Matrix3<T>) -> Matrix3<T> {
-    if let Some([s0, s1]) = shear(a) {
-        let mut p = *b;
-        for j in 0..3 {
-            p[(0, j)] += s0 * b[(2, j)];
-            p[(1, j)] += s1 * b[(2, j)];
-        }
-        return p;
+    if let Some(s) = shear(a) {
+        return sheared_rows(s, b);
     }
     Matrix3::from_fn(|i, j| a[(i, 0)] * b[(0, j)] + a[(i, 1)] * b[(1, j)] + a[(i, 2)] * b[(2, j)])
 }
@@ -58,14 +67,8 @@ pub(crate) fn product<T: Real>(a: &Matrix3<T>, b: &Matrix3<T>) -> Matrix3<T> {
 #[cfg_attr(target_os = "none", inline(never))]
 pub(crate) fn congruence<T: Real>(a: &Matrix3<T>, m: &Matrix3<T>) -> Matrix3<T> {
     if let Some(s) = shear(a) {
-        // `a · m`: rows 0 and 1 gain multiples of row 2; then `· aᵀ`: columns 0 and 1
-        // gain multiples of column 2.
-        let mut t = *m;
-        for j in 0..3 {
-            for (r, sr) in s.iter().enumerate() {
-                t[(r, j)] += *sr * m[(2, j)];
-            }
-        }
+        // `a · m`, then `· aᵀ`: columns 0 and 1 gain multiples of column 2.
+        let t = sheared_rows(s, m);
         let mut c = t;
         for i in 0..3 {
             for (r, sr) in s.iter().enumerate() {
