@@ -39,10 +39,11 @@ const KNOWN: [(u8, f64, f64, f64, f64, f64); 5] = [
     (5, 0.1358, 0.0816, 4.312, 0.950, 1.1411),
 ];
 
-/// The range bias `r + b₀ + b₂ β²` of each robot's sightings fitted by least squares
-/// against the Vicon ground truth (range error against the true range and bearing of
-/// the true landmark; errors beyond 1 m left out), computed outside this project's code:
-/// (robot, b₀ m, b₂ m/rad²). The filter never sees it.
+/// The range bias of each robot's sightings fitted by least squares against the Vicon
+/// ground truth: range error (measured − true range) = `b₀ + b₂ β² + c r`, `β` the
+/// measured bearing and `r` the true range, errors beyond 1 m left out; computed outside
+/// the code under test (`scripts/mrclam-vicon-errors`, first table): (robot, b₀ m,
+/// b₂ m/rad²). The filter never sees it.
 const RANGE_BIAS_FROM_GROUND_TRUTH: [(u8, f64, f64); 5] = [
     (1, 0.126, -1.540),
     (2, 0.188, -1.932),
@@ -79,7 +80,7 @@ fn check_known(robot: u8) {
     // The self-calibration finds the range bias the ground truth shows (measured within
     // 0.057 m and 0.091 m/rad²; the sightings' bearing noise of the settings, 0.1 rad,
     // leaves b₀ less well determined than the 0.03 rad of earlier settings did, which
-    // came within 0.021 m) and a speed scale below 1 (the odometry reads 5–10 % fast;
+    // came within 0.021 m) and a speed scale below 1 (the odometry reads 5–12 % fast;
     // measured 0.93–0.97).
     let &(_, b0, b2) = RANGE_BIAS_FROM_GROUND_TRUTH
         .iter()
