@@ -201,6 +201,9 @@ pub struct LocalizeArgs {
     /// Output folder.
     #[arg(long, short, default_value = "out/localize")]
     pub out: PathBuf,
+    /// Skip the picture of the map with the trajectory (`map.png`).
+    #[arg(long)]
+    pub no_plots: bool,
     /// Global localization trials instead of one tracked run.
     #[command(flatten)]
     pub global: GlobalArgs,
@@ -597,6 +600,7 @@ impl From<&LocalizeArgs> for LocalizeOptions {
             global: (&a.global).into(),
             mcap: a.mcap.clone(),
             bag: (&a.bag).into(),
+            no_plots: a.no_plots,
         }
     }
 }

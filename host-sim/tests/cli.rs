@@ -199,3 +199,97 @@ fn particle_counts_that_are_not_compiled_in_are_refused_with_the_list() {
     assert!(!out.status.success());
     assert!(err.contains("[8, 16, 32, 64, 100, 128, 200, 400]"), "{err}");
 }
+
+/// The PNG files under `dir`, at any depth.
+fn pictures(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut found = Vec::new();
+    for entry in std::fs::read_dir(dir).expect("output folder").flatten() {
+        let path = entry.path();
+        if path.is_dir() {
+            found.extend(pictures(&path));
+        } else if path.extension().is_some_and(|e| e == "png") {
+            found.push(path);
+        }
+    }
+    found.sort();
+    found
+}
+
+/// Runs `host-sim` with `args` into the folder `out`.
+fn run_into(out: &std::path::Path, args: &[&str]) {
+    succeeds(host_sim().args(args).arg("--quiet").arg("--out").arg(out));
+}
+
+#[test]
+fn no_plots_leaves_out_every_picture_and_an_earlier_runs() {
+    use host_sim::domain::datasets::dataset_path;
+    let dir = tempfile::tempdir().unwrap();
+    // The first 300 scans of the Intel log (its three header lines, then one scan a line).
+    let intel = dataset_path("intel/intel-raw-part.clf").expect("the Intel log");
+    let text = std::fs::read_to_string(intel).unwrap();
+    let log = dir.path().join("intel300.clf");
+    let head: String = text.lines().take(303).map(|l| format!("{l}\n")).collect();
+    std::fs::write(&log, head).unwrap();
+    let carmen = format!("carmen:{}", log.display());
+
+    // Grid SLAM: the picture, then none (the earlier one removed), the data files kept.
+    let slam = dir.path().join("slam");
+    let grid_slam = ["replay", "--filter", "grid-slam", "--dataset", &carmen];
+    run_into(&slam, &grid_slam);
+    assert_eq!(pictures(&slam), [slam.join("map.png")]);
+    run_into(&slam, &[&grid_slam[..], &["--no-plots"]].concat());
+    assert_eq!(pictures(&slam), Vec::<std::path::PathBuf>::new());
+    for f in ["map.pgm", "map.yaml", "trajectory.tum", "metrics.json"] {
+        assert!(
+            slam.join(f).is_file(),
+            "grid SLAM without pictures lacks {f}"
+        );
+    }
+
+    // The localizer on that map, the same way.
+    let localized = dir.path().join("localize");
+    let map = slam.join("map.yaml");
+    let map = map.to_str().unwrap();
+    let localize = ["localize", "--map", map, "--dataset", &carmen];
+    run_into(&localized, &localize);
+    assert_eq!(pictures(&localized), [localized.join("map.png")]);
+    run_into(&localized, &[&localize[..], &["--no-plots"]].concat());
+    assert_eq!(pictures(&localized), Vec::<std::path::PathBuf>::new());
+    assert!(localized.join("trajectory.tum").is_file());
+
+    // The landmark EKF (MRCLAM): map.png and errors.png, then neither.
+    let ekf = dir.path().join("ekf");
+    let mrclam = ["replay", "--dataset", "mrclam:dataset6"];
+    run_into(&ekf, &mrclam);
+    assert_eq!(
+        pictures(&ekf),
+        [ekf.join("errors.png"), ekf.join("map.png")]
+    );
+    run_into(&ekf, &[&mrclam[..], &["--no-plots"]].concat());
+    assert_eq!(pictures(&ekf), Vec::<std::path::PathBuf>::new());
+    assert!(ekf.join("trajectory.tum").is_file());
+
+    // The simulator: no picture of the landmark run nor of either grid run.
+    let sim = dir.path().join("sim");
+    let cfg = dir.path().join("short.toml");
+    std::fs::write(&cfg, "[scenario]\nduration_s = 20.0\n").unwrap();
+    let cfg = cfg.to_str().unwrap();
+    let sim_args = [
+        "sim",
+        "--seed",
+        "3",
+        "--grid-particles",
+        "16",
+        "--config",
+        cfg,
+    ];
+    run_into(&sim, &[&sim_args[..], &["--no-plots"]].concat());
+    assert_eq!(pictures(&sim), Vec::<std::path::PathBuf>::new());
+    for f in [
+        "grid/slam/map.pgm",
+        "grid/localize/trajectory.tum",
+        "metrics.json",
+    ] {
+        assert!(sim.join(f).is_file(), "sim without pictures lacks {f}");
+    }
+}

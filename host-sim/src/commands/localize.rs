@@ -33,6 +33,8 @@ pub struct LocalizeOptions {
     pub mcap: Option<PathBuf>,
     /// Topics and lidar mount of `rosbag:` datasets.
     pub bag: BagOptions,
+    /// Skip the picture (`map.png`).
+    pub no_plots: bool,
 }
 
 /// `host-sim localize --map map.yaml --dataset carmen:<file>`.
@@ -82,7 +84,14 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
         &run,
         &args.grid,
     )?;
-    write_outputs(&args.out, &run, &options.config, &metrics, None)?;
+    write_outputs(
+        &args.out,
+        &run,
+        &options.config,
+        &metrics,
+        None,
+        !args.no_plots,
+    )?;
     report(quiet, &lidar.name, &metrics, &args.out);
     super::close_mcap(mcap, quiet)
 }

@@ -334,7 +334,7 @@ pub(crate) fn report(quiet: bool, dataset: &str, metrics: &serde_json::Value, ou
 fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
     let start = Instant::now();
     if let DatasetSpec::Thor(dir) = &args.dataset {
-        return thor_replay(dir, args.run, &args.out, quiet);
+        return thor_replay(dir, args.run, &args.out, !args.no_plots, quiet);
     }
     let lidar = lidar_log(&args.dataset, args.config.as_deref(), &args.grid, &args.bag)?;
     let (log, options) = (lidar.log, lidar.options);
@@ -392,7 +392,14 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
         &run,
         &args.grid,
     )?;
-    write_outputs(&args.out, &run, &options.config, &metrics, None)?;
+    write_outputs(
+        &args.out,
+        &run,
+        &options.config,
+        &metrics,
+        None,
+        !args.no_plots,
+    )?;
     if let Some(gif) = &args.animate {
         let title = format!("Grid SLAM: {}", lidar.name);
         write_gif(
@@ -478,8 +485,8 @@ fn read_lidar(
 }
 
 /// `host-sim replay --dataset thor:<dir> --run N`: trajectory.tum, trajectory.png (with a
-/// 1 m grid), metrics.json (length, duration, end pose).
-fn thor_replay(dir: &str, run: u32, out: &Path, quiet: bool) -> Result<()> {
+/// 1 m grid; when `plots`), metrics.json (length, duration, end pose).
+fn thor_replay(dir: &str, run: u32, out: &Path, plots: bool, quiet: bool) -> Result<()> {
     let start = std::time::Instant::now();
     let direct = Path::new(dir);
     let path = if direct.is_dir() {
@@ -495,11 +502,16 @@ fn thor_replay(dir: &str, run: u32, out: &Path, quiet: bool) -> Result<()> {
         .map(|w| (w[1].1.x - w[0].1.x).hypot(w[1].1.y - w[0].1.y))
         .sum();
     let duration = traj.last().map_or(0.0, |l| l.0) - traj.first().map_or(0.0, |f| f.0);
-    crate::output::thor::draw_trajectory(
-        &out.join("trajectory.png"),
-        &traj,
-        &format!("THOR run {run}: encoder + IMU dead reckoning"),
-    )?;
+    let picture = out.join("trajectory.png");
+    if plots {
+        crate::output::thor::draw_trajectory(
+            &picture,
+            &traj,
+            &format!("THOR run {run}: encoder + IMU dead reckoning"),
+        )?;
+    } else {
+        crate::output::remove_stale(&picture)?;
+    }
     let end = traj.last().map_or(Pose2::IDENTITY, |l| l.1);
     let metrics = serde_json::json!({
         "dataset": format!("thor/run{run}"),

@@ -127,9 +127,12 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
         [config, localizer],
         loop_closure,
         args.grid_particles,
-        &out,
-        mcap.as_mut(),
-        args.animate.as_deref(),
+        SimGridOutputs {
+            dir: &out,
+            mcap: mcap.as_mut(),
+            animate: args.animate.as_deref(),
+            plots: !args.no_plots,
+        },
     )?;
     if args.global.enabled {
         super::global::sim_cli(
@@ -165,21 +168,37 @@ pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
 /// Particle counts `host-sim sim --grid-particles` accepts.
 pub const SIM_PARTICLES: [usize; 4] = [16, 32, 64, 200];
 
+/// Where [`run_and_write`] puts what the grid runs of the simulator produce.
+pub struct SimGridOutputs<'a> {
+    /// The folder of `slam/` and `localize/`.
+    pub dir: &'a Path,
+    /// The MCAP file both runs are recorded into (under `/grid_slam` and `/grid_localize`).
+    pub mcap: Option<&'a mut crate::output::mcap::McapFile>,
+    /// An animated GIF of SLAM building the map.
+    pub animate: Option<&'a Path>,
+    /// Draw each run's `map.png`.
+    pub plots: bool,
+}
+
 /// Runs SLAM (closing loops with `loop_closure` when given) and the localizer with
 /// `particles` particles and their settings `configs` (SLAM's, the localizer's), writing
-/// `out/slam/` and `out/localize/` (map.pgm, map.yaml, map.png, trajectory.tum,
-/// groundtruth.tum, metrics.json), recording both into `mcap` (under `/grid_slam` and
-/// `/grid_localize`) and drawing `animate` (an animated GIF of SLAM) when given. Returns
-/// the two metrics documents.
+/// `slam/` and `localize/` into `outputs.dir` (map.pgm, map.yaml, trajectory.tum,
+/// groundtruth.tum, metrics.json, and map.png when `outputs.plots`), recording both into
+/// `outputs.mcap` and drawing `outputs.animate` when given. Returns the two metrics
+/// documents.
 pub fn run_and_write(
     rec: &LidarRecording,
     configs: [GridPfConfig; 2],
     loop_closure: Option<crate::domain::grid::LoopClosureConfig>,
     particles: usize,
-    out: &Path,
-    mut mcap: Option<&mut crate::output::mcap::McapFile>,
-    animate: Option<&Path>,
+    outputs: SimGridOutputs<'_>,
 ) -> Result<(serde_json::Value, serde_json::Value)> {
+    let SimGridOutputs {
+        dir: out,
+        mut mcap,
+        animate,
+        plots,
+    } = outputs;
     let started = Instant::now();
     if !SIM_PARTICLES.contains(&particles) {
         bail!("--grid-particles {particles} is not compiled in; use one of {SIM_PARTICLES:?}");
@@ -279,7 +298,7 @@ pub fn run_and_write(
                 "summary": summary,
             })),
         });
-        write_outputs(&dir, run, &config, &metrics, Some(&truth))?;
+        write_outputs(&dir, run, &config, &metrics, Some(&truth), plots)?;
         write_tum(
             &dir.join("groundtruth.tum"),
             truth.iter().map(|(t, p)| (*t, p.cast())),

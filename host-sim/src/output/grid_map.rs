@@ -59,16 +59,44 @@ fn write_map_server(out: &Path, cells: &[i8], g: &GridGeometry, log_odds: &LogOd
     Ok(())
 }
 
-/// Writes the outputs of a run into `out`.
+/// Writes the outputs of a run into `out`: the map for `map_server` (`map.pgm`,
+/// `map.yaml`), `trajectory.tum`, `metrics.json` and, when `plots`, the picture
+/// `map.png` (the map with the trajectory, and `truth` under it when given; without
+/// `plots`, an earlier run's `map.png` is removed).
 pub fn write_outputs(
     out: &Path,
     run: &GridRun,
     config: &GridPfConfig,
     metrics: &serde_json::Value,
     truth: Option<&[(f64, Pose2<f32>)]>,
+    plots: bool,
 ) -> Result<()> {
     super::create_folder(out)?;
     write_map_server(out, &run.cells, &run.geometry, &config.log_odds)?;
+    if plots {
+        draw_map_picture(out, run, config, metrics, truth)?;
+    } else {
+        super::remove_stale(&out.join("map.png"))?;
+    }
+    super::write_tum(
+        &out.join("trajectory.tum"),
+        run.trajectory.iter().map(|(t, p)| (*t, p.cast())),
+    )?;
+    super::write_file(
+        &out.join("metrics.json"),
+        serde_json::to_string_pretty(metrics)? + "\n",
+    )?;
+    Ok(())
+}
+
+/// `map.png` of [`write_outputs`], titled after the run's estimator and dataset.
+fn draw_map_picture(
+    out: &Path,
+    run: &GridRun,
+    config: &GridPfConfig,
+    metrics: &serde_json::Value,
+    truth: Option<&[(f64, Pose2<f32>)]>,
+) -> Result<()> {
     let estimator = metrics["estimator"].as_str().unwrap_or("grid SLAM");
     let mut letters = estimator.chars();
     let title = format!(
@@ -90,16 +118,7 @@ pub fn write_outputs(
             truth,
             title: &title,
         },
-    )?;
-    super::write_tum(
-        &out.join("trajectory.tum"),
-        run.trajectory.iter().map(|(t, p)| (*t, p.cast())),
-    )?;
-    super::write_file(
-        &out.join("metrics.json"),
-        serde_json::to_string_pretty(metrics)? + "\n",
-    )?;
-    Ok(())
+    )
 }
 
 #[cfg(test)]

@@ -36,12 +36,19 @@ pub fn create_folder(path: &Path) -> Result<()> {
 /// ~4 ms longer that way (MRCLAM ds6 robot 1, medians of 15 runs on this machine's ext4).
 /// The error names the file.
 pub fn create_file(path: &Path) -> Result<std::fs::File> {
-    match std::fs::remove_file(path) {
-        Ok(()) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-        Err(e) => return Err(e).with_context(|| format!("cannot replace {}", path.display())),
-    }
+    remove_stale(path)?;
     std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))
+}
+
+/// Removes the output file `path` an earlier run left in the folder, if there is one, so
+/// that the folder holds this run's outputs only (a run with `--no-plots` leaves no
+/// earlier run's picture behind). The error names the file.
+pub fn remove_stale(path: &Path) -> Result<()> {
+    match std::fs::remove_file(path) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(e).with_context(|| format!("cannot replace {}", path.display())),
+    }
 }
 
 /// Writes `bytes` into the new output file `path` ([`create_file`]).
@@ -52,8 +59,8 @@ pub fn write_file(path: &Path, bytes: impl AsRef<[u8]>) -> Result<()> {
         .with_context(|| format!("cannot write {}", path.display()))
 }
 
-/// Writes `landmarks.csv`, `map.png` and `errors.png` (when `plots`), then `metrics.json`
-/// with the wall time since `started`. (`trajectory.tum` and `groundtruth.tum` need no
+/// Writes `landmarks.csv`, `map.png` and `errors.png` (when `plots`; otherwise removes
+/// those an earlier run left), then `metrics.json` with the wall time since `started`. (`trajectory.tum` and `groundtruth.tum` need no
 /// metrics: [`write_trajectory`] and [`write_truth`] run while the filter runs.)
 pub fn write_all(
     out: &Path,
@@ -76,6 +83,9 @@ pub fn write_all(
         });
         map?;
         errors?;
+    } else {
+        remove_stale(&out.join("map.png"))?;
+        remove_stale(&out.join("errors.png"))?;
     }
     write_landmarks(&out.join("landmarks.csv"), run)?;
     metrics.wall_time_s = started.elapsed().as_secs_f64();
