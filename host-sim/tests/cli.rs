@@ -190,6 +190,25 @@ fn help_names_every_estimator_dataset_family_and_particle_count() {
 }
 
 #[test]
+fn the_landmark_filter_on_a_lidar_log_is_refused_with_the_way_out() {
+    for dataset in ["carmen:x.clf", "thor:thor", "rosbag:x.mcap"] {
+        let out = host_sim()
+            .args(["replay", "--dataset", dataset, "--filter", "ekf-slam"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{dataset}");
+        let family = dataset.split(':').next().unwrap();
+        assert!(
+            err.contains("range-bearing sightings")
+                && err.contains(&format!("a {family} replay"))
+                && err.contains("--filter grid-slam"),
+            "{err}"
+        );
+    }
+}
+
+#[test]
 fn particle_counts_that_are_not_compiled_in_are_refused_with_the_list() {
     let out = host_sim()
         .args(["replay", "--dataset", "carmen:x.clf", "--particles", "7"])

@@ -81,6 +81,12 @@ pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
     if grid {
         return grid_replay(args, quiet);
     }
+    if lidar {
+        bail!(
+            "the landmark EKF-SLAM needs range-bearing sightings (mrclam:<dir>); a {} replay has none: use --filter grid-slam",
+            args.dataset.family()
+        );
+    }
     let started = Instant::now();
     let settings = Settings::load_for(
         args.dataset.family(),
