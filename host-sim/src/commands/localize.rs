@@ -1,14 +1,13 @@
 //! `host-sim localize`: the grid localizer on a saved map (`map.yaml` + PGM) over a
 //! CARMEN log, scored with the relation metric when a relations file is found.
 
-use super::replay::{lidar_log, metrics_json, report, scan_progress_bar, with_reference};
+use super::replay::{RunOutputs, lidar_log, report, scan_progress_bar, score_and_write};
 use crate::domain::grid::{GlobalOptions, GridOptions};
 use crate::drivers::grid::{carmen_inputs, run_localizer_observed};
 use crate::inputs::readers::DatasetSpec;
 use crate::inputs::readers::carmen::front_scans;
 use crate::inputs::readers::map::LocalizationMap;
 use crate::inputs::readers::rosbag::BagOptions;
-use crate::output::grid_map::write_outputs;
 use anyhow::Result;
 use microslam::geometry::Pose2;
 use std::path::PathBuf;
@@ -52,10 +51,10 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
     }
     let start = Instant::now();
     let lidar = lidar_log(&args.dataset, args.config.as_deref(), &args.grid, &args.bag)?;
-    let (log, options) = (lidar.log, lidar.options);
+    let options = &lidar.options;
     let map = LocalizationMap::read(&args.map, &options.config)?;
     let view = map.view()?;
-    let scans = front_scans(&log);
+    let scans = front_scans(&lidar.log);
     let inputs = carmen_inputs(&scans);
     let pb = scan_progress_bar(scans.len(), quiet);
     // The SLAM map's frame is the pose of the log's first scan.
@@ -67,7 +66,7 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
                 &inputs,
                 &view,
                 Pose2::IDENTITY,
-                &options,
+                options,
                 &|i| {
                     if i % 64 == 0 {
                         pb.set_position(i as u64);
@@ -77,21 +76,11 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
             )
         })?;
     pb.finish_and_clear();
-    let rel = super::relation_error_for(&lidar.path, args.grid.relations.as_deref(), &run)?;
-    let wall = start.elapsed().as_secs_f64();
-    let metrics = with_reference(
-        metrics_json(&lidar.name, &run, &options, rel, None, wall),
-        &run,
-        &args.grid,
-    )?;
-    write_outputs(
-        &args.out,
-        &run,
-        &options.config,
-        &metrics,
-        None,
-        !args.no_plots,
-    )?;
+    let outputs = RunOutputs {
+        dir: &args.out,
+        plots: !args.no_plots,
+    };
+    let metrics = score_and_write(&lidar, &run, &args.grid, None, start, outputs)?;
     report(quiet, &lidar.name, &metrics, &args.out);
     super::close_mcap(mcap, quiet)
 }

@@ -283,6 +283,44 @@ pub(crate) fn metrics_json(
     })
 }
 
+/// Where [`score_and_write`] writes a run's outputs.
+pub(crate) struct RunOutputs<'a> {
+    /// The output folder.
+    pub dir: &'a Path,
+    /// Draw `map.png`.
+    pub plots: bool,
+}
+
+/// Scores a grid run over the lidar log `lidar` — the relation error when a relations file
+/// is found ([`super::relation_error_for`]), the ATE against `--reference` when given —
+/// writes its outputs ([`write_outputs`]) and returns `metrics.json`'s document. The wall
+/// time is the command's since `started`, taken before the files are written.
+pub(crate) fn score_and_write(
+    lidar: &LidarLog,
+    run: &GridRun,
+    grid: &GridOptions,
+    faults: Option<&FaultReport>,
+    started: Instant,
+    outputs: RunOutputs<'_>,
+) -> Result<serde_json::Value> {
+    let rel = super::relation_error_for(&lidar.path, grid.relations.as_deref(), run)?;
+    let wall = started.elapsed().as_secs_f64();
+    let metrics = with_reference(
+        metrics_json(&lidar.name, run, &lidar.options, rel, faults, wall),
+        run,
+        grid,
+    )?;
+    write_outputs(
+        outputs.dir,
+        run,
+        &lidar.options.config,
+        &metrics,
+        None,
+        outputs.plots,
+    )?;
+    Ok(metrics)
+}
+
 /// `metrics` with the `reference` entry: the ATE against `--reference` when given.
 pub(crate) fn with_reference(
     mut metrics: serde_json::Value,
@@ -343,8 +381,8 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
         return thor_replay(dir, args.run, &args.out, !args.no_plots, quiet);
     }
     let lidar = lidar_log(&args.dataset, args.config.as_deref(), &args.grid, &args.bag)?;
-    let (log, options) = (lidar.log, lidar.options);
-    let clean = front_scans(&log);
+    let options = &lidar.options;
+    let clean = front_scans(&lidar.log);
     // Faults (`--faults`) go into a copy of the laser messages.
     let (faulty, faults) = match args.faults.filter(|f| !f.is_none()) {
         Some(rates) => {
@@ -383,29 +421,18 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
             run_slam_observed::<GRID_CELLS, GRID_BITMAP>(
                 &inputs,
                 Pose2::IDENTITY,
-                &options,
+                options,
                 &progress,
                 o,
                 every,
             )
         })?;
     pb.finish_and_clear();
-    let rel = super::relation_error_for(&lidar.path, args.grid.relations.as_deref(), &run)?;
-    // Wall time: the whole replay (reading, filtering, metrics) before the files are written.
-    let wall = start.elapsed().as_secs_f64();
-    let metrics = with_reference(
-        metrics_json(&lidar.name, &run, &options, rel, faults.as_ref(), wall),
-        &run,
-        &args.grid,
-    )?;
-    write_outputs(
-        &args.out,
-        &run,
-        &options.config,
-        &metrics,
-        None,
-        !args.no_plots,
-    )?;
+    let outputs = RunOutputs {
+        dir: &args.out,
+        plots: !args.no_plots,
+    };
+    let metrics = score_and_write(&lidar, &run, &args.grid, faults.as_ref(), start, outputs)?;
     if let Some(gif) = &args.animate {
         let title = format!("Grid SLAM: {}", lidar.name);
         write_gif(
