@@ -65,3 +65,37 @@ impl<I> fmt::Display for MapFull<I> {
 }
 
 impl<I: fmt::Debug> core::error::Error for MapFull<I> {}
+
+/// A setting out of its range, as a configuration's `invalid_setting` reports it
+/// ([`crate::pf::GridPfConfig::invalid_setting`]): the field's name — the key `host-sim`'s
+/// settings files use — and the range it must be in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct InvalidSetting {
+    /// The field, e.g. `"resample_neff_fraction"`.
+    pub name: &'static str,
+    /// What it must be, e.g. `"within 0 ..= 1"`.
+    pub rule: &'static str,
+}
+
+impl InvalidSetting {
+    /// The first of `checks` — `(name, rule, holds)` — that does not hold. Always inlined,
+    /// so that a caller asking only whether one fails (`is_valid`) keeps no names.
+    #[inline(always)]
+    pub(crate) fn first<const N: usize>(
+        checks: [(&'static str, &'static str, bool); N],
+    ) -> Option<Self> {
+        checks
+            .into_iter()
+            .find(|(_, _, holds)| !holds)
+            .map(|(name, rule, _)| Self { name, rule })
+    }
+}
+
+impl fmt::Display for InvalidSetting {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "`{}` must be {}", self.name, self.rule)
+    }
+}
+
+impl core::error::Error for InvalidSetting {}

@@ -209,6 +209,42 @@ fn the_landmark_filter_on_a_lidar_log_is_refused_with_the_way_out() {
 }
 
 #[test]
+fn a_setting_out_of_range_is_named_with_its_file_and_rule() {
+    let dir = tempfile::tempdir().unwrap();
+    let refused = |args: &[&str], text: &str| {
+        let file = dir.path().join("bad.toml");
+        std::fs::write(&file, text).unwrap();
+        let out = host_sim()
+            .args(args)
+            .arg("--config")
+            .arg(&file)
+            .arg("--out")
+            .arg(dir.path().join("out"))
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{text}");
+        let err = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(err.contains(&file.display().to_string()), "{err}");
+        err
+    };
+    // Grid settings.
+    let grid = ["replay", "--dataset", "carmen:intel/intel-raw-part.clf"];
+    let err = refused(&grid, "resample_neff_fraction = 2.0\n");
+    assert!(
+        err.contains("`resample_neff_fraction` must be within 0 ..= 1"),
+        "{err}"
+    );
+    let err = refused(&grid, "hit = -3\n");
+    assert!(err.contains("`hit` must be 0 or more"), "{err}");
+    // EKF settings.
+    let ekf = ["replay", "--dataset", "mrclam:dataset6"];
+    let err = refused(&ekf, "[sighting]\nrange_std = -1.0\n");
+    assert!(err.contains("sighting.range_std = -1"), "{err}");
+    let err = refused(&ekf, "[recovery]\nheading_std = nan\n");
+    assert!(err.contains("recovery.heading_std = NaN"), "{err}");
+}
+
+#[test]
 fn particle_counts_that_are_not_compiled_in_are_refused_with_the_list() {
     let out = host_sim()
         .args(["replay", "--dataset", "carmen:x.clf", "--particles", "7"])

@@ -175,7 +175,18 @@ impl LogOdds {
 
     /// `true` when the limits are ordered (`min ≤ 0 ≤ max`) and the steps not negative.
     pub fn is_valid(&self) -> bool {
-        self.hit >= 0 && self.miss >= 0 && self.min <= 0 && self.max >= 0
+        self.invalid_setting().is_none()
+    }
+
+    /// The first field out of range, `None` when the model is valid.
+    #[inline]
+    pub fn invalid_setting(&self) -> Option<crate::error::InvalidSetting> {
+        crate::error::InvalidSetting::first([
+            ("hit", "0 or more", self.hit >= 0),
+            ("miss", "0 or more", self.miss >= 0),
+            ("min", "0 or less", self.min <= 0),
+            ("max", "0 or more", self.max >= 0),
+        ])
     }
 
     /// The value after a hit.

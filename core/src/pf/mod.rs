@@ -38,6 +38,7 @@ pub use prediction::MotionNoise;
 pub use resampling::Resampling;
 pub use slam::{GridSlam, StepReport};
 
+use crate::error::InvalidSetting;
 use crate::grid::LogOdds;
 use core::fmt;
 
@@ -68,12 +69,35 @@ pub struct FilterConfig {
 impl FilterConfig {
     /// `true` when every setting is finite and in range.
     pub fn is_valid(&self) -> bool {
-        self.motion_noise.is_valid()
-            && self.shift_window_cells <= correlation::MAX_SHIFT_WINDOW
-            && self.log_likelihood_per_unit.is_finite()
-            && self.log_likelihood_per_unit >= 0.0
-            && self.resample_neff_fraction.is_finite()
-            && (0.0..=1.0).contains(&self.resample_neff_fraction)
+        self.invalid_setting().is_none()
+    }
+
+    /// The first setting out of range (this one's or a [`MotionNoise`] field), `None`
+    /// when every one is valid.
+    #[inline]
+    pub fn invalid_setting(&self) -> Option<InvalidSetting> {
+        // The rule's text below names the largest window.
+        const _: () = assert!(correlation::MAX_SHIFT_WINDOW == 7);
+        let l = self.log_likelihood_per_unit;
+        self.motion_noise.invalid_setting().or_else(|| {
+            InvalidSetting::first([
+                (
+                    "shift_window_cells",
+                    "at most 7 (a 15 × 15 window)",
+                    self.shift_window_cells <= correlation::MAX_SHIFT_WINDOW,
+                ),
+                (
+                    "log_likelihood_per_unit",
+                    "finite and non-negative",
+                    l.is_finite() && l >= 0.0,
+                ),
+                (
+                    "resample_neff_fraction",
+                    "within 0 ..= 1",
+                    (0.0..=1.0).contains(&self.resample_neff_fraction),
+                ),
+            ])
+        })
     }
 }
 
@@ -201,14 +225,38 @@ impl GridPfConfig {
 
     /// `true` when every setting is finite and in range.
     pub fn is_valid(&self) -> bool {
-        self.resolution.is_finite()
-            && self.resolution > 0.0
-            && self.log_odds.is_valid()
-            && self.range_weight_exponent.is_finite()
-            && self.range_weight_exponent >= 0.0
-            && self.filter.is_valid()
-            && self.shift_prior_std_cells.is_finite()
-            && self.shift_prior_std_cells >= 0.0
+        self.invalid_setting().is_none()
+    }
+
+    /// The first setting out of range — this one's, or a field of [`LogOdds`],
+    /// [`FilterConfig`] or [`MotionNoise`], named as `host-sim`'s settings files name it —
+    /// `None` when every one is valid.
+    #[inline]
+    pub fn invalid_setting(&self) -> Option<InvalidSetting> {
+        let ok = |v: f32| v.is_finite() && v >= 0.0;
+        let r = self.resolution;
+        let own = |checks| InvalidSetting::first(checks);
+        own([(
+            "resolution",
+            "finite and positive",
+            r.is_finite() && r > 0.0,
+        )])
+        .or_else(|| self.log_odds.invalid_setting())
+        .or_else(|| {
+            own([(
+                "range_weight_exponent",
+                "finite and non-negative",
+                ok(self.range_weight_exponent),
+            )])
+        })
+        .or_else(|| self.filter.invalid_setting())
+        .or_else(|| {
+            own([(
+                "shift_prior_std_cells",
+                "finite and non-negative",
+                ok(self.shift_prior_std_cells),
+            )])
+        })
     }
 
     /// Loads the usable beams of `scan` into `points` with these settings' decimation

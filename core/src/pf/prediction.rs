@@ -11,6 +11,7 @@
 //! heading drift uncorrected between turns; [`MotionNoise`] adds floors and noise that
 //! grows with the distance driven (see `DESIGN.md`).
 
+use crate::error::InvalidSetting;
 use crate::geometry::Pose2;
 
 /// Standard deviations of the input noise of one step.
@@ -64,17 +65,43 @@ impl MotionNoise {
 
     /// `true` when every figure is finite and non-negative.
     pub fn is_valid(&self) -> bool {
-        [
-            self.distance_std,
-            self.distance_std_per_metre,
-            self.distance_std_per_radian,
-            self.heading_std,
-            self.heading_std_per_radian,
-            self.heading_std_per_metre,
-            self.sideways_std_per_metre,
-        ]
-        .iter()
-        .all(|v| v.is_finite() && *v >= 0.0)
+        self.invalid_setting().is_none()
+    }
+
+    /// The first figure that is negative or not finite, `None` when every one is valid.
+    #[inline]
+    pub fn invalid_setting(&self) -> Option<InvalidSetting> {
+        let ok = |v: f32| v.is_finite() && v >= 0.0;
+        let rule = "finite and non-negative";
+        InvalidSetting::first([
+            ("distance_std", rule, ok(self.distance_std)),
+            (
+                "distance_std_per_metre",
+                rule,
+                ok(self.distance_std_per_metre),
+            ),
+            (
+                "distance_std_per_radian",
+                rule,
+                ok(self.distance_std_per_radian),
+            ),
+            ("heading_std", rule, ok(self.heading_std)),
+            (
+                "heading_std_per_radian",
+                rule,
+                ok(self.heading_std_per_radian),
+            ),
+            (
+                "heading_std_per_metre",
+                rule,
+                ok(self.heading_std_per_metre),
+            ),
+            (
+                "sideways_std_per_metre",
+                rule,
+                ok(self.sideways_std_per_metre),
+            ),
+        ])
     }
 
     /// `(σ_d, σ_θ, σ_s)` for one step.

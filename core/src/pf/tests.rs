@@ -439,3 +439,67 @@ fn a_correction_moves_every_particle_and_a_rebuild_redraws_the_map() {
         Err(PfError::NonFiniteInput)
     );
 }
+
+#[test]
+fn an_invalid_setting_is_named_with_its_rule() {
+    for valid in [
+        GridPfConfig::SEED,
+        GridPfConfig::DEFAULT,
+        GridPfConfig::MICROCONTROLLER,
+        GridPfConfig::DEFAULT.for_localizer(),
+    ] {
+        assert_eq!(valid.invalid_setting(), None);
+        assert!(valid.is_valid());
+    }
+    type Break = fn(&mut GridPfConfig);
+    let cases: [(Break, &str, &str); 9] = [
+        (|c| c.resolution = 0.0, "resolution", "finite and positive"),
+        (|c| c.log_odds.miss = -1, "miss", "0 or more"),
+        (|c| c.log_odds.min = 5, "min", "0 or less"),
+        (
+            |c| c.range_weight_exponent = f32::NAN,
+            "range_weight_exponent",
+            "finite and non-negative",
+        ),
+        (
+            |c| c.filter.motion_noise.sideways_std_per_metre = -0.1,
+            "sideways_std_per_metre",
+            "finite and non-negative",
+        ),
+        (
+            |c| c.filter.shift_window_cells = correlation::MAX_SHIFT_WINDOW + 1,
+            "shift_window_cells",
+            "at most 7 (a 15 × 15 window)",
+        ),
+        (
+            |c| c.filter.log_likelihood_per_unit = f32::INFINITY,
+            "log_likelihood_per_unit",
+            "finite and non-negative",
+        ),
+        (
+            |c| c.filter.resample_neff_fraction = 1.5,
+            "resample_neff_fraction",
+            "within 0 ..= 1",
+        ),
+        (
+            |c| c.shift_prior_std_cells = -1.0,
+            "shift_prior_std_cells",
+            "finite and non-negative",
+        ),
+    ];
+    for (break_it, name, rule) in cases {
+        let mut c = GridPfConfig::DEFAULT;
+        break_it(&mut c);
+        assert!(!c.is_valid(), "{name}");
+        assert_eq!(
+            c.invalid_setting(),
+            Some(crate::error::InvalidSetting { name, rule }),
+            "{name}"
+        );
+    }
+    // Two at once: the first in the order the settings are checked.
+    let mut c = GridPfConfig::DEFAULT;
+    c.filter.resample_neff_fraction = 2.0;
+    c.resolution = -1.0;
+    assert_eq!(c.invalid_setting().map(|i| i.name), Some("resolution"));
+}

@@ -229,11 +229,13 @@ pub(crate) fn options_for_beams(
     if let Some(k) = grid.window {
         c.filter.shift_window_cells = k;
     }
-    if !c.is_valid() {
-        bail!(
-            "grid filter settings out of range (window ≤ {})",
-            microslam::pf::correlation::MAX_SHIFT_WINDOW
-        );
+    if let Some(invalid) = c.invalid_setting() {
+        match grid.window {
+            Some(k) if invalid.name == "shift_window_cells" => {
+                bail!("--window {k}: the half-width must be at most 7 (a 15 × 15 window)")
+            }
+            _ => bail!("grid filter settings: {invalid}"),
+        }
     }
     Ok(GridRunOptions {
         particles: grid.particles,

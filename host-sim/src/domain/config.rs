@@ -237,7 +237,7 @@ impl Settings {
         let settings: Self = toml::Value::Table(base)
             .try_into()
             .with_context(|| origin.to_owned())?;
-        settings.validate()?;
+        settings.validate().with_context(|| origin.to_owned())?;
         Ok(settings)
     }
 
@@ -246,29 +246,38 @@ impl Settings {
         Self::load_for(family, path, None)
     }
 
-    /// Checks ranges of values that TOML types cannot.
+    /// Checks ranges of values that TOML types cannot; the error names the setting as the
+    /// settings file spells it.
     pub fn validate(&self) -> Result<()> {
         let o = &self.odometry;
         let s = &self.sighting;
         let a = &self.association;
         let non_negative = [
-            o.linear_std,
-            o.linear_std_per_mps,
-            o.angular_std,
-            o.angular_std_per_radps,
-            o.angular_std_per_mps,
-            o.speed_scale_std,
-            o.turn_scale_std,
-            s.range_std,
-            s.bearing_std,
-            s.range_bias_offset_std,
-            s.range_bias_curvature_std,
-            s.min_range,
-            a.batch_window_s,
-            a.ambiguity_margin,
+            ("odometry.linear_std", o.linear_std),
+            ("odometry.linear_std_per_mps", o.linear_std_per_mps),
+            ("odometry.angular_std", o.angular_std),
+            ("odometry.angular_std_per_radps", o.angular_std_per_radps),
+            ("odometry.angular_std_per_mps", o.angular_std_per_mps),
+            ("odometry.speed_scale_std", o.speed_scale_std),
+            ("odometry.turn_scale_std", o.turn_scale_std),
+            ("sighting.range_std", s.range_std),
+            ("sighting.bearing_std", s.bearing_std),
+            ("sighting.range_bias_offset_std", s.range_bias_offset_std),
+            (
+                "sighting.range_bias_curvature_std",
+                s.range_bias_curvature_std,
+            ),
+            ("sighting.min_range", s.min_range),
+            ("association.batch_window_s", a.batch_window_s),
+            ("association.ambiguity_margin", a.ambiguity_margin),
         ];
-        if non_negative.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-            bail!("noise figures, ranges and windows must be finite and non-negative");
+        if let Some((name, v)) = non_negative
+            .iter()
+            .find(|(_, v)| !(v.is_finite() && *v >= 0.0))
+        {
+            bail!(
+                "{name} = {v}: noise figures, ranges and windows must be finite and non-negative"
+            );
         }
         if !(s.range_bias_offset_mean.is_finite() && s.range_bias_curvature_mean.is_finite()) {
             bail!("sighting.range_bias_offset_mean and range_bias_curvature_mean must be finite");
@@ -299,13 +308,13 @@ impl Settings {
             bail!("new_landmark_probability must not be below individual_probability");
         }
         let r = &self.recovery;
-        if [r.huber_sigma, r.position_std, r.heading_std]
-            .iter()
-            .any(|v| !(v.is_finite() && *v >= 0.0))
-        {
-            bail!(
-                "[recovery] huber_sigma, position_std and heading_std must be finite and non-negative"
-            );
+        let recovery = [
+            ("recovery.huber_sigma", r.huber_sigma),
+            ("recovery.position_std", r.position_std),
+            ("recovery.heading_std", r.heading_std),
+        ];
+        if let Some((name, v)) = recovery.iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
+            bail!("{name} = {v}: must be finite and non-negative");
         }
         if s.mount.iter().any(|v| !v.is_finite()) {
             bail!("sensor mount must be finite");

@@ -254,8 +254,8 @@ impl GridToml {
             resample_neff_fraction => c.filter.resample_neff_fraction, seed => c.filter.seed,
             shift_window_cells => c.filter.shift_window_cells, beam_decimation => c.beam_decimation,
             shift_prior_std_cells => c.shift_prior_std_cells);
-        if !c.is_valid() {
-            bail!("grid filter settings out of range: {c:?}");
+        if let Some(invalid) = c.invalid_setting() {
+            bail!("grid filter settings: {invalid}");
         }
         Ok(c)
     }
@@ -365,9 +365,11 @@ impl Preset {
         role: FilterRole,
     ) -> Result<GridPfConfig> {
         let file = config.map(GridToml::read).transpose()?;
-        let mut c = match &file {
-            Some(f) => f.apply_over(self.config())?,
-            None => self.config(),
+        let mut c = match (&file, config) {
+            (Some(f), Some(path)) => f
+                .apply_over(self.config())
+                .with_context(|| format!("in {}", path.display()))?,
+            _ => self.config(),
         };
         if role == FilterRole::Localizer && !file.as_ref().is_some_and(GridToml::sets_window) {
             c = c.for_localizer();
