@@ -82,9 +82,7 @@ impl InvalidSetting {
     /// The first of `checks` — `(name, rule, holds)` — that does not hold. Always inlined,
     /// so that a caller asking only whether one fails (`is_valid`) keeps no names.
     #[inline(always)]
-    pub(crate) fn first<const N: usize>(
-        checks: [(&'static str, &'static str, bool); N],
-    ) -> Option<Self> {
+    pub fn first<const N: usize>(checks: [(&'static str, &'static str, bool); N]) -> Option<Self> {
         checks
             .into_iter()
             .find(|(_, _, holds)| !holds)

@@ -236,12 +236,37 @@ fn a_setting_out_of_range_is_named_with_its_file_and_rule() {
     );
     let err = refused(&grid, "hit = -3\n");
     assert!(err.contains("`hit` must be 0 or more"), "{err}");
+    let err = refused(&grid, "[loop_closure]\nloop_std_m = -1.0\n");
+    assert!(
+        err.contains("[loop_closure]: `loop_std_m` must be finite and positive"),
+        "{err}"
+    );
     // EKF settings.
     let ekf = ["replay", "--dataset", "mrclam:dataset6"];
     let err = refused(&ekf, "[sighting]\nrange_std = -1.0\n");
     assert!(err.contains("sighting.range_std = -1"), "{err}");
     let err = refused(&ekf, "[recovery]\nheading_std = nan\n");
     assert!(err.contains("recovery.heading_std = NaN"), "{err}");
+    // A global search option: named with the option that sets it.
+    let out = host_sim()
+        .args([
+            "sim",
+            "--grid-particles",
+            "16",
+            "--global",
+            "--min-score",
+            "1.5",
+        ])
+        .arg("--out")
+        .arg(dir.path().join("global"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("`min_score_fraction` must be within 0 ..= 1 (--min-score)"),
+        "{err}"
+    );
 }
 
 #[test]

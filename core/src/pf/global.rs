@@ -62,6 +62,7 @@
 //! the tabled dilations (≈ 3.5 KB of stack).
 
 use super::correlation::ScanPoint;
+use crate::error::InvalidSetting;
 use crate::geometry::{Pose2, wrap_angle, wrap_near};
 use crate::grid::{GridView, MaxPoolLayers, floor_i32};
 use core::fmt;
@@ -151,31 +152,74 @@ impl GlobalSearchConfig {
 
     /// `true` when every setting is finite and in range.
     pub fn is_valid(&self) -> bool {
-        self.max_range.is_finite()
-            && self.max_range > 0.0
-            && self.max_beams > 0
-            && usize::from(self.max_beams) <= MAX_SEARCH_BEAMS
-            && self.heading_step.is_finite()
-            && self.heading_step >= 0.0
-            && self.min_score_fraction.is_finite()
-            && (0.0..=1.0).contains(&self.min_score_fraction)
-            && self.relative_score.is_finite()
-            && (0.0..=1.0).contains(&self.relative_score)
-            && self.first_pass_fraction.is_finite()
-            && (0.0..=1.0).contains(&self.first_pass_fraction)
-            && self.pass_step.is_finite()
-            && self.pass_step > 0.0
-            && self.pass_step <= 1.0
-            && self.work_budget > 0
-            && self.separation_m.is_finite()
-            && self.separation_m >= 0.0
-            && self.separation_rad.is_finite()
-            && self.separation_rad >= 0.0
-            && usize::from(self.heading_peaks) <= MAX_HEADING_PEAKS
-            && self.heading_window.is_finite()
-            && self.heading_window >= 0.0
-            && self.full_turn_below.is_finite()
-            && (0.0..=1.0).contains(&self.full_turn_below)
+        self.invalid_setting().is_none()
+    }
+
+    /// The first setting out of range (the field's name and its rule), `None` when every
+    /// one is valid.
+    #[inline]
+    pub fn invalid_setting(&self) -> Option<InvalidSetting> {
+        // The rules' texts below name these limits.
+        const _: () = assert!(MAX_SEARCH_BEAMS == 128 && MAX_HEADING_PEAKS == 4);
+        let non_negative = |v: f32| v.is_finite() && v >= 0.0;
+        let fraction = |v: f32| (0.0..=1.0).contains(&v);
+        const NON_NEGATIVE: &str = "finite and non-negative";
+        const FRACTION: &str = "within 0 ..= 1";
+        InvalidSetting::first([
+            (
+                "max_range",
+                "finite and positive",
+                self.max_range.is_finite() && self.max_range > 0.0,
+            ),
+            (
+                "max_beams",
+                "within 1 ..= 128",
+                (1..=MAX_SEARCH_BEAMS).contains(&usize::from(self.max_beams)),
+            ),
+            (
+                "heading_step",
+                NON_NEGATIVE,
+                non_negative(self.heading_step),
+            ),
+            (
+                "min_score_fraction",
+                FRACTION,
+                fraction(self.min_score_fraction),
+            ),
+            ("relative_score", FRACTION, fraction(self.relative_score)),
+            (
+                "first_pass_fraction",
+                FRACTION,
+                fraction(self.first_pass_fraction),
+            ),
+            (
+                "pass_step",
+                "within (0, 1]",
+                self.pass_step > 0.0 && self.pass_step <= 1.0,
+            ),
+            ("work_budget", "1 or more", self.work_budget > 0),
+            (
+                "separation_m",
+                NON_NEGATIVE,
+                non_negative(self.separation_m),
+            ),
+            (
+                "separation_rad",
+                NON_NEGATIVE,
+                non_negative(self.separation_rad),
+            ),
+            (
+                "heading_peaks",
+                "at most 4",
+                usize::from(self.heading_peaks) <= MAX_HEADING_PEAKS,
+            ),
+            (
+                "heading_window",
+                NON_NEGATIVE,
+                non_negative(self.heading_window),
+            ),
+            ("full_turn_below", FRACTION, fraction(self.full_turn_below)),
+        ])
     }
 }
 

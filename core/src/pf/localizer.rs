@@ -29,6 +29,7 @@ use super::global::{
 use super::orientation::DirectionHistogram;
 use super::prediction::{arc_between, drive_arc};
 use super::{GridPfConfig, LOCALIZER_SHIFT_WINDOW, ParticleFilter, PfError, StepReport};
+use crate::error::InvalidSetting;
 use crate::geometry::Pose2;
 use crate::grid::{GridView, MaxPoolLayers, ScanIntegration};
 use crate::sensors::lidar::LidarScan;
@@ -82,14 +83,27 @@ impl LostDetection {
 
     /// `true` when every setting is finite and in range.
     pub fn is_valid(&self) -> bool {
-        self.ratio.is_finite()
-            && (0.0..=1.0).contains(&self.ratio)
-            && self.initial_expected.is_finite()
-            && self.initial_expected > 0.0
-            && self.initial_expected <= 1.0
-            && self.learning_rate.is_finite()
-            && self.learning_rate > 0.0
-            && self.learning_rate <= 1.0
+        self.invalid_setting().is_none()
+    }
+
+    /// The first setting out of range (the field's name and its rule), `None` when every
+    /// one is valid.
+    #[inline]
+    pub fn invalid_setting(&self) -> Option<InvalidSetting> {
+        let in_unit = |v: f32| v > 0.0 && v <= 1.0;
+        InvalidSetting::first([
+            ("ratio", "within 0 ..= 1", (0.0..=1.0).contains(&self.ratio)),
+            (
+                "initial_expected",
+                "within (0, 1]",
+                in_unit(self.initial_expected),
+            ),
+            (
+                "learning_rate",
+                "within (0, 1]",
+                in_unit(self.learning_rate),
+            ),
+        ])
     }
 }
 
@@ -141,16 +155,44 @@ impl RelocalizationConfig {
 
     /// `true` when every setting is finite and in range.
     pub fn is_valid(&self) -> bool {
-        self.search.is_valid()
-            && self.lost.is_valid()
-            && self.hypotheses >= 1
-            && usize::from(self.hypotheses) <= MAX_HYPOTHESES
-            && self.spread_m.is_finite()
-            && self.spread_m >= 0.0
-            && self.spread_rad.is_finite()
-            && self.spread_rad >= 0.0
-            && self.search_scans >= 1
-            && self.pull_in_window_cells <= super::correlation::MAX_SHIFT_WINDOW
+        self.invalid_setting().is_none()
+    }
+
+    /// The first setting out of range — this one's, or a field of its
+    /// [`GlobalSearchConfig`] or [`LostDetection`] — `None` when every one is valid.
+    #[inline]
+    pub fn invalid_setting(&self) -> Option<InvalidSetting> {
+        // The rules' texts below name these limits.
+        const _: () = assert!(MAX_HYPOTHESES == 8 && super::correlation::MAX_SHIFT_WINDOW == 7);
+        let non_negative = |v: f32| v.is_finite() && v >= 0.0;
+        self.search
+            .invalid_setting()
+            .or_else(|| self.lost.invalid_setting())
+            .or_else(|| {
+                InvalidSetting::first([
+                    (
+                        "hypotheses",
+                        "within 1 ..= 8",
+                        (1..=MAX_HYPOTHESES).contains(&usize::from(self.hypotheses)),
+                    ),
+                    (
+                        "spread_m",
+                        "finite and non-negative",
+                        non_negative(self.spread_m),
+                    ),
+                    (
+                        "spread_rad",
+                        "finite and non-negative",
+                        non_negative(self.spread_rad),
+                    ),
+                    ("search_scans", "1 or more", self.search_scans >= 1),
+                    (
+                        "pull_in_window_cells",
+                        "at most 7",
+                        self.pull_in_window_cells <= super::correlation::MAX_SHIFT_WINDOW,
+                    ),
+                ])
+            })
     }
 }
 

@@ -503,3 +503,39 @@ fn an_invalid_setting_is_named_with_its_rule() {
     c.resolution = -1.0;
     assert_eq!(c.invalid_setting().map(|i| i.name), Some("resolution"));
 }
+
+#[test]
+fn an_invalid_relocalization_setting_is_named_with_its_rule() {
+    assert_eq!(RelocalizationConfig::DEFAULT.invalid_setting(), None);
+    type Break = fn(&mut RelocalizationConfig);
+    let cases: [(Break, &str, &str); 6] = [
+        (|c| c.search.max_beams = 0, "max_beams", "within 1 ..= 128"),
+        (
+            |c| c.search.min_score_fraction = f32::NAN,
+            "min_score_fraction",
+            "within 0 ..= 1",
+        ),
+        (|c| c.search.work_budget = 0, "work_budget", "1 or more"),
+        (
+            |c| c.lost.learning_rate = 0.0,
+            "learning_rate",
+            "within (0, 1]",
+        ),
+        (|c| c.hypotheses = 9, "hypotheses", "within 1 ..= 8"),
+        (
+            |c| c.pull_in_window_cells = 8,
+            "pull_in_window_cells",
+            "at most 7",
+        ),
+    ];
+    for (break_it, name, rule) in cases {
+        let mut c = RelocalizationConfig::DEFAULT;
+        break_it(&mut c);
+        assert!(!c.is_valid(), "{name}");
+        assert_eq!(
+            c.invalid_setting(),
+            Some(crate::error::InvalidSetting { name, rule }),
+            "{name}"
+        );
+    }
+}

@@ -3,6 +3,7 @@
 //! geometry of CARMEN logs.
 
 use anyhow::{Context, Result, bail};
+use microslam::error::InvalidSetting;
 use microslam::pf::{GridPfConfig, MotionNoise};
 use microslam::sensors::lidar::LidarGeometry;
 use std::path::Path;
@@ -140,31 +141,88 @@ impl LoopClosureConfig {
     /// `true` when every value is in range (positive distances, steps and deviations,
     /// fractions in (0, 1], a stride of at least 1).
     pub fn is_valid(&self) -> bool {
-        let positive = [
-            self.keyframe_distance_m,
-            self.keyframe_turn_rad,
-            self.search_radius_m,
-            self.submap_radius_m,
-            self.window_m,
-            self.heading_step_rad,
-            self.score_temperature,
-            self.sequential_std_m,
-            self.sequential_heading_std,
-            self.loop_std_m,
-            self.loop_heading_std,
-        ];
-        positive.iter().all(|v| v.is_finite() && *v > 0.0)
-            && self.sequential_std_per_m.is_finite()
-            && self.sequential_std_per_m >= 0.0
-            && self.heading_window_rad.is_finite()
-            && self.heading_window_rad >= 0.0
-            && self.min_score_fraction > 0.0
-            && self.min_score_fraction <= 1.0
-            && self.beam_stride >= 1
-            && self.min_age_keyframes >= 1
+        self.invalid_setting().is_none()
+    }
+
+    /// The first value out of range (its key in `[loop_closure]` and its rule), `None`
+    /// when every one is valid.
+    pub fn invalid_setting(&self) -> Option<InvalidSetting> {
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+        const POSITIVE: &str = "finite and positive";
+        InvalidSetting::first([
+            (
+                "keyframe_distance_m",
+                POSITIVE,
+                positive(self.keyframe_distance_m),
+            ),
+            (
+                "keyframe_turn_rad",
+                POSITIVE,
+                positive(self.keyframe_turn_rad),
+            ),
+            ("search_radius_m", POSITIVE, positive(self.search_radius_m)),
+            ("submap_radius_m", POSITIVE, positive(self.submap_radius_m)),
+            ("window_m", POSITIVE, positive(self.window_m)),
+            (
+                "heading_step_rad",
+                POSITIVE,
+                positive(self.heading_step_rad),
+            ),
+            (
+                "score_temperature",
+                POSITIVE,
+                positive(self.score_temperature),
+            ),
+            (
+                "sequential_std_m",
+                POSITIVE,
+                positive(self.sequential_std_m),
+            ),
+            (
+                "sequential_heading_std",
+                POSITIVE,
+                positive(self.sequential_heading_std),
+            ),
+            ("loop_std_m", POSITIVE, positive(self.loop_std_m)),
+            (
+                "loop_heading_std",
+                POSITIVE,
+                positive(self.loop_heading_std),
+            ),
+            (
+                "sequential_std_per_m",
+                "finite and non-negative",
+                non_negative(self.sequential_std_per_m),
+            ),
+            (
+                "heading_window_rad",
+                "finite and non-negative",
+                non_negative(self.heading_window_rad),
+            ),
+            (
+                "min_score_fraction",
+                "within (0, 1]",
+                self.min_score_fraction > 0.0 && self.min_score_fraction <= 1.0,
+            ),
+            ("beam_stride", "1 or more", self.beam_stride >= 1),
+            (
+                "min_age_keyframes",
+                "1 or more",
+                self.min_age_keyframes >= 1,
+            ),
             // The search's work: positions × headings, kept to what a replay can afford.
-            && (self.window_m / 0.05) <= 100.0
-            && (self.heading_window_rad / self.heading_step_rad) <= 200.0
+            (
+                "window_m",
+                "at most 5 m (100 cells of 5 cm each way)",
+                (self.window_m / 0.05) <= 100.0,
+            ),
+            (
+                "heading_window_rad",
+                "at most 200 heading steps (heading_step_rad)",
+                (self.heading_window_rad / self.heading_step_rad) <= 200.0,
+            ),
+        ])
     }
 }
 
@@ -197,8 +255,8 @@ impl LoopClosureToml {
             loop_heading_std,
             beam_stride
         );
-        if !c.is_valid() {
-            bail!("[loop_closure] settings out of range: {c:?}");
+        if let Some(invalid) = c.invalid_setting() {
+            bail!("[loop_closure]: {invalid}");
         }
         Ok(Some(c))
     }

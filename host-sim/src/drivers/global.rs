@@ -426,8 +426,22 @@ pub fn settings_from(
     if let Some(n) = args.search_scans {
         relocalization.search_scans = n;
     }
-    if !relocalization.is_valid() {
-        bail!("global search settings out of range: {relocalization:?}");
+    if let Some(invalid) = relocalization.invalid_setting() {
+        // The option that sets it.
+        let option = match invalid.name {
+            "work_budget" => " (--work-budget)",
+            "min_score_fraction" => " (--min-score)",
+            "max_range" => " (--search-range)",
+            "max_beams" => " (--search-beams)",
+            "heading_peaks" => " (--heading-peaks)",
+            "heading_window" => " (--heading-window, in degrees)",
+            "first_pass_fraction" => " (--first-pass)",
+            "full_turn_below" => " (--full-turn-below)",
+            "hypotheses" => " (--hypotheses)",
+            "search_scans" => " (--search-scans)",
+            _ => "",
+        };
+        bail!("global search settings: {invalid}{option}");
     }
     if args.trials == 0 || args.max_scans == 0 {
         bail!("--trials and --max-scans must be at least 1");
