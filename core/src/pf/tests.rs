@@ -440,6 +440,24 @@ fn a_correction_moves_every_particle_and_a_rebuild_redraws_the_map() {
     );
 }
 
+/// One way to break a configuration: how, then the name and rule that must be reported.
+type BrokenSetting<C> = (fn(&mut C), &'static str, &'static str);
+
+/// Breaks `valid` each way of `cases` and checks that `judge` (`is_valid` and
+/// `invalid_setting`) refuses it and names it with its rule.
+fn each_broken_setting_is_named<C: Copy>(
+    valid: C,
+    cases: &[BrokenSetting<C>],
+    judge: impl Fn(&C) -> (bool, Option<crate::error::InvalidSetting>),
+) {
+    for &(break_it, name, rule) in cases {
+        let mut c = valid;
+        break_it(&mut c);
+        let expected = Some(crate::error::InvalidSetting { name, rule });
+        assert_eq!(judge(&c), (false, expected), "{name}");
+    }
+}
+
 #[test]
 fn an_invalid_setting_is_named_with_its_rule() {
     for valid in [
@@ -451,8 +469,7 @@ fn an_invalid_setting_is_named_with_its_rule() {
         assert_eq!(valid.invalid_setting(), None);
         assert!(valid.is_valid());
     }
-    type Break = fn(&mut GridPfConfig);
-    let cases: [(Break, &str, &str); 9] = [
+    let cases: [BrokenSetting<GridPfConfig>; 9] = [
         (|c| c.resolution = 0.0, "resolution", "finite and positive"),
         (|c| c.log_odds.miss = -1, "miss", "0 or more"),
         (|c| c.log_odds.min = 5, "min", "0 or less"),
@@ -487,16 +504,9 @@ fn an_invalid_setting_is_named_with_its_rule() {
             "finite and non-negative",
         ),
     ];
-    for (break_it, name, rule) in cases {
-        let mut c = GridPfConfig::DEFAULT;
-        break_it(&mut c);
-        assert!(!c.is_valid(), "{name}");
-        assert_eq!(
-            c.invalid_setting(),
-            Some(crate::error::InvalidSetting { name, rule }),
-            "{name}"
-        );
-    }
+    each_broken_setting_is_named(GridPfConfig::DEFAULT, &cases, |c| {
+        (c.is_valid(), c.invalid_setting())
+    });
     // Two at once: the first in the order the settings are checked.
     let mut c = GridPfConfig::DEFAULT;
     c.filter.resample_neff_fraction = 2.0;
@@ -507,8 +517,7 @@ fn an_invalid_setting_is_named_with_its_rule() {
 #[test]
 fn an_invalid_relocalization_setting_is_named_with_its_rule() {
     assert_eq!(RelocalizationConfig::DEFAULT.invalid_setting(), None);
-    type Break = fn(&mut RelocalizationConfig);
-    let cases: [(Break, &str, &str); 6] = [
+    let cases: [BrokenSetting<RelocalizationConfig>; 6] = [
         (|c| c.search.max_beams = 0, "max_beams", "within 1 ..= 128"),
         (
             |c| c.search.min_score_fraction = f32::NAN,
@@ -528,14 +537,7 @@ fn an_invalid_relocalization_setting_is_named_with_its_rule() {
             "at most 7",
         ),
     ];
-    for (break_it, name, rule) in cases {
-        let mut c = RelocalizationConfig::DEFAULT;
-        break_it(&mut c);
-        assert!(!c.is_valid(), "{name}");
-        assert_eq!(
-            c.invalid_setting(),
-            Some(crate::error::InvalidSetting { name, rule }),
-            "{name}"
-        );
-    }
+    each_broken_setting_is_named(RelocalizationConfig::DEFAULT, &cases, |c| {
+        (c.is_valid(), c.invalid_setting())
+    });
 }
