@@ -556,7 +556,10 @@ mod tests {
         );
         let range =
             settings("[loop_closure]\nmin_score_fraction = 1.5\n", false, slam).unwrap_err();
-        assert!(format!("{range:#}").contains("out of range"), "{range:#}");
+        assert!(
+            format!("{range:#}").contains("`min_score_fraction` must be within (0, 1]"),
+            "{range:#}"
+        );
         let localizer = loop_closure_settings(None, true, FilterRole::Localizer).unwrap_err();
         assert!(localizer.to_string().contains("grid SLAM"), "{localizer}");
         assert!(settings("[loop_closure]\n", false, FilterRole::Localizer).is_err());
