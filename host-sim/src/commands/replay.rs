@@ -232,7 +232,7 @@ pub(crate) fn options_for_beams(
     if let Some(invalid) = c.invalid_setting() {
         match grid.window {
             Some(k) if invalid.name == "shift_window_cells" => {
-                bail!("--window {k}: the half-width must be at most 7 (a 15 × 15 window)")
+                bail!("--window {k}: the half-width must be {}", invalid.rule)
             }
             _ => bail!("grid filter settings: {invalid}"),
         }
