@@ -3,6 +3,7 @@
 //! Every step function checks its input before it touches the filter: when it returns an
 //! error, the state is exactly what it was before the call.
 
+use crate::scalar::Real;
 use core::fmt;
 
 /// Why an EKF step was refused. The filter state is unchanged whenever one is returned.
@@ -78,15 +79,56 @@ pub struct InvalidSetting {
     pub rule: &'static str,
 }
 
+/// One check of a configuration for [`InvalidSetting::first`]: the field's name, its
+/// rule, and whether the field keeps it.
+pub type SettingCheck = (&'static str, &'static str, bool);
+
 impl InvalidSetting {
-    /// The first of `checks` — `(name, rule, holds)` — that does not hold. Always inlined,
-    /// so that a caller asking only whether one fails (`is_valid`) keeps no names.
+    /// The rule of noise figures, weights and spreads: `"finite and non-negative"`.
+    pub const NON_NEGATIVE: &'static str = "finite and non-negative";
+    /// The rule of sizes and scales: `"finite and positive"`.
+    pub const POSITIVE: &'static str = "finite and positive";
+    /// The rule of shares and fractions: `"within 0 ..= 1"`.
+    pub const FRACTION: &'static str = "within 0 ..= 1";
+    /// The rule of rates and steps that must not be 0: `"within (0, 1]"`.
+    pub const POSITIVE_FRACTION: &'static str = "within (0, 1]";
+
+    /// The first of `checks` that does not hold. Always inlined, so that a caller asking
+    /// only whether one fails (`is_valid`) keeps no names.
     #[inline(always)]
-    pub fn first<const N: usize>(checks: [(&'static str, &'static str, bool); N]) -> Option<Self> {
+    pub fn first<const N: usize>(checks: [SettingCheck; N]) -> Option<Self> {
         checks
             .into_iter()
             .find(|(_, _, holds)| !holds)
             .map(|(name, rule, _)| Self { name, rule })
+    }
+
+    /// `name` must be [`InvalidSetting::NON_NEGATIVE`] (NaN and ±∞ are not).
+    #[inline(always)]
+    pub fn non_negative<T: Real>(name: &'static str, value: T) -> SettingCheck {
+        (name, Self::NON_NEGATIVE, value.finite() && value >= T::ZERO)
+    }
+
+    /// `name` must be [`InvalidSetting::POSITIVE`].
+    #[inline(always)]
+    pub fn positive<T: Real>(name: &'static str, value: T) -> SettingCheck {
+        (name, Self::POSITIVE, value.finite() && value > T::ZERO)
+    }
+
+    /// `name` must be [`InvalidSetting::FRACTION`] (NaN is not).
+    #[inline(always)]
+    pub fn fraction<T: Real>(name: &'static str, value: T) -> SettingCheck {
+        (name, Self::FRACTION, value >= T::ZERO && value <= T::ONE)
+    }
+
+    /// `name` must be [`InvalidSetting::POSITIVE_FRACTION`] (NaN is not).
+    #[inline(always)]
+    pub fn positive_fraction<T: Real>(name: &'static str, value: T) -> SettingCheck {
+        (
+            name,
+            Self::POSITIVE_FRACTION,
+            value > T::ZERO && value <= T::ONE,
+        )
     }
 }
 

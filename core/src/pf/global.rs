@@ -161,64 +161,29 @@ impl GlobalSearchConfig {
     pub fn invalid_setting(&self) -> Option<InvalidSetting> {
         // The rules' texts below name these limits.
         const _: () = assert!(MAX_SEARCH_BEAMS == 128 && MAX_HEADING_PEAKS == 4);
-        let non_negative = |v: f32| v.is_finite() && v >= 0.0;
-        let fraction = |v: f32| (0.0..=1.0).contains(&v);
-        const NON_NEGATIVE: &str = "finite and non-negative";
-        const FRACTION: &str = "within 0 ..= 1";
+        let (non_negative, fraction) = (InvalidSetting::non_negative, InvalidSetting::fraction);
         InvalidSetting::first([
-            (
-                "max_range",
-                "finite and positive",
-                self.max_range.is_finite() && self.max_range > 0.0,
-            ),
+            InvalidSetting::positive("max_range", self.max_range),
             (
                 "max_beams",
                 "within 1 ..= 128",
                 (1..=MAX_SEARCH_BEAMS).contains(&usize::from(self.max_beams)),
             ),
-            (
-                "heading_step",
-                NON_NEGATIVE,
-                non_negative(self.heading_step),
-            ),
-            (
-                "min_score_fraction",
-                FRACTION,
-                fraction(self.min_score_fraction),
-            ),
-            ("relative_score", FRACTION, fraction(self.relative_score)),
-            (
-                "first_pass_fraction",
-                FRACTION,
-                fraction(self.first_pass_fraction),
-            ),
-            (
-                "pass_step",
-                "within (0, 1]",
-                self.pass_step > 0.0 && self.pass_step <= 1.0,
-            ),
+            non_negative("heading_step", self.heading_step),
+            fraction("min_score_fraction", self.min_score_fraction),
+            fraction("relative_score", self.relative_score),
+            fraction("first_pass_fraction", self.first_pass_fraction),
+            InvalidSetting::positive_fraction("pass_step", self.pass_step),
             ("work_budget", "1 or more", self.work_budget > 0),
-            (
-                "separation_m",
-                NON_NEGATIVE,
-                non_negative(self.separation_m),
-            ),
-            (
-                "separation_rad",
-                NON_NEGATIVE,
-                non_negative(self.separation_rad),
-            ),
+            non_negative("separation_m", self.separation_m),
+            non_negative("separation_rad", self.separation_rad),
             (
                 "heading_peaks",
                 "at most 4",
                 usize::from(self.heading_peaks) <= MAX_HEADING_PEAKS,
             ),
-            (
-                "heading_window",
-                NON_NEGATIVE,
-                non_negative(self.heading_window),
-            ),
-            ("full_turn_below", FRACTION, fraction(self.full_turn_below)),
+            non_negative("heading_window", self.heading_window),
+            fraction("full_turn_below", self.full_turn_below),
         ])
     }
 }

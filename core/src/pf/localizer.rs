@@ -90,19 +90,10 @@ impl LostDetection {
     /// one is valid.
     #[inline]
     pub fn invalid_setting(&self) -> Option<InvalidSetting> {
-        let in_unit = |v: f32| v > 0.0 && v <= 1.0;
         InvalidSetting::first([
-            ("ratio", "within 0 ..= 1", (0.0..=1.0).contains(&self.ratio)),
-            (
-                "initial_expected",
-                "within (0, 1]",
-                in_unit(self.initial_expected),
-            ),
-            (
-                "learning_rate",
-                "within (0, 1]",
-                in_unit(self.learning_rate),
-            ),
+            InvalidSetting::fraction("ratio", self.ratio),
+            InvalidSetting::positive_fraction("initial_expected", self.initial_expected),
+            InvalidSetting::positive_fraction("learning_rate", self.learning_rate),
         ])
     }
 }
@@ -164,7 +155,6 @@ impl RelocalizationConfig {
     pub fn invalid_setting(&self) -> Option<InvalidSetting> {
         // The rules' texts below name these limits.
         const _: () = assert!(MAX_HYPOTHESES == 8 && super::correlation::MAX_SHIFT_WINDOW == 7);
-        let non_negative = |v: f32| v.is_finite() && v >= 0.0;
         self.search
             .invalid_setting()
             .or_else(|| self.lost.invalid_setting())
@@ -175,16 +165,8 @@ impl RelocalizationConfig {
                         "within 1 ..= 8",
                         (1..=MAX_HYPOTHESES).contains(&usize::from(self.hypotheses)),
                     ),
-                    (
-                        "spread_m",
-                        "finite and non-negative",
-                        non_negative(self.spread_m),
-                    ),
-                    (
-                        "spread_rad",
-                        "finite and non-negative",
-                        non_negative(self.spread_rad),
-                    ),
+                    InvalidSetting::non_negative("spread_m", self.spread_m),
+                    InvalidSetting::non_negative("spread_rad", self.spread_rad),
                     ("search_scans", "1 or more", self.search_scans >= 1),
                     (
                         "pull_in_window_cells",

@@ -78,7 +78,6 @@ impl FilterConfig {
     pub fn invalid_setting(&self) -> Option<InvalidSetting> {
         // The rule's text below names the largest window.
         const _: () = assert!(correlation::MAX_SHIFT_WINDOW == 7);
-        let l = self.log_likelihood_per_unit;
         self.motion_noise.invalid_setting().or_else(|| {
             InvalidSetting::first([
                 (
@@ -86,16 +85,11 @@ impl FilterConfig {
                     "at most 7 (a 15 × 15 window)",
                     self.shift_window_cells <= correlation::MAX_SHIFT_WINDOW,
                 ),
-                (
+                InvalidSetting::non_negative(
                     "log_likelihood_per_unit",
-                    "finite and non-negative",
-                    l.is_finite() && l >= 0.0,
+                    self.log_likelihood_per_unit,
                 ),
-                (
-                    "resample_neff_fraction",
-                    "within 0 ..= 1",
-                    (0.0..=1.0).contains(&self.resample_neff_fraction),
-                ),
+                InvalidSetting::fraction("resample_neff_fraction", self.resample_neff_fraction),
             ])
         })
     }
@@ -233,30 +227,22 @@ impl GridPfConfig {
     /// `None` when every one is valid.
     #[inline]
     pub fn invalid_setting(&self) -> Option<InvalidSetting> {
-        let ok = |v: f32| v.is_finite() && v >= 0.0;
-        let r = self.resolution;
         let own = |checks| InvalidSetting::first(checks);
-        own([(
-            "resolution",
-            "finite and positive",
-            r.is_finite() && r > 0.0,
-        )])
-        .or_else(|| self.log_odds.invalid_setting())
-        .or_else(|| {
-            own([(
-                "range_weight_exponent",
-                "finite and non-negative",
-                ok(self.range_weight_exponent),
-            )])
-        })
-        .or_else(|| self.filter.invalid_setting())
-        .or_else(|| {
-            own([(
-                "shift_prior_std_cells",
-                "finite and non-negative",
-                ok(self.shift_prior_std_cells),
-            )])
-        })
+        own([InvalidSetting::positive("resolution", self.resolution)])
+            .or_else(|| self.log_odds.invalid_setting())
+            .or_else(|| {
+                own([InvalidSetting::non_negative(
+                    "range_weight_exponent",
+                    self.range_weight_exponent,
+                )])
+            })
+            .or_else(|| self.filter.invalid_setting())
+            .or_else(|| {
+                own([InvalidSetting::non_negative(
+                    "shift_prior_std_cells",
+                    self.shift_prior_std_cells,
+                )])
+            })
     }
 
     /// Loads the usable beams of `scan` into `points` with these settings' decimation

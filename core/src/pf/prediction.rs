@@ -71,36 +71,15 @@ impl MotionNoise {
     /// The first figure that is negative or not finite, `None` when every one is valid.
     #[inline]
     pub fn invalid_setting(&self) -> Option<InvalidSetting> {
-        let ok = |v: f32| v.is_finite() && v >= 0.0;
-        let rule = "finite and non-negative";
+        let non_negative = InvalidSetting::non_negative;
         InvalidSetting::first([
-            ("distance_std", rule, ok(self.distance_std)),
-            (
-                "distance_std_per_metre",
-                rule,
-                ok(self.distance_std_per_metre),
-            ),
-            (
-                "distance_std_per_radian",
-                rule,
-                ok(self.distance_std_per_radian),
-            ),
-            ("heading_std", rule, ok(self.heading_std)),
-            (
-                "heading_std_per_radian",
-                rule,
-                ok(self.heading_std_per_radian),
-            ),
-            (
-                "heading_std_per_metre",
-                rule,
-                ok(self.heading_std_per_metre),
-            ),
-            (
-                "sideways_std_per_metre",
-                rule,
-                ok(self.sideways_std_per_metre),
-            ),
+            non_negative("distance_std", self.distance_std),
+            non_negative("distance_std_per_metre", self.distance_std_per_metre),
+            non_negative("distance_std_per_radian", self.distance_std_per_radian),
+            non_negative("heading_std", self.heading_std),
+            non_negative("heading_std_per_radian", self.heading_std_per_radian),
+            non_negative("heading_std_per_metre", self.heading_std_per_metre),
+            non_negative("sideways_std_per_metre", self.sideways_std_per_metre),
         ])
     }
 

@@ -147,64 +147,22 @@ impl LoopClosureConfig {
     /// The first value out of range (its key in `[loop_closure]` and its rule), `None`
     /// when every one is valid.
     pub fn invalid_setting(&self) -> Option<InvalidSetting> {
-        let positive = |v: f64| v.is_finite() && v > 0.0;
-        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
-        const POSITIVE: &str = "finite and positive";
+        let (positive, non_negative) = (InvalidSetting::positive, InvalidSetting::non_negative);
         InvalidSetting::first([
-            (
-                "keyframe_distance_m",
-                POSITIVE,
-                positive(self.keyframe_distance_m),
-            ),
-            (
-                "keyframe_turn_rad",
-                POSITIVE,
-                positive(self.keyframe_turn_rad),
-            ),
-            ("search_radius_m", POSITIVE, positive(self.search_radius_m)),
-            ("submap_radius_m", POSITIVE, positive(self.submap_radius_m)),
-            ("window_m", POSITIVE, positive(self.window_m)),
-            (
-                "heading_step_rad",
-                POSITIVE,
-                positive(self.heading_step_rad),
-            ),
-            (
-                "score_temperature",
-                POSITIVE,
-                positive(self.score_temperature),
-            ),
-            (
-                "sequential_std_m",
-                POSITIVE,
-                positive(self.sequential_std_m),
-            ),
-            (
-                "sequential_heading_std",
-                POSITIVE,
-                positive(self.sequential_heading_std),
-            ),
-            ("loop_std_m", POSITIVE, positive(self.loop_std_m)),
-            (
-                "loop_heading_std",
-                POSITIVE,
-                positive(self.loop_heading_std),
-            ),
-            (
-                "sequential_std_per_m",
-                "finite and non-negative",
-                non_negative(self.sequential_std_per_m),
-            ),
-            (
-                "heading_window_rad",
-                "finite and non-negative",
-                non_negative(self.heading_window_rad),
-            ),
-            (
-                "min_score_fraction",
-                "within (0, 1]",
-                self.min_score_fraction > 0.0 && self.min_score_fraction <= 1.0,
-            ),
+            positive("keyframe_distance_m", self.keyframe_distance_m),
+            positive("keyframe_turn_rad", self.keyframe_turn_rad),
+            positive("search_radius_m", self.search_radius_m),
+            positive("submap_radius_m", self.submap_radius_m),
+            positive("window_m", self.window_m),
+            positive("heading_step_rad", self.heading_step_rad),
+            positive("score_temperature", self.score_temperature),
+            positive("sequential_std_m", self.sequential_std_m),
+            positive("sequential_heading_std", self.sequential_heading_std),
+            positive("loop_std_m", self.loop_std_m),
+            positive("loop_heading_std", self.loop_heading_std),
+            non_negative("sequential_std_per_m", self.sequential_std_per_m),
+            non_negative("heading_window_rad", self.heading_window_rad),
+            InvalidSetting::positive_fraction("min_score_fraction", self.min_score_fraction),
             ("beam_stride", "1 or more", self.beam_stride >= 1),
             (
                 "min_age_keyframes",
