@@ -15,6 +15,7 @@
 //! The noise of each form is configuration ([`IncrementNoise`], [`VelocityNoise`]); nothing
 //! here hard-codes a covariance.
 
+use crate::error::InvalidSetting;
 use crate::geometry::{Pose2, wrap_near};
 use crate::scalar::Real;
 use nalgebra::{Matrix2, Matrix3, Matrix3x2};
@@ -147,15 +148,20 @@ impl<T: Real> IncrementNoise<T> {
 
     /// `true` when every parameter is finite and non-negative.
     pub fn is_valid(&self) -> bool {
-        [
-            self.translation_std,
-            self.translation_std_per_metre,
-            self.rotation_std,
-            self.rotation_std_per_radian,
-            self.rotation_std_per_metre,
-        ]
-        .iter()
-        .all(|v| v.finite() && *v >= T::ZERO)
+        self.invalid_setting().is_none()
+    }
+
+    /// The first parameter that is negative or not finite, `None` when every one is valid.
+    #[inline]
+    pub fn invalid_setting(&self) -> Option<InvalidSetting> {
+        let non_negative = InvalidSetting::non_negative;
+        InvalidSetting::first([
+            non_negative("translation_std", self.translation_std),
+            non_negative("translation_std_per_metre", self.translation_std_per_metre),
+            non_negative("rotation_std", self.rotation_std),
+            non_negative("rotation_std_per_radian", self.rotation_std_per_radian),
+            non_negative("rotation_std_per_metre", self.rotation_std_per_metre),
+        ])
     }
 }
 
@@ -194,15 +200,20 @@ impl<T: Real> VelocityNoise<T> {
 
     /// `true` when every parameter is finite and non-negative.
     pub fn is_valid(&self) -> bool {
-        [
-            self.linear_std,
-            self.linear_std_per_mps,
-            self.angular_std,
-            self.angular_std_per_radps,
-            self.angular_std_per_mps,
-        ]
-        .iter()
-        .all(|v| v.finite() && *v >= T::ZERO)
+        self.invalid_setting().is_none()
+    }
+
+    /// The first parameter that is negative or not finite, `None` when every one is valid.
+    #[inline]
+    pub fn invalid_setting(&self) -> Option<InvalidSetting> {
+        let non_negative = InvalidSetting::non_negative;
+        InvalidSetting::first([
+            non_negative("linear_std", self.linear_std),
+            non_negative("linear_std_per_mps", self.linear_std_per_mps),
+            non_negative("angular_std", self.angular_std),
+            non_negative("angular_std_per_radps", self.angular_std_per_radps),
+            non_negative("angular_std_per_mps", self.angular_std_per_mps),
+        ])
     }
 }
 

@@ -1,5 +1,6 @@
 //! Helpers shared by the unit tests (compiled only for `cargo test`).
 
+use crate::error::InvalidSetting;
 use crate::geometry::wrap_angle;
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
@@ -46,5 +47,23 @@ pub fn assert_jacobian<const R: usize, const C: usize>(
                 "Jacobian entry ({i},{j}): analytic {a}, numeric {n}\n{analytic}\n{numeric}"
             );
         }
+    }
+}
+
+/// One way to break a configuration: how, then the name and rule that must be reported.
+pub type BrokenSetting<C> = (fn(&mut C), &'static str, &'static str);
+
+/// Breaks `valid` each way of `cases` and checks that `judge` (`is_valid` and
+/// `invalid_setting`) refuses it and names it with its rule.
+pub fn each_broken_setting_is_named<C: Copy>(
+    valid: C,
+    cases: &[BrokenSetting<C>],
+    judge: impl Fn(&C) -> (bool, Option<InvalidSetting>),
+) {
+    for &(break_it, name, rule) in cases {
+        let mut c = valid;
+        break_it(&mut c);
+        let expected = Some(InvalidSetting { name, rule });
+        assert_eq!(judge(&c), (false, expected), "{name}");
     }
 }

@@ -21,7 +21,7 @@
 //! allocation; per sighting the cost is one extra 2 × 2 innovation.
 
 use super::{EkfSlam, UpdateOutcome};
-use crate::error::EkfError;
+use crate::error::{EkfError, InvalidSetting};
 use crate::scalar::Real;
 use crate::sensors::range_bearing::RangeBearing;
 use nalgebra::Matrix3;
@@ -64,11 +64,18 @@ impl HealthConfig<f32> {
 impl<T: Real> HealthConfig<T> {
     /// `true` when every figure is finite and the recovery figures non-negative.
     pub fn is_valid(&self) -> bool {
-        self.huber_sigma.finite()
-            && self.recovery_position_std.finite()
-            && self.recovery_heading_std.finite()
-            && self.recovery_position_std >= T::ZERO
-            && self.recovery_heading_std >= T::ZERO
+        self.invalid_setting().is_none()
+    }
+
+    /// The first figure out of range (the field's name and its rule), `None` when every one
+    /// is valid.
+    #[inline]
+    pub fn invalid_setting(&self) -> Option<InvalidSetting> {
+        InvalidSetting::first([
+            ("huber_sigma", "finite", self.huber_sigma.finite()),
+            InvalidSetting::non_negative("recovery_position_std", self.recovery_position_std),
+            InvalidSetting::non_negative("recovery_heading_std", self.recovery_heading_std),
+        ])
     }
 
     /// The same settings in another scalar type.
@@ -385,5 +392,26 @@ mod tests {
             })
             .is_err()
         );
+    }
+
+    #[test]
+    fn an_invalid_setting_is_named_with_its_rule() {
+        use crate::testing::{BrokenSetting, each_broken_setting_is_named};
+        assert_eq!(HealthConfig::DEFAULT_F32.invalid_setting(), None);
+        assert_eq!(HealthConfig::OFF_F32.invalid_setting(), None);
+        let cases: [BrokenSetting<HealthConfig<f64>>; 3] = [
+            (|c| c.huber_sigma = f64::NAN, "huber_sigma", "finite"),
+            (
+                |c| c.recovery_position_std = -0.3,
+                "recovery_position_std",
+                "finite and non-negative",
+            ),
+            (
+                |c| c.recovery_heading_std = f64::INFINITY,
+                "recovery_heading_std",
+                "finite and non-negative",
+            ),
+        ];
+        each_broken_setting_is_named(config(), &cases, |c| (c.is_valid(), c.invalid_setting()));
     }
 }

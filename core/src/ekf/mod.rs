@@ -101,7 +101,7 @@
 //! let ekf = EkfSlam::<f32, 4, 10>::new(EkfConfig::DEFAULT_F32);
 //! ```
 
-use crate::error::EkfError;
+use crate::error::{EkfError, InvalidSetting};
 use crate::gate::ChiSquareGate;
 use crate::geometry::{Pose2, wrap_angle, wrap_near};
 use crate::motion::{
@@ -217,16 +217,35 @@ impl EkfConfig<f64> {
 }
 
 impl<T: Real> EkfConfig<T> {
-    /// `true` when every noise figure is finite and non-negative and the gate positive.
+    /// `true` when every noise figure is finite and non-negative, the sensor mount finite
+    /// and the gate positive. One copy (not inlined), which keeps none of the names.
+    #[inline(never)]
     pub fn is_valid(&self) -> bool {
-        self.increment_noise.is_valid()
-            && self.velocity_noise.is_valid()
-            && self.range_std.finite()
-            && self.bearing_std.finite()
-            && self.range_std >= T::ZERO
-            && self.bearing_std >= T::ZERO
-            && self.sensor.mount.is_finite()
-            && self.gate.threshold > T::ZERO
+        self.invalid_setting().is_none()
+    }
+
+    /// The first setting out of range — a field of its [`IncrementNoise`] or
+    /// [`VelocityNoise`] by the field's own name, then `range_std`, `bearing_std`, `mount`
+    /// (of `sensor`) and `gate` — `None` when every one is valid. [`EkfSlam::init`] and
+    /// [`EkfSlam::set_config`] refuse an invalid configuration with
+    /// [`EkfError::InvalidNoise`]; this says which setting it was.
+    #[inline(always)]
+    pub fn invalid_setting(&self) -> Option<InvalidSetting> {
+        self.increment_noise
+            .invalid_setting()
+            .or_else(|| self.velocity_noise.invalid_setting())
+            .or_else(|| {
+                InvalidSetting::first([
+                    InvalidSetting::non_negative("range_std", self.range_std),
+                    InvalidSetting::non_negative("bearing_std", self.bearing_std),
+                    ("mount", "finite", self.sensor.mount.is_finite()),
+                    (
+                        "gate",
+                        "a positive threshold",
+                        self.gate.threshold > T::ZERO,
+                    ),
+                ])
+            })
     }
 
     /// The same settings in another scalar type (e.g. a host `f64` configuration for an
@@ -385,7 +404,10 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// A filter with the robot at the origin, known exactly, and no landmarks.
     ///
     /// A `const fn`: use it to initialise a `static`, so the covariance is placed by the
-    /// linker and never copied through the stack.
+    /// linker and never copied through the stack. Being `const`, it cannot check
+    /// `config`: give it a constant one, and pass a configuration read at run time (a
+    /// file, the wire) through [`EkfSlam::init`] or [`EkfSlam::set_config`], which refuse
+    /// an invalid one ([`EkfConfig::invalid_setting`] names it).
     pub const fn new(config: EkfConfig<T>) -> Self {
         let () = Self::DIMENSIONS_ARE_VALID;
         Self {
@@ -1830,6 +1852,60 @@ mod tests {
             for s in 0..k {
                 assert_eq!(internal_to_public(internal(s, k), k), s);
             }
+        }
+    }
+
+    #[test]
+    fn an_invalid_setting_is_named_with_its_rule() {
+        use crate::testing::{BrokenSetting, each_broken_setting_is_named};
+        let valid = EkfConfig::<f64>::DEFAULT_F64;
+        assert_eq!(valid.invalid_setting(), None);
+        assert_eq!(EkfConfig::<f32>::MICROCONTROLLER.invalid_setting(), None);
+        let cases: [BrokenSetting<EkfConfig<f64>>; 7] = [
+            (
+                |c| c.increment_noise.rotation_std_per_metre = -0.1,
+                "rotation_std_per_metre",
+                "finite and non-negative",
+            ),
+            (
+                |c| c.velocity_noise.linear_std = f64::NAN,
+                "linear_std",
+                "finite and non-negative",
+            ),
+            (
+                |c| c.velocity_noise.angular_std_per_mps = f64::INFINITY,
+                "angular_std_per_mps",
+                "finite and non-negative",
+            ),
+            (
+                |c| c.range_std = -1.0,
+                "range_std",
+                "finite and non-negative",
+            ),
+            (
+                |c| c.bearing_std = f64::NEG_INFINITY,
+                "bearing_std",
+                "finite and non-negative",
+            ),
+            (|c| c.sensor.mount.theta = f64::NAN, "mount", "finite"),
+            (
+                |c| c.gate = ChiSquareGate::from_threshold(0.0),
+                "gate",
+                "a positive threshold",
+            ),
+        ];
+        each_broken_setting_is_named(valid, &cases, |c| (c.is_valid(), c.invalid_setting()));
+        // The filter refuses each of them and keeps its own.
+        for (break_it, name, _) in cases {
+            let mut c = valid;
+            break_it(&mut c);
+            let mut slam = Slam::new(valid);
+            assert_eq!(slam.set_config(c), Err(EkfError::InvalidNoise), "{name}");
+            assert_eq!(slam.config(), &valid, "{name}");
+            assert_eq!(
+                slam.init(c, Pose2::new(1.0, 0.0, 0.0)),
+                Err(EkfError::InvalidNoise)
+            );
         }
     }
 }

@@ -6,6 +6,7 @@ use super::*;
 use crate::geometry::{Pose2, ray_to_segments};
 use crate::grid::{GridGeometry, GridView, OccupancyGrid};
 use crate::sensors::lidar::{LidarGeometry, LidarScan};
+use crate::testing::{BrokenSetting, each_broken_setting_is_named};
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
@@ -438,24 +439,6 @@ fn a_correction_moves_every_particle_and_a_rebuild_redraws_the_map() {
         )]),
         Err(PfError::NonFiniteInput)
     );
-}
-
-/// One way to break a configuration: how, then the name and rule that must be reported.
-type BrokenSetting<C> = (fn(&mut C), &'static str, &'static str);
-
-/// Breaks `valid` each way of `cases` and checks that `judge` (`is_valid` and
-/// `invalid_setting`) refuses it and names it with its rule.
-fn each_broken_setting_is_named<C: Copy>(
-    valid: C,
-    cases: &[BrokenSetting<C>],
-    judge: impl Fn(&C) -> (bool, Option<crate::error::InvalidSetting>),
-) {
-    for &(break_it, name, rule) in cases {
-        let mut c = valid;
-        break_it(&mut c);
-        let expected = Some(crate::error::InvalidSetting { name, rule });
-        assert_eq!(judge(&c), (false, expected), "{name}");
-    }
 }
 
 #[test]
