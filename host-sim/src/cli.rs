@@ -188,7 +188,8 @@ pub struct LocalizeArgs {
     #[arg(long)]
     pub map: PathBuf,
     /// Dataset: `carmen:<log>` (a CARMEN log file, or a path under `$SLAM_DATASETS/carmen`,
-    /// e.g. `carmen:intel/intel-raw-part.clf`).
+    /// e.g. `carmen:intel/intel-raw-part.clf`) or `rosbag:<file.mcap>` (a ROS 2 bag; its
+    /// topics: `--scan-topic`, `--odom-topic`).
     #[arg(long, short)]
     pub dataset: DatasetSpec,
     /// Grid filter settings (TOML): `base = "default" | "seed" | "microcontroller"` and any
@@ -304,7 +305,8 @@ impl From<&GlobalArgs> for GlobalOptions {
 /// Options of `host-sim replay`.
 #[derive(Debug, Clone, Args)]
 pub struct ReplayArgs {
-    /// Dataset: `mrclam:<dir>` (landmarks), `carmen:<log>` (lidar) or `thor:<dir>`
+    /// Dataset: `mrclam:<dir>` (landmarks), `carmen:<log>` or `rosbag:<file.mcap>`
+    /// (lidar; a ROS 2 bag's topics: `--scan-topic`, `--odom-topic`) or `thor:<dir>`
     /// (encoders + IMU): a path, or a name under `$SLAM_DATASETS/<family>`, e.g.
     /// `mrclam:dataset6`, `carmen:intel/intel-raw-part.clf`, `thor:thor`;
     /// `mrclam:dataset6/robot3` picks the robot (overrides `--robot`).
