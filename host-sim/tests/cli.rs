@@ -247,6 +247,12 @@ fn a_setting_out_of_range_is_named_with_its_file_and_rule() {
     assert!(err.contains("sighting.range_std = -1"), "{err}");
     let err = refused(&ekf, "[recovery]\nheading_std = nan\n");
     assert!(err.contains("recovery.heading_std = NaN"), "{err}");
+    let err = refused(&ekf, "[sighting]\nrange_std = 1e40\n");
+    assert!(
+        err.contains("sighting.range_std: beyond the range of f32")
+            && err.contains("`range_std` must be finite and non-negative"),
+        "{err}"
+    );
     // A global search option: named with the option that sets it.
     let out = host_sim()
         .args([

@@ -319,7 +319,31 @@ impl Settings {
         if s.mount.iter().any(|v| !v.is_finite()) {
             bail!("sensor mount must be finite");
         }
+        // The filter can run in `f32` (`--precision f32`) and the firmware does: a value
+        // valid as an `f64` may still be beyond `f32`'s range (≈ 3.4e38).
+        let in_f32 = self.ekf_config::<f32>().invalid_setting();
+        if let Some(bad) = in_f32.or_else(|| self.health_config::<f32>().invalid_setting()) {
+            bail!(
+                "{}: beyond the range of f32, in which the filter can run (--precision f32) \
+                 and the firmware does: {bad}",
+                Self::key_of(bad.name)
+            );
+        }
         Ok(())
+    }
+
+    /// The settings file's key of a field of the library's [`EkfConfig`] or
+    /// [`HealthConfig`], as their `invalid_setting` names it.
+    fn key_of(field: &str) -> String {
+        match field {
+            "range_std" | "bearing_std" | "mount" => format!("sighting.{field}"),
+            "gate" => "sighting.update_gate_probability".to_owned(),
+            "huber_sigma" => "recovery.huber_sigma".to_owned(),
+            "recovery_position_std" => "recovery.position_std".to_owned(),
+            "recovery_heading_std" => "recovery.heading_std".to_owned(),
+            // The velocity noise's fields, as [odometry] spells them.
+            other => format!("odometry.{other}"),
+        }
     }
 
     /// The EKF configuration in scalar `T`.
@@ -468,6 +492,38 @@ mod tests {
         assert_eq!(known.sighting.range_std, base.sighting.range_std);
         assert_eq!(jcbb.sighting.range_std, 0.3);
         assert_eq!(jcbb.association.mode, AssociationMode::Jcbb);
+    }
+
+    #[test]
+    fn a_value_beyond_f32_is_refused_with_its_key() {
+        let mut base = Settings::load("mrclam", None).unwrap();
+        base.validate().unwrap();
+        let huge = 1e39; // finite as an f64, ∞ as an f32
+        type SetValue = fn(&mut Settings, f64);
+        let cases: [(SetValue, &str); 5] = [
+            (
+                |s, v| s.odometry.angular_std_per_radps = v,
+                "odometry.angular_std_per_radps",
+            ),
+            (|s, v| s.sighting.bearing_std = v, "sighting.bearing_std"),
+            (|s, v| s.sighting.mount[2] = v, "sighting.mount"),
+            (|s, v| s.recovery.huber_sigma = v, "recovery.huber_sigma"),
+            (|s, v| s.recovery.heading_std = v, "recovery.heading_std"),
+        ];
+        for (set, key) in cases {
+            let mut s = base.clone();
+            set(&mut s, huge);
+            let err = format!("{:#}", s.validate().unwrap_err());
+            assert!(
+                err.starts_with(&format!("{key}: beyond the range of f32")),
+                "{err}"
+            );
+            // Just inside f32's range it is taken.
+            set(&mut s, 1e38);
+            s.validate().unwrap();
+        }
+        base.sighting.range_std = 1e38;
+        base.validate().unwrap();
     }
 
     #[test]
