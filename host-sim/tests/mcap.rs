@@ -62,6 +62,7 @@ fn an_intel_grid_slam_recording_reads_back() {
         config: GridPfConfig::MICROCONTROLLER,
         lidar: carmen_lidar(180),
         loop_closure: None,
+        grid_origin: None,
     };
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("intel.mcap");

@@ -61,6 +61,7 @@ fn the_intel_bag_replays_like_the_carmen_log() {
         config: GridPfConfig::MICROCONTROLLER,
         lidar,
         loop_closure: None,
+        grid_origin: None,
     };
     let from_bag: Vec<&LaserMessage> = bag.scans.iter().collect();
     let a = run_slam::<GRID_CELLS, GRID_BITMAP>(

@@ -35,6 +35,7 @@ fn intel_run(particles: usize, config: GridPfConfig) -> (f64, f64, usize) {
         config,
         lidar: carmen_lidar(180),
         loop_closure: None,
+        grid_origin: None,
     };
     let inputs = carmen_inputs(&front_scans(&log));
     let run =
@@ -92,6 +93,7 @@ fn sim_slam(rec: &LidarRecording, particles: usize, config: GridPfConfig) -> gri
         config,
         lidar: rec.lidar,
         loop_closure: None,
+        grid_origin: None,
     };
     let start = f32_pose(&rec.scans[0].truth);
     grid::run_slam::<SIM_GRID_CELLS, SIM_GRID_BITMAP>(&sim_inputs(rec), start, &options, &|_| {})

@@ -48,6 +48,7 @@ fn intel_slam_closing(
         config,
         lidar: carmen_lidar(180),
         loop_closure,
+        grid_origin: None,
     };
     let run = run_slam::<GRID_CELLS, GRID_BITMAP>(
         &carmen_inputs(scans),

@@ -32,6 +32,7 @@ fn options(rec: &LidarRecording, particles: usize, config: GridPfConfig) -> Grid
         config,
         lidar: rec.lidar,
         loop_closure: None,
+        grid_origin: None,
     }
 }
 
@@ -99,4 +100,37 @@ fn same_seed_same_estimate() {
     let b = run_slam(&rec, 32, mcu());
     assert_eq!(a.trajectory, b.trajectory);
     assert_eq!(a.cells, b.cells);
+}
+
+#[test]
+fn end_points_off_the_grid_are_counted_not_written() {
+    let rec = recording(1);
+    let start = f32_pose(&rec.scans[0].truth);
+    let inputs = sim_inputs(&rec);
+    let run_with = |grid_origin| {
+        let opts = GridRunOptions {
+            grid_origin,
+            ..options(&rec, 16, mcu())
+        };
+        grid::run_slam::<SIM_GRID_CELLS, SIM_GRID_BITMAP>(&inputs, start, &opts, &|_| {}).unwrap()
+    };
+    // The office on its grid centred on the world's origin, as `host-sim sim` runs it:
+    // every end point is written.
+    let centred = run_with(None);
+    assert_eq!(
+        (centred.off_grid_end_points, centred.scans_off_grid),
+        (0, 0)
+    );
+    // The grid moved 6 m to the east (half its width): what lies west of x = −0.4 m is
+    // off it, end points there are counted, scan by scan, and the map holds none of them.
+    let moved = run_with(Some([-0.4, -6.4]));
+    println!(
+        "off the grid: {} end points in {} of {} scans",
+        moved.off_grid_end_points,
+        moved.scans_off_grid,
+        rec.scans.len()
+    );
+    assert!(moved.off_grid_end_points > 0 && moved.scans_off_grid > 0);
+    assert!(moved.scans_off_grid <= rec.scans.len());
+    assert_eq!(moved.geometry.origin_x, -0.4);
 }

@@ -28,6 +28,7 @@ fn device_localizer_on_the_intel_slam_map_meets_the_relation_error_bar() {
         config: GridPfConfig::DEFAULT,
         lidar: carmen_lidar(180),
         loop_closure: None,
+        grid_origin: None,
     };
     let slam = run_slam::<GRID_CELLS, GRID_BITMAP>(
         &carmen_inputs(&front_scans(&log)),

@@ -4,7 +4,8 @@
 
 use crate::domain::config::Settings;
 use crate::domain::grid::{
-    GRID_BITMAP, GRID_CELLS, GridOptions, Preset, carmen_lidar, loop_closure_settings,
+    GRID_BITMAP, GRID_BITMAP_LARGE, GRID_CELLS, GRID_CELLS_LARGE, GRID_MARGIN_M, GridOptions,
+    GridPlacement, OdometryExtent, Preset, carmen_lidar, loop_closure_settings,
 };
 use crate::domain::recording::Recording;
 use crate::domain::{AssociationMode, FilterKind, Precision};
@@ -242,6 +243,8 @@ pub(crate) fn options_for_beams(
         config: c,
         lidar: carmen_lidar(n),
         loop_closure: loop_closure_settings(config, grid.loop_closure, grid.role)?,
+        // Placed on the recording's odometry by grid SLAM's replay (`GridPlacement`).
+        grid_origin: None,
     })
 }
 
@@ -272,6 +275,13 @@ pub(crate) fn metrics_json(
         "skipped_scans": run.skipped_scans,
         "refused_odometry": run.refused_odometry,
         "non_finite_beams": run.non_finite_beams,
+        "grid": serde_json::json!({
+            "cells": [run.geometry.width, run.geometry.height],
+            "resolution_m": run.geometry.resolution,
+            "origin_m": [run.geometry.origin_x, run.geometry.origin_y],
+            "off_grid_end_points": run.off_grid_end_points,
+            "scans_with_off_grid_end_points": run.scans_off_grid,
+        }),
         "faults": faults,
         "window": 2 * u32::from(options.config.filter.shift_window_cells) + 1,
         "beam_decimation": options.config.beam_decimation,
@@ -376,6 +386,27 @@ pub(crate) fn report(quiet: bool, dataset: &str, metrics: &serde_json::Value, ou
     );
 }
 
+/// Says where the grid goes when it is not the smaller one centred on the start.
+fn placement_note(extent: Option<&OdometryExtent>, placement: &GridPlacement, resolution: f32) {
+    let (Some(e), side) = (extent, placement.side_m(resolution)) else {
+        return;
+    };
+    let [w, h] = e.size();
+    if !placement.fits {
+        println!(
+            "note: the odometry spans {w:.1} × {h:.1} m, more than the largest grid ({side:.1} m) \
+             holds with {GRID_MARGIN_M} m to spare: what lies beyond it is not mapped \
+             (a coarser `resolution` in --config covers more)"
+        );
+    } else if placement.cells != GRID_CELLS || placement.origin_m != [-0.5 * side; 2] {
+        println!(
+            "note: the odometry spans {w:.1} × {h:.1} m: a {} × {} grid ({side:.1} m), its \
+             lower-left corner at ({:.2}, {:.2}) m from the start",
+            placement.cells, placement.cells, placement.origin_m[0], placement.origin_m[1]
+        );
+    }
+}
+
 /// `host-sim replay --filter grid-slam --dataset carmen:<file>` (and `thor:<dir>`).
 fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
     let start = Instant::now();
@@ -416,20 +447,49 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
             pb.set_position(i as u64);
         }
     };
+    let extent = OdometryExtent::of(inputs.iter().map(|input| input.odometry));
+    let placement = GridPlacement::for_extent(extent.as_ref(), options.config.resolution);
+    if !quiet {
+        placement_note(extent.as_ref(), &placement, options.config.resolution);
+    }
+    let options = &GridRunOptions {
+        grid_origin: Some(placement.origin_m),
+        ..options.clone()
+    };
     let mut mcap = super::open_mcap(args.mcap.as_deref())?;
     let log_odds = options.config.log_odds;
     let run =
         super::recorded_grid_run(mcap.as_mut(), "", inputs.len(), log_odds, &[], true, |o| {
-            run_slam_observed::<GRID_CELLS, GRID_BITMAP>(
-                &inputs,
-                Pose2::IDENTITY,
-                options,
-                &progress,
-                o,
-                every,
-            )
+            if placement.cells == GRID_CELLS {
+                run_slam_observed::<GRID_CELLS, GRID_BITMAP>(
+                    &inputs,
+                    Pose2::IDENTITY,
+                    options,
+                    &progress,
+                    o,
+                    every,
+                )
+            } else {
+                run_slam_observed::<GRID_CELLS_LARGE, GRID_BITMAP_LARGE>(
+                    &inputs,
+                    Pose2::IDENTITY,
+                    options,
+                    &progress,
+                    o,
+                    every,
+                )
+            }
         })?;
     pb.finish_and_clear();
+    if !quiet && run.off_grid_end_points > 0 {
+        println!(
+            "note: {} end points of {} scans fell off the {:.1} m grid and were not written \
+             (metrics.json: grid)",
+            run.off_grid_end_points,
+            run.scans_off_grid,
+            placement.side_m(options.config.resolution)
+        );
+    }
     let outputs = RunOutputs {
         dir: &args.out,
         plots: !args.no_plots,

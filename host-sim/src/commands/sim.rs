@@ -212,6 +212,8 @@ pub fn run_and_write(
         config,
         lidar: rec.lidar,
         loop_closure,
+        // The simulated world lies around its start.
+        grid_origin: None,
     };
     let animation = AnimationSettings::default();
     let every = animate.map_or(0, |_| animation.snapshot_every(inputs.len()));

@@ -4,6 +4,7 @@
 
 use anyhow::{Context, Result, bail};
 use microslam::error::InvalidSetting;
+use microslam::geometry::Pose2;
 use microslam::pf::{GridPfConfig, MotionNoise};
 use microslam::sensors::lidar::LidarGeometry;
 use std::path::Path;
@@ -14,6 +15,119 @@ pub const GRID_CELLS: usize = 1024;
 /// one, like the firmware, so that the shift search reads only the occupied cells
 /// (the scores are the same as without; Intel seed replay 4.3 → 3.5 CPU-s).
 pub const GRID_BITMAP: usize = microslam::grid::occupancy_bytes(GRID_CELLS, GRID_CELLS);
+/// Grid edge in cells of the larger host grid: 2048 × 2048 cells (102.4 m at 5 cm), 4 MB,
+/// for a recording whose odometry does not fit [`GRID_CELLS`] ([`GridPlacement`]).
+pub const GRID_CELLS_LARGE: usize = 2048;
+/// Bytes of the larger grid's occupied-cell bitmap (512 KB).
+pub const GRID_BITMAP_LARGE: usize =
+    microslam::grid::occupancy_bytes(GRID_CELLS_LARGE, GRID_CELLS_LARGE);
+/// Room kept between the odometry's extent and the grid's edge, metres: for the walls the
+/// lidar sees beyond the path, and for the odometry's drift.
+pub const GRID_MARGIN_M: f32 = 5.0;
+
+/// Where the odometry goes: the box its positions span, in the frame of its first finite
+/// pose (the frame a run that starts at the identity maps in), metres.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct OdometryExtent {
+    /// Smallest x and y.
+    pub min: [f32; 2],
+    /// Largest x and y.
+    pub max: [f32; 2],
+}
+
+impl OdometryExtent {
+    /// The extent of `poses` (odometry poses in their own frame, in order; the ones that
+    /// are not finite left out); `None` when none is finite.
+    pub fn of(poses: impl IntoIterator<Item = Pose2<f32>>) -> Option<Self> {
+        let mut poses = poses.into_iter().filter(Pose2::is_finite);
+        let to_start = poses.next()?.inverse();
+        let mut extent = Self {
+            min: [0.0; 2],
+            max: [0.0; 2],
+        };
+        for p in poses {
+            let q = to_start.compose(&p);
+            for (axis, v) in [q.x, q.y].into_iter().enumerate() {
+                extent.min[axis] = extent.min[axis].min(v);
+                extent.max[axis] = extent.max[axis].max(v);
+            }
+        }
+        Some(extent)
+    }
+
+    /// Width and height, metres.
+    pub fn size(&self) -> [f32; 2] {
+        [self.max[0] - self.min[0], self.max[1] - self.min[1]]
+    }
+}
+
+/// Size and place of a SLAM run's square grid on the host.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct GridPlacement {
+    /// Cells along each edge ([`GRID_CELLS`] or [`GRID_CELLS_LARGE`]).
+    pub cells: usize,
+    /// World position of the grid's lower-left corner, metres.
+    pub origin_m: [f32; 2],
+    /// `false` when the odometry's extent with [`GRID_MARGIN_M`] on every side does not
+    /// fit even the larger grid: end points beyond it are skipped (and counted).
+    pub fits: bool,
+}
+
+impl GridPlacement {
+    /// The smaller host grid ([`GRID_CELLS`], else [`GRID_CELLS_LARGE`]) that holds
+    /// `extent` with [`GRID_MARGIN_M`] to spare on every side: centred on the start when
+    /// it holds it so, else centred on the extent, rounded to whole cells (so that the
+    /// cells lie where the centred grid's would). Without an extent, the smaller grid
+    /// centred on the start.
+    pub fn for_extent(extent: Option<&OdometryExtent>, resolution: f32) -> Self {
+        let centred = |cells: usize| Self {
+            cells,
+            origin_m: [-(cells as f32) * resolution * 0.5; 2],
+            fits: true,
+        };
+        let Some(e) = extent else {
+            return centred(GRID_CELLS);
+        };
+        let reach = |v: f32| v.abs() + GRID_MARGIN_M;
+        let held_centred = |cells: usize| {
+            let half = cells as f32 * resolution * 0.5;
+            e.min.iter().chain(&e.max).all(|&v| reach(v) <= half)
+        };
+        let held = |cells: usize| {
+            let side = cells as f32 * resolution;
+            e.size().iter().all(|&s| s + 2.0 * GRID_MARGIN_M <= side)
+        };
+        for cells in [GRID_CELLS, GRID_CELLS_LARGE] {
+            if held_centred(cells) {
+                return centred(cells);
+            }
+            if held(cells) {
+                return Self::on_extent(e, cells, resolution, true);
+            }
+        }
+        Self::on_extent(e, GRID_CELLS_LARGE, resolution, false)
+    }
+
+    /// A grid of `cells` centred on `extent`'s middle, rounded to whole cells.
+    fn on_extent(extent: &OdometryExtent, cells: usize, resolution: f32, fits: bool) -> Self {
+        let half = cells as f32 * resolution * 0.5;
+        let corner = |axis: usize| {
+            let middle = 0.5 * (extent.min[axis] + extent.max[axis]);
+            (middle / resolution).round() * resolution - half
+        };
+        Self {
+            cells,
+            origin_m: [corner(0), corner(1)],
+            fits,
+        }
+    }
+
+    /// Edge length, metres.
+    pub fn side_m(&self, resolution: f32) -> f32 {
+        self.cells as f32 * resolution
+    }
+}
+
 /// Most beams a scan may use (the Intel/ACES SICK has 180; more are decimated).
 pub const MAX_BEAMS: usize = 361;
 
@@ -430,6 +544,61 @@ pub const MICROCONTROLLER_BEAMS: usize = 90;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn extent(min: [f32; 2], max: [f32; 2]) -> OdometryExtent {
+        OdometryExtent { min, max }
+    }
+
+    #[test]
+    fn the_extent_is_taken_in_the_frame_of_the_first_pose() {
+        // An odometry frame turned by 90° and moved: the robot drives 2 m ahead, then 1 m
+        // to its left.
+        let poses = [
+            Pose2::new(5.0, 3.0, std::f32::consts::FRAC_PI_2),
+            Pose2::new(f32::NAN, 0.0, 0.0),
+            Pose2::new(5.0, 5.0, std::f32::consts::FRAC_PI_2),
+            Pose2::new(4.0, 5.0, std::f32::consts::PI),
+        ];
+        let e = OdometryExtent::of(poses).unwrap();
+        for (got, want) in e.min.iter().chain(&e.max).zip([0.0, 0.0, 2.0, 1.0]) {
+            assert!((got - want).abs() < 1e-5, "{e:?}");
+        }
+        assert_eq!(e.size().map(|v| (v * 1e4).round()), [2e4, 1e4]);
+        assert_eq!(OdometryExtent::of([Pose2::new(f32::NAN, 0.0, 0.0)]), None);
+    }
+
+    #[test]
+    fn the_grid_is_the_smaller_one_that_holds_the_odometry_with_its_margin() {
+        let r = 0.05;
+        let place = |e: Option<OdometryExtent>| GridPlacement::for_extent(e.as_ref(), r);
+        // No odometry, and a run around its start that the 51.2 m grid holds with 5 m to
+        // spare (the Intel log's extent): the smaller grid centred on the start.
+        for e in [None, Some(extent([-7.0, -14.5], [14.3, 3.4]))] {
+            let p = place(e);
+            assert_eq!((p.cells, p.origin_m, p.fits), (1024, [-25.6, -25.6], true));
+        }
+        // 40 m along x from the start: centred it would not hold it, placed on it it does
+        // (its middle at x = 20 m).
+        let p = place(Some(extent([0.0, -5.0], [40.0, 5.0])));
+        assert_eq!((p.cells, p.fits), (1024, true));
+        assert!(
+            (p.origin_m[0] + 5.6).abs() < 1e-4 && p.origin_m[1] == -25.6,
+            "{p:?}"
+        );
+        // Corners on whole cells: the middle 20.013 m is rounded to 20.0 m.
+        let p = place(Some(extent([0.0, -5.0], [40.026, 5.0])));
+        assert!((p.origin_m[0] + 5.6).abs() < 1e-4, "{p:?}");
+        // 54 × 54 m (the ACES log in its start frame): the 102.4 m grid, centred.
+        let p = place(Some(extent([-18.3, -44.3], [35.8, 9.7])));
+        assert_eq!((p.cells, p.origin_m, p.fits), (2048, [-51.2, -51.2], true));
+        // 80 m from the start: the larger grid placed on it.
+        let p = place(Some(extent([0.0, 0.0], [80.0, 10.0])));
+        assert_eq!((p.cells, p.fits), (2048, true));
+        assert!((p.origin_m[0] + 11.2).abs() < 1e-4, "{p:?}");
+        // 95 m wide: even the larger grid leaves less than 5 m on each side.
+        let p = place(Some(extent([0.0, 0.0], [95.0, 10.0])));
+        assert_eq!((p.cells, p.fits), (2048, false));
+    }
 
     #[test]
     fn a_localizer_gets_the_narrow_window_unless_the_file_sets_one() {

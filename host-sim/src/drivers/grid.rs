@@ -43,6 +43,9 @@ pub struct GridRunOptions {
     /// Grid SLAM closes loops with these settings ([`super::loop_closure`]); `None` for
     /// none (and always for a localizer).
     pub loop_closure: Option<LoopClosureConfig>,
+    /// Grid SLAM's map: the world position of its lower-left corner, metres
+    /// ([`crate::domain::grid::GridPlacement`]); `None`: centred on the start.
+    pub grid_origin: Option<[f32; 2]>,
 }
 
 /// Result of a run: the estimate at each processed scan, the map, and timing.
@@ -65,6 +68,11 @@ pub struct GridRun {
     pub refused_odometry: usize,
     /// Ranges that were NaN or ±∞ in the processed scans (skipped beam by beam).
     pub non_finite_beams: usize,
+    /// Grid SLAM: end points that fell off the grid, not written (the robot, or what it
+    /// saw, left the map's area).
+    pub off_grid_end_points: u64,
+    /// Grid SLAM: scans with at least one end point off the grid.
+    pub scans_off_grid: usize,
     /// The map as it grew ([`run_slam_observed`] with `snapshot_every` > 0; empty otherwise): the first entry holds
     /// the known cells of the starting map, each later one the cells changed since.
     pub snapshots: Vec<MapChanges>,
@@ -122,6 +130,8 @@ impl GridRun {
             skipped_scans: 0,
             refused_odometry: 0,
             non_finite_beams: 0,
+            off_grid_end_points: 0,
+            scans_off_grid: 0,
             snapshots: Vec::new(),
             localizer: None,
             loop_closure: None,
@@ -251,7 +261,11 @@ fn drive(
         let scan = LidarScan::new(input.ranges, *lidar);
         run.non_finite_beams += scan.census().1;
         match filter.observe(&scan) {
-            Ok(r) => run.trajectory.push((input.stamp, r.pose)),
+            Ok(r) => {
+                run.trajectory.push((input.stamp, r.pose));
+                run.off_grid_end_points += u64::from(r.map.off_grid);
+                run.scans_off_grid += usize::from(r.map.off_grid > 0);
+            }
             Err(_) => {
                 run.skipped_scans += 1;
                 run.trajectory.push((input.stamp, filter.pose()));
@@ -310,7 +324,8 @@ macro_rules! dispatch_particles {
     };
 }
 
-/// Grid SLAM on an `N × N` grid centred on the origin over `inputs`, from `start`.
+/// Grid SLAM on an `N × N` grid over `inputs`, from `start`: centred on the origin, or
+/// where [`GridRunOptions::grid_origin`] puts it.
 ///
 /// Runs on a thread with a 64 MB stack: a large grid is built on the stack before it is
 /// boxed in unoptimised builds.
@@ -361,10 +376,10 @@ fn slam_p<const N: usize, const BITMAP: usize, const P: usize>(
     snapshot_every: usize,
 ) -> Result<GridRun> {
     let c = options.config;
-    let mut grid = Box::new(OccupancyGrid::<N, N, BITMAP>::centred(
-        c.resolution,
-        c.log_odds,
-    ));
+    let mut grid = Box::new(match options.grid_origin {
+        Some([x, y]) => OccupancyGrid::<N, N, BITMAP>::new(c.resolution, x, y, c.log_odds),
+        None => OccupancyGrid::<N, N, BITMAP>::centred(c.resolution, c.log_odds),
+    });
     let mut run = GridRun::empty(Vec::new(), *grid.geometry(), inputs.len());
     let t0 = Instant::now();
     {
