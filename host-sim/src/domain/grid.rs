@@ -154,6 +154,7 @@ pub struct GridToml {
     shift_prior_std_cells: Option<f32>,
     distance_std: Option<f32>,
     distance_std_per_metre: Option<f32>,
+    distance_std_per_radian: Option<f32>,
     heading_std: Option<f32>,
     heading_std_per_radian: Option<f32>,
     heading_std_per_metre: Option<f32>,
@@ -376,7 +377,7 @@ impl GridToml {
             ($($field:ident => $target:expr),* $(,)?) => {$(if let Some(v) = self.$field { $target = v; })*};
         }
         set!(distance_std => n.distance_std, distance_std_per_metre => n.distance_std_per_metre,
-            heading_std => n.heading_std, heading_std_per_radian => n.heading_std_per_radian,
+            distance_std_per_radian => n.distance_std_per_radian, heading_std => n.heading_std, heading_std_per_radian => n.heading_std_per_radian,
             heading_std_per_metre => n.heading_std_per_metre, sideways_std_per_metre => n.sideways_std_per_metre);
         set!(resolution => c.resolution, hit => c.log_odds.hit, miss => c.log_odds.miss,
             occupied_above => c.log_odds.occupied_above, range_weight_exponent => c.range_weight_exponent,
@@ -619,6 +620,35 @@ mod tests {
         // A file that sets something else leaves the localizer's window.
         std::fs::write(&file, "seed = 7\n").unwrap();
         assert_eq!(window(Some(&file), FilterRole::Localizer), 1);
+    }
+
+    #[test]
+    fn every_motion_noise_key_sets_its_field() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("noise.toml");
+        std::fs::write(
+            &file,
+            "distance_std = 0.01\ndistance_std_per_metre = 0.02\n\
+             distance_std_per_radian = 0.03\nheading_std = 0.04\n\
+             heading_std_per_radian = 0.05\nheading_std_per_metre = 0.06\n\
+             sideways_std_per_metre = 0.07\n",
+        )
+        .unwrap();
+        let c = Preset::Default
+            .settings(Some(&file), None, 180, FilterRole::Slam)
+            .unwrap();
+        assert_eq!(
+            c.filter.motion_noise,
+            MotionNoise {
+                distance_std: 0.01,
+                distance_std_per_metre: 0.02,
+                distance_std_per_radian: 0.03,
+                heading_std: 0.04,
+                heading_std_per_radian: 0.05,
+                heading_std_per_metre: 0.06,
+                sideways_std_per_metre: 0.07,
+            }
+        );
     }
 
     #[test]
