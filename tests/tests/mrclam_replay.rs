@@ -221,3 +221,53 @@ fn jcbb_hidden_ids_every_robot() {
         );
     }
 }
+
+/// MRCLAM dataset 1 (robot 1 only, no robot ground truth: the maps are aligned on each
+/// other) with dataset 6's settings file.
+fn run_dataset1(mode: AssociationMode) -> Metrics {
+    let settings = Settings::load_for("mrclam", None, Some(mode)).unwrap();
+    let rec = readers::read(&DatasetSpec::Mrclam("dataset1".into()), 1).expect("MRCLAM dataset 1");
+    let run = host_sim::drivers::ekf::replay(&rec, &settings, mode, Precision::F64, None).unwrap();
+    evaluate(&rec, &run)
+}
+
+/// Dataset 1's tables disagree about two landmarks: with known ids, the estimates of
+/// subjects 11 and 17 (barcodes 18 and 61) each lie about 6 m from their tabled positions
+/// (which are 6.08 m apart; with the two exchanged the maps align to 0.094 m,
+/// docs/results-ekf.md), while the other thirteen are within 0.16 m of theirs (measured
+/// 0.036–0.158 m). The map error is that of the
+/// tables, not of the filter; `landmark_errors_m` shows it landmark by landmark.
+#[test]
+fn dataset1_known_ids_two_landmarks_sit_at_each_others_tabled_positions() {
+    let m = run_dataset1(AssociationMode::Known);
+    assert_eq!(m.landmark_alignment.as_deref(), Some("landmarks"));
+    assert_eq!(m.landmark_errors_m.len(), 15);
+    for e in &m.landmark_errors_m {
+        if e.id == 11 || e.id == 17 {
+            assert!((5.8..6.2).contains(&e.error_m), "{e:?}");
+        } else {
+            assert!(e.error_m < bound(0.158), "{e:?}");
+        }
+    }
+    // The RMSE is the root of the mean of the squared errors listed (measured 2.1976 m).
+    let mean_sq = m
+        .landmark_errors_m
+        .iter()
+        .map(|e| e.error_m.powi(2))
+        .sum::<f64>()
+        / 15.0;
+    assert!((se2(&m.landmark_rmse_m) - mean_sq.sqrt()).abs() < 1e-12);
+    assert!(se2(&m.landmark_rmse_m) < bound(2.1976), "{m:?}");
+}
+
+/// Hidden ids on dataset 1 with dataset 6's hidden-id settings: measured 42 landmarks for
+/// 15, map error 0.723 m, purity 0.806 — settings tuned on clustered landmarks do not
+/// carry over (docs/results-ekf.md, "Dataset 1").
+#[test]
+fn dataset1_jcbb_with_dataset6_settings() {
+    let m = run_dataset1(AssociationMode::Jcbb);
+    assert_eq!(m.landmark_alignment.as_deref(), Some("landmarks"));
+    assert!(se2(&m.landmark_rmse_m) < bound(0.723), "{m:?}");
+    assert!(m.association_purity.unwrap() > 0.806 / 1.05, "{m:?}");
+    assert_eq!(m.landmarks_created, 42);
+}

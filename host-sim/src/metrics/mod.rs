@@ -58,6 +58,15 @@ pub struct Aligned {
     pub se2: Option<f64>,
 }
 
+/// One landmark's error after the `se2` alignment.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct LandmarkError {
+    /// The true landmark's id (its subject number in MRCLAM).
+    pub id: u32,
+    /// Distance between its estimate and its true position, metres.
+    pub error_m: f64,
+}
+
 /// The contents of `metrics.json`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct Metrics {
@@ -116,6 +125,9 @@ pub struct Metrics {
     /// truth) or `landmarks` (no robot ground truth: the estimated landmarks, matched by
     /// id, least-squares aligned onto the true ones).
     pub landmark_alignment: Option<String>,
+    /// Each landmark's error under the alignment of `landmark_rmse_m.se2`, by true id:
+    /// which landmarks make up the RMSE.
+    pub landmark_errors_m: Vec<LandmarkError>,
 }
 
 /// Scores a replay against the recording's ground truth.
@@ -235,13 +247,16 @@ fn evaluate_filter(recording: &Recording, run: &ReplayRun, pairs: PosePairs<'_>)
     m.yaw_rmse_deg = by_alignment(&|t| yaw_rmse_deg(t, &est, &gt));
     m.landmark_rmse_m = by_alignment(&|t| landmark_rmse(t, recording, run));
     m.landmark_alignment = transforms.1.map(|_| "trajectory".to_owned());
-    if transforms.1.is_none()
+    let mut se2 = transforms.1;
+    if se2.is_none()
         && let Some(t) = landmark_only_alignment(recording, run)
     {
         // No robot ground truth (MRCLAM dataset 1): align the maps themselves.
         m.landmark_rmse_m.se2 = landmark_rmse(&t, recording, run);
         m.landmark_alignment = Some("landmarks".to_owned());
+        se2 = Some(t);
     }
+    m.landmark_errors_m = se2.map_or_else(Vec::new, |t| landmark_errors(&t, recording, run));
     m.nees_pose_mean = mean(&nees);
     let bound = microslam::gate::chi_square_quantile(0.95, 3);
     m.nees_pose_within_95 = (!nees.is_empty())
@@ -337,12 +352,21 @@ pub fn landmark_pairs(
 }
 
 /// SE(2) least-squares alignment of the estimated landmarks onto the true ones, matched
-/// by id (known-id runs only); `None` with fewer than two matches.
+/// by id — with hidden ids, by the true landmark most of a landmark's sightings were of
+/// (for scoring only, as the purity) — `None` with fewer than two matches.
 fn landmark_only_alignment(recording: &Recording, run: &ReplayRun) -> Option<Pose2<f64>> {
     let mut est = Vec::new();
     let mut truth = Vec::new();
     for l in &run.landmarks {
-        let id = l.id?;
+        let majority = || {
+            l.true_ids
+                .iter()
+                .max_by_key(|&(id, n)| (*n, std::cmp::Reverse(*id)))
+                .map(|(id, _)| *id)
+        };
+        let Some(id) = l.id.or_else(majority) else {
+            continue;
+        };
         if let Some(g) = recording.landmarks.iter().find(|g| g.id == id) {
             est.push(l.position);
             truth.push(g.position);
@@ -351,15 +375,29 @@ fn landmark_only_alignment(recording: &Recording, run: &ReplayRun) -> Option<Pos
     se2_least_squares(&est, &truth)
 }
 
-fn landmark_rmse(t: &Pose2<f64>, recording: &Recording, run: &ReplayRun) -> Option<f64> {
-    let sq: Vec<f64> = landmark_pairs(t, recording, run)
+/// The error of each estimated landmark paired with a true one ([`landmark_pairs`])
+/// after the alignment `t`, sorted by id.
+fn landmark_errors(t: &Pose2<f64>, recording: &Recording, run: &ReplayRun) -> Vec<LandmarkError> {
+    let mut errors: Vec<LandmarkError> = landmark_pairs(t, recording, run)
         .into_iter()
         .filter_map(|(i, j)| {
             let l = run.landmarks.get(i)?;
             let g = recording.landmarks.get(j)?;
             let p = t.transform_point(&Vector2::new(l.position[0], l.position[1]));
-            Some((p[0] - g.position[0]).powi(2) + (p[1] - g.position[1]).powi(2))
+            Some(LandmarkError {
+                id: g.id,
+                error_m: (p[0] - g.position[0]).hypot(p[1] - g.position[1]),
+            })
         })
+        .collect();
+    errors.sort_by_key(|e| e.id);
+    errors
+}
+
+fn landmark_rmse(t: &Pose2<f64>, recording: &Recording, run: &ReplayRun) -> Option<f64> {
+    let sq: Vec<f64> = landmark_errors(t, recording, run)
+        .iter()
+        .map(|e| e.error_m * e.error_m)
         .collect();
     mean(&sq).map(f64::sqrt)
 }
