@@ -386,20 +386,26 @@ pub(crate) fn report(quiet: bool, dataset: &str, metrics: &serde_json::Value, ou
     );
 }
 
-/// Says where the grid goes when it is not the smaller one centred on the start.
-fn placement_note(extent: Option<&OdometryExtent>, placement: &GridPlacement, resolution: f32) {
+/// Says on stderr where the grid goes when it is not the smaller one centred on the start
+/// (with `quiet`, only when the odometry does not fit).
+fn placement_note(
+    extent: Option<&OdometryExtent>,
+    placement: &GridPlacement,
+    resolution: f32,
+    quiet: bool,
+) {
     let (Some(e), side) = (extent, placement.side_m(resolution)) else {
         return;
     };
     let [w, h] = e.size();
     if !placement.fits {
-        println!(
+        eprintln!(
             "note: the odometry spans {w:.1} × {h:.1} m, more than the largest grid ({side:.1} m) \
              holds with {GRID_MARGIN_M} m to spare: what lies beyond it is not mapped \
              (a coarser `resolution` in --config covers more)"
         );
-    } else if placement.cells != GRID_CELLS || placement.origin_m != [-0.5 * side; 2] {
-        println!(
+    } else if !quiet && (placement.cells != GRID_CELLS || !placement.centred) {
+        eprintln!(
             "note: the odometry spans {w:.1} × {h:.1} m: a {} × {} grid ({side:.1} m), its \
              lower-left corner at ({:.2}, {:.2}) m from the start",
             placement.cells, placement.cells, placement.origin_m[0], placement.origin_m[1]
@@ -449,9 +455,12 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
     };
     let extent = OdometryExtent::of(inputs.iter().map(|input| input.odometry));
     let placement = GridPlacement::for_extent(extent.as_ref(), options.config.resolution);
-    if !quiet {
-        placement_note(extent.as_ref(), &placement, options.config.resolution);
-    }
+    placement_note(
+        extent.as_ref(),
+        &placement,
+        options.config.resolution,
+        quiet,
+    );
     let options = &GridRunOptions {
         grid_origin: Some(placement.origin_m),
         ..options.clone()
@@ -481,8 +490,8 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
             }
         })?;
     pb.finish_and_clear();
-    if !quiet && run.off_grid_end_points > 0 {
-        println!(
+    if run.off_grid_end_points > 0 {
+        eprintln!(
             "note: {} end points of {} scans fell off the {:.1} m grid and were not written \
              (metrics.json: grid)",
             run.off_grid_end_points,

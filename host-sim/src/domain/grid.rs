@@ -68,6 +68,8 @@ pub struct GridPlacement {
     pub cells: usize,
     /// World position of the grid's lower-left corner, metres.
     pub origin_m: [f32; 2],
+    /// `true` when the grid is centred on the start (the world's origin).
+    pub centred: bool,
     /// `false` when the odometry's extent with [`GRID_MARGIN_M`] on every side does not
     /// fit even the larger grid: end points beyond it are skipped (and counted).
     pub fits: bool,
@@ -83,6 +85,7 @@ impl GridPlacement {
         let centred = |cells: usize| Self {
             cells,
             origin_m: [-(cells as f32) * resolution * 0.5; 2],
+            centred: true,
             fits: true,
         };
         let Some(e) = extent else {
@@ -118,6 +121,7 @@ impl GridPlacement {
         Self {
             cells,
             origin_m: [corner(0), corner(1)],
+            centred: false,
             fits,
         }
     }
@@ -576,12 +580,15 @@ mod tests {
         // spare (the Intel log's extent): the smaller grid centred on the start.
         for e in [None, Some(extent([-7.0, -14.5], [14.3, 3.4]))] {
             let p = place(e);
-            assert_eq!((p.cells, p.origin_m, p.fits), (1024, [-25.6, -25.6], true));
+            assert_eq!(
+                (p.cells, p.origin_m, p.centred, p.fits),
+                (1024, [-25.6, -25.6], true, true)
+            );
         }
         // 40 m along x from the start: centred it would not hold it, placed on it it does
         // (its middle at x = 20 m).
         let p = place(Some(extent([0.0, -5.0], [40.0, 5.0])));
-        assert_eq!((p.cells, p.fits), (1024, true));
+        assert_eq!((p.cells, p.centred, p.fits), (1024, false, true));
         assert!(
             (p.origin_m[0] + 5.6).abs() < 1e-4 && p.origin_m[1] == -25.6,
             "{p:?}"
@@ -591,7 +598,10 @@ mod tests {
         assert!((p.origin_m[0] + 5.6).abs() < 1e-4, "{p:?}");
         // 54 × 54 m (the ACES log in its start frame): the 102.4 m grid, centred.
         let p = place(Some(extent([-18.3, -44.3], [35.8, 9.7])));
-        assert_eq!((p.cells, p.origin_m, p.fits), (2048, [-51.2, -51.2], true));
+        assert_eq!(
+            (p.cells, p.origin_m, p.centred, p.fits),
+            (2048, [-51.2, -51.2], true, true)
+        );
         // 80 m from the start: the larger grid placed on it.
         let p = place(Some(extent([0.0, 0.0], [80.0, 10.0])));
         assert_eq!((p.cells, p.fits), (2048, true));
