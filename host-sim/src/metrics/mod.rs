@@ -123,7 +123,8 @@ pub struct Metrics {
     pub se2_alignment: Option<[f64; 3]>,
     /// What the `se2` landmark error was aligned on: `trajectory` (the robot's ground
     /// truth) or `landmarks` (no robot ground truth: the estimated landmarks, matched by
-    /// id, least-squares aligned onto the true ones).
+    /// id — with hidden ids by the true landmark most of each one's sightings were of —
+    /// least-squares aligned onto the true ones).
     pub landmark_alignment: Option<String>,
     /// Each landmark's error under the alignment of `landmark_rmse_m.se2`, by true id:
     /// which landmarks make up the RMSE.
@@ -247,16 +248,16 @@ fn evaluate_filter(recording: &Recording, run: &ReplayRun, pairs: PosePairs<'_>)
     m.yaw_rmse_deg = by_alignment(&|t| yaw_rmse_deg(t, &est, &gt));
     m.landmark_rmse_m = by_alignment(&|t| landmark_rmse(t, recording, run));
     m.landmark_alignment = transforms.1.map(|_| "trajectory".to_owned());
-    let mut se2 = transforms.1;
-    if se2.is_none()
+    if transforms.1.is_none()
         && let Some(t) = landmark_only_alignment(recording, run)
     {
         // No robot ground truth (MRCLAM dataset 1): align the maps themselves.
-        m.landmark_rmse_m.se2 = landmark_rmse(&t, recording, run);
+        m.landmark_errors_m = landmark_errors(&t, recording, run);
+        m.landmark_rmse_m.se2 = rms(&m.landmark_errors_m);
         m.landmark_alignment = Some("landmarks".to_owned());
-        se2 = Some(t);
+    } else if let Some(t) = &transforms.1 {
+        m.landmark_errors_m = landmark_errors(t, recording, run);
     }
-    m.landmark_errors_m = se2.map_or_else(Vec::new, |t| landmark_errors(&t, recording, run));
     m.nees_pose_mean = mean(&nees);
     let bound = microslam::gate::chi_square_quantile(0.95, 3);
     m.nees_pose_within_95 = (!nees.is_empty())
@@ -395,10 +396,12 @@ fn landmark_errors(t: &Pose2<f64>, recording: &Recording, run: &ReplayRun) -> Ve
 }
 
 fn landmark_rmse(t: &Pose2<f64>, recording: &Recording, run: &ReplayRun) -> Option<f64> {
-    let sq: Vec<f64> = landmark_errors(t, recording, run)
-        .iter()
-        .map(|e| e.error_m * e.error_m)
-        .collect();
+    rms(&landmark_errors(t, recording, run))
+}
+
+/// Root mean square of the errors; `None` without one.
+fn rms(errors: &[LandmarkError]) -> Option<f64> {
+    let sq: Vec<f64> = errors.iter().map(|e| e.error_m * e.error_m).collect();
     mean(&sq).map(f64::sqrt)
 }
 
