@@ -134,3 +134,36 @@ fn end_points_off_the_grid_are_counted_not_written() {
     assert!(moved.scans_off_grid <= rec.scans.len());
     assert_eq!(moved.geometry.origin_x, -0.4);
 }
+
+#[test]
+fn a_localizer_counts_the_end_points_outside_its_map() {
+    let rec = recording(2);
+    let config = mcu();
+    let map = true_map(&rec.world.walls, &config);
+    let full = map.view();
+    // The whole office: every end point lies on the map.
+    let run = run_localizer(&rec, &full, 32, config);
+    assert_eq!((run.off_grid_end_points, run.scans_off_grid), (0, 0));
+    // The map's southern half (its first rows, the same origin): what the robot sees
+    // north of the cut lies outside it and is counted, scan by scan.
+    let mut half = *full.geometry();
+    half.height /= 2;
+    let cut = half.origin_y + half.height as f32 * half.resolution;
+    let cells = &full.cells()[..half.width * half.height];
+    let south = GridView::new(cells, half, full.occupied_above()).unwrap();
+    let run = run_localizer(&rec, &south, 32, config);
+    let north_of_cut = rec
+        .world
+        .walls
+        .iter()
+        .any(|w| w.a[1].max(w.b[1]) > f64::from(cut));
+    assert!(north_of_cut, "the office must reach north of y = {cut} m");
+    println!(
+        "outside the southern half: {} end points in {} of {} scans",
+        run.off_grid_end_points,
+        run.scans_off_grid,
+        rec.scans.len()
+    );
+    assert!(run.off_grid_end_points > 0 && run.scans_off_grid > 0);
+    assert!(run.scans_off_grid <= rec.scans.len());
+}

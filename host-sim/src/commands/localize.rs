@@ -76,6 +76,13 @@ pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
             )
         })?;
     pb.finish_and_clear();
+    if run.off_grid_end_points > 0 {
+        eprintln!(
+            "note: {} end points of {} scans, seen from the estimate, lie outside the map \
+             (the robot at or beyond its edge; metrics.json: grid)",
+            run.off_grid_end_points, run.scans_off_grid
+        );
+    }
     let outputs = RunOutputs {
         dir: &args.out,
         plots: !args.no_plots,

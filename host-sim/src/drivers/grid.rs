@@ -15,8 +15,10 @@ use crate::inputs::sim::lidar_world::LidarRecording;
 use anyhow::{Result, anyhow, bail};
 use microslam::geometry::Pose2;
 use microslam::grid::{GridGeometry, GridView, OccupancyGrid};
-use microslam::pf::{GridEstimator, GridLocalizer, GridPfConfig, GridSlam, LocalizerState};
-use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+use microslam::pf::{
+    GridEstimator, GridLocalizer, GridPfConfig, GridSlam, LocalizerState, StepReport,
+};
+use microslam::sensors::lidar::{LidarGeometry, LidarScan, robot_to_world};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
 
@@ -68,10 +70,11 @@ pub struct GridRun {
     pub refused_odometry: usize,
     /// Ranges that were NaN or ±∞ in the processed scans (skipped beam by beam).
     pub non_finite_beams: usize,
-    /// Grid SLAM: end points that fell off the grid, not written (the robot, or what it
-    /// saw, left the map's area).
+    /// End points off the grid: for grid SLAM those that fell off it and were not written,
+    /// for a localizer those that lie outside its map seen from the estimate (either way
+    /// the robot, or what it saw, left the map's area).
     pub off_grid_end_points: u64,
-    /// Grid SLAM: scans with at least one end point off the grid.
+    /// Scans with at least one end point off the grid.
     pub scans_off_grid: usize,
     /// The map as it grew ([`run_slam_observed`] with `snapshot_every` > 0; empty otherwise): the first entry holds
     /// the known cells of the starting map, each later one the cells changed since.
@@ -174,6 +177,11 @@ pub trait GridObserver: Send {
 /// and its map, for the observer and the map snapshots.
 trait GridFilter: GridEstimator {
     fn particles(&self) -> &[Pose2<f32>];
+    /// The end points of `scan` (every `decimation`-th beam) off the grid after the step
+    /// that `report` describes.
+    fn off_grid(&self, report: &StepReport, _scan: &LidarScan<'_>, _decimation: usize) -> u32 {
+        report.map.off_grid
+    }
     /// Re-places the map and the particles after a loop closure.
     fn close_loop(
         &mut self,
@@ -219,6 +227,17 @@ impl<const P: usize, const B: usize> GridFilter for GridLocalizer<'_, P, B> {
     fn particles(&self) -> &[Pose2<f32>] {
         self.filter().poses()
     }
+    /// A localizer writes no map: the end points seen from its estimate that fall
+    /// outside the map it localizes on.
+    fn off_grid(&self, report: &StepReport, scan: &LidarScan<'_>, decimation: usize) -> u32 {
+        let geometry = self.map().geometry();
+        let outside = scan
+            .beams(decimation)
+            .map(|beam| robot_to_world(&report.pose, beam.robot_point))
+            .filter(|&(x, y)| geometry.world_to_cell(x, y).is_none())
+            .count();
+        u32::try_from(outside).unwrap_or(u32::MAX)
+    }
     fn view(&self) -> GridView<'_> {
         *self.map()
     }
@@ -263,8 +282,9 @@ fn drive(
         match filter.observe(&scan) {
             Ok(r) => {
                 run.trajectory.push((input.stamp, r.pose));
-                run.off_grid_end_points += u64::from(r.map.off_grid);
-                run.scans_off_grid += usize::from(r.map.off_grid > 0);
+                let off_grid = filter.off_grid(&r, &scan, options.config.beam_decimation);
+                run.off_grid_end_points += u64::from(off_grid);
+                run.scans_off_grid += usize::from(off_grid > 0);
             }
             Err(_) => {
                 run.skipped_scans += 1;
