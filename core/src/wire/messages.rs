@@ -88,9 +88,10 @@ pub enum Command {
     /// Answer with a [`ToHost::Status`].
     ReportStatus,
     /// Replace the EKF's settings (noise, gate, sensor mount, update form), for the running
-    /// filter (its map and pose are kept) and for every later reset. Settings that are not
-    /// valid ([`EkfConfig::is_valid`]) are refused: counted in [`Status::rejected`], the
-    /// settings unchanged.
+    /// filter (its map and pose are kept) and for every later reset. Settings with a value
+    /// out of its range ([`EkfSettings::invalid_field`]) are refused with
+    /// [`ToHost::Refused`] ([`Refusal::InvalidEkfSetting`] names the value) and counted in
+    /// [`Status::rejected`], the settings unchanged.
     ConfigureEkf(EkfSettings),
     /// Forget the localizer's pose: it is lost, and its next scan starts the global search
     /// over the whole map, one work budget a scan for up to
@@ -167,8 +168,81 @@ impl EkfSettings {
         }
     }
 
+    /// The names of the settings' values in wire order: [`EkfSettings::increment_noise`]'s
+    /// five, [`EkfSettings::velocity_noise`]'s five (each by its [`IncrementNoise`] or
+    /// [`VelocityNoise`] field's name), `range_std`, `bearing_std`, the mount's x, y and
+    /// yaw, the gate's threshold, and the four [`EkfSettings::calibration`] priors.
+    /// [`Refusal::InvalidEkfSetting`] names a value by its position here.
+    pub const FIELD_NAMES: [&'static str; 20] = [
+        "translation_std",
+        "translation_std_per_metre",
+        "rotation_std",
+        "rotation_std_per_radian",
+        "rotation_std_per_metre",
+        "linear_std",
+        "linear_std_per_mps",
+        "angular_std",
+        "angular_std_per_radps",
+        "angular_std_per_mps",
+        "range_std",
+        "bearing_std",
+        "sensor_mount.x",
+        "sensor_mount.y",
+        "sensor_mount.yaw",
+        "gate_threshold",
+        "speed_scale_std",
+        "turn_scale_std",
+        "range_bias_offset_std",
+        "range_bias_curvature_std",
+    ];
+
+    /// The settings' values in wire order (named by [`EkfSettings::FIELD_NAMES`]).
+    pub fn values(&self) -> [f32; 20] {
+        let ([a, b, c, d, e], [f, g, h, i, j]) = (self.increment_noise, self.velocity_noise);
+        let [mx, my, mt] = self.sensor_mount;
+        let [s, t, o, k] = self.calibration;
+        [
+            a,
+            b,
+            c,
+            d,
+            e,
+            f,
+            g,
+            h,
+            i,
+            j,
+            self.range_std,
+            self.bearing_std,
+            mx,
+            my,
+            mt,
+            self.gate_threshold,
+            s,
+            t,
+            o,
+            k,
+        ]
+    }
+
+    /// The position in [`EkfSettings::FIELD_NAMES`] of the first value out of its range,
+    /// `None` when the device takes the settings. The rules are the configuration's
+    /// ([`EkfConfig::invalid_setting`]: noise figures finite and non-negative, the mount
+    /// finite, the gate's threshold positive) and, for the calibration priors, finite and
+    /// non-negative (0: not estimated); a test holds the two sets of rules together. Value
+    /// by value, without the names, so that a firmware carries none of them.
+    pub fn invalid_field(&self) -> Option<u8> {
+        let holds = |(i, &v): (usize, &f32)| match i {
+            12..=14 => v.is_finite(),
+            15 => v > 0.0,
+            _ => v.is_finite() && v >= 0.0,
+        };
+        let position = self.values().iter().enumerate().position(|iv| !holds(iv))?;
+        u8::try_from(position).ok()
+    }
+
     /// The configuration these settings describe (not checked: see
-    /// [`EkfConfig::is_valid`]).
+    /// [`EkfSettings::invalid_field`]).
     pub fn to_config(&self) -> EkfConfig<f32> {
         let [ts, tpm, rs, rpr, rpm] = self.increment_noise;
         let [ls, lpm, as_, apr, apm] = self.velocity_noise;
@@ -390,13 +464,37 @@ pub enum Refusal {
     NotLocalizing,
     /// The map carries no max-pooled layers: the localizer cannot search globally.
     NoGlobalSearch,
+    /// [`Command::ConfigureEkf`] carried a value out of its range: `field` is its position
+    /// in [`EkfSettings::FIELD_NAMES`] ([`EkfSettings::invalid_field`]). The settings are
+    /// unchanged (since protocol 3).
+    InvalidEkfSetting {
+        /// Position of the value in [`EkfSettings::FIELD_NAMES`].
+        field: u8,
+    },
+}
+
+impl core::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            Self::NoMap => f.write_str("the firmware carries no map"),
+            Self::BadMap { code } => write!(f, "the map in flash failed its check (code {code})"),
+            Self::NotLocalizing => f.write_str("the localizer is not the active estimator"),
+            Self::NoGlobalSearch => f.write_str("the map carries no layers for a global search"),
+            Self::InvalidEkfSetting { field } => {
+                match EkfSettings::FIELD_NAMES.get(usize::from(field)) {
+                    Some(name) => write!(f, "EKF setting `{name}` is out of its range"),
+                    None => write!(f, "EKF setting number {field} is out of its range"),
+                }
+            }
+        }
+    }
 }
 
 /// Version of the messages' layout, sent in every [`ToHost::Status`]: raised whenever a
 /// message of either direction changes. [`ToHost::Status`] keeps its variant index (1)
 /// and its first two fields (`seq`, `protocol`) in every version, so a host can always
 /// tell which version a device speaks.
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 
 /// Messages from the device to the host.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -442,13 +442,20 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             }
             Command::ReportStatus => {}
             Command::ConfigureEkf(settings) => {
-                // Taken by the running filter and kept for every later reset.
+                if let Some(field) = settings.invalid_field() {
+                    self.status.rejected = self.status.rejected.saturating_add(1);
+                    return ToHost::Refused {
+                        seq,
+                        reason: Refusal::InvalidEkfSetting { field },
+                        estimator: self.active,
+                    };
+                }
+                // Taken by the running filter and kept for every later reset (valid:
+                // `invalid_field` holds the configuration's rules).
                 let config = settings.to_config();
                 if self.ekf.set_config(config).is_ok() {
                     self.ekf_config = config;
                     self.calibration = settings.calibration;
-                } else {
-                    self.status.rejected = self.status.rejected.saturating_add(1);
                 }
             }
         }
@@ -700,15 +707,30 @@ mod tests {
             },
         ]);
         let replies: std::vec::Vec<_> = bytes.iter().filter_map(|&b| session.receive(b)).collect();
-        let statuses: std::vec::Vec<_> = replies
-            .iter()
-            .map(|r| match r {
-                ToHost::Status { seq, status, .. } => (*seq, status.rejected),
-                other => panic!("{other:?}"),
-            })
-            .collect();
-        // The valid settings are taken, the NaN ones refused and counted.
-        assert_eq!(statuses, [(1, 0), (2, 1)]);
+        // The valid settings are taken; the NaN ones refused, the value named (the
+        // bearing's standard deviation is the twelfth value on the wire) and counted.
+        assert!(
+            matches!(replies[0], ToHost::Status { seq: 1, status, .. } if status.rejected == 0),
+            "{:?}",
+            replies[0]
+        );
+        assert_eq!(
+            replies[1],
+            ToHost::Refused {
+                seq: 2,
+                reason: Refusal::InvalidEkfSetting { field: 11 },
+                estimator: EstimatorKind::Ekf,
+            }
+        );
+        let status = frames(&[ToDevice::Command {
+            seq: 3,
+            command: Command::ReportStatus,
+        }]);
+        let counted: std::vec::Vec<_> = status.iter().filter_map(|&b| session.receive(b)).collect();
+        assert!(
+            matches!(counted[..], [ToHost::Status { status, .. }] if status.rejected == 1),
+            "{counted:?}"
+        );
         // A reset keeps them.
         let reset = frames(&[ToDevice::Command {
             seq: 3,

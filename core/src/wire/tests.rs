@@ -388,3 +388,70 @@ fn scan_chunks_reassemble_and_gaps_drop_the_scan() {
     );
     assert_eq!(asm.dropped(), 3);
 }
+
+/// `settings` with its value number `i` (in wire order) set to `v`.
+fn with_value(mut s: EkfSettings, i: usize, v: f32) -> EkfSettings {
+    match i {
+        0..=4 => s.increment_noise[i] = v,
+        5..=9 => s.velocity_noise[i - 5] = v,
+        10 => s.range_std = v,
+        11 => s.bearing_std = v,
+        12..=14 => s.sensor_mount[i - 12] = v,
+        15 => s.gate_threshold = v,
+        _ => s.calibration[i - 16] = v,
+    }
+    s
+}
+
+#[test]
+fn an_invalid_ekf_setting_is_named_by_its_position_on_the_wire() {
+    let good = EkfSettings::from_config(&crate::ekf::EkfConfig::MICROCONTROLLER)
+        .with_calibration([0.02, 0.02, 0.2, 2.0]);
+    assert_eq!(good.invalid_field(), None);
+    for i in 0..EkfSettings::FIELD_NAMES.len() {
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            // An infinite gate threshold is a gate that passes every sighting.
+            let want = (i != 15 || bad != f32::INFINITY).then_some(i as u8);
+            assert_eq!(with_value(good, i, bad).invalid_field(), want, "{i}: {bad}");
+        }
+        // Every value but the mount's must not be negative; the gate not 0 either.
+        let negative = with_value(good, i, -0.5).invalid_field();
+        let zero = with_value(good, i, 0.0).invalid_field();
+        match i {
+            12..=14 => assert_eq!((negative, zero), (None, None), "{i}"),
+            15 => assert_eq!((negative, zero), (Some(15), Some(15))),
+            _ => assert_eq!((negative, zero), (Some(i as u8), None), "{i}"),
+        }
+    }
+    // The wire's rules are the configuration's, value by value.
+    let values = [
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        -0.5,
+        -0.0,
+        0.0,
+        1e-30,
+        0.5,
+        1e30,
+    ];
+    for i in 0..16 {
+        for v in values {
+            let s = with_value(good, i, v);
+            assert_eq!(
+                s.invalid_field().is_some(),
+                !s.to_config().is_valid(),
+                "{i}: {v}"
+            );
+        }
+    }
+    // The first bad value is named; the configuration refuses what the wire refuses.
+    let two_bad = with_value(with_value(good, 3, -1.0), 11, f32::NAN);
+    assert_eq!(two_bad.invalid_field(), Some(3));
+    assert!(!two_bad.to_config().is_valid());
+    let refusal = Refusal::InvalidEkfSetting { field: 11 };
+    assert_eq!(
+        std::format!("{refusal}"),
+        "EKF setting `bearing_std` is out of its range"
+    );
+}
