@@ -5,7 +5,7 @@
 use crate::domain::config::Settings;
 use crate::domain::grid::{
     GRID_BITMAP, GRID_BITMAP_LARGE, GRID_CELLS, GRID_CELLS_LARGE, GRID_MARGIN_M, GridOptions,
-    GridPlacement, OdometryExtent, Preset, carmen_lidar, loop_closure_settings,
+    GridPlacement, OdometryExtent, Preset, ScanSpacing, carmen_lidar, loop_closure_settings,
 };
 use crate::domain::recording::Recording;
 use crate::domain::{AssociationMode, FilterKind, Precision};
@@ -282,6 +282,7 @@ pub(crate) fn metrics_json(
             "off_grid_end_points": run.off_grid_end_points,
             "scans_with_off_grid_end_points": run.scans_off_grid,
         }),
+        "scan_spacing": run.scan_spacing,
         "faults": faults,
         "window": 2 * u32::from(options.config.filter.shift_window_cells) + 1,
         "beam_decimation": options.config.beam_decimation,
@@ -490,6 +491,14 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
             }
         })?;
     pb.finish_and_clear();
+    if let Some(spacing) = run.scan_spacing.filter(ScanSpacing::is_sparse) {
+        eprintln!(
+            "note: the scans are a median of {:.2} m and {:.2} rad apart; grid SLAM is built \
+             for scans a few centimetres apart and loses the map on logs with scans 0.7–1 m \
+             apart (docs/results-grid.md); give it every scan the lidar took",
+            spacing.median_step_m, spacing.median_turn_rad
+        );
+    }
     if run.off_grid_end_points > 0 {
         eprintln!(
             "note: {} end points of {} scans fell off the {:.1} m grid and were not written \

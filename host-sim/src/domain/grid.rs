@@ -61,6 +61,68 @@ impl OdometryExtent {
     }
 }
 
+/// How far apart a run's scans are, from the odometry poses at the scans. The grid
+/// filters are built for scans a few centimetres apart (the Intel raw part: 0.056 m
+/// median): a prediction takes each step as an arc
+/// ([`microslam::pf::prediction::arc_between`]), which leaves out a step's sideways
+/// part, and a scan a metre from the last does not pin the pose to a cell; on the logs
+/// with scans 0.7–1 m apart every grid SLAM run loses the map (`docs/results-grid.md`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct ScanSpacing {
+    /// Steps between consecutive scans whose odometry poses are both finite.
+    pub steps: usize,
+    /// Median distance between consecutive scans, metres.
+    pub median_step_m: f32,
+    /// Median heading change between consecutive scans, radians.
+    pub median_turn_rad: f32,
+    /// Median of the part of a step the arc leaves out, metres.
+    pub median_arc_residual_m: f32,
+    /// Largest part of a step the arc leaves out, metres.
+    pub max_arc_residual_m: f32,
+}
+
+impl ScanSpacing {
+    /// A median step longer than this, metres, makes the scans sparse
+    /// ([`ScanSpacing::is_sparse`]): between the Intel raw part's 0.056 m, which grid SLAM
+    /// maps, and the corrected logs' 0.67 m and 0.97 m, which it loses.
+    pub const SPARSE_STEP_M: f32 = 0.25;
+
+    /// The spacing of scans at the odometry poses `poses` (in scan order; a step with a
+    /// pose that is not finite left out); `None` without a step.
+    pub fn of(poses: impl IntoIterator<Item = Pose2<f32>>) -> Option<Self> {
+        use microslam::pf::prediction::{arc_between, drive_arc};
+        let poses: Vec<Pose2<f32>> = poses.into_iter().collect();
+        let (mut step, mut turn, mut residual) = (Vec::new(), Vec::new(), Vec::new());
+        for pair in poses.windows(2) {
+            let [from, to] = pair else { continue };
+            if !(from.is_finite() && to.is_finite()) {
+                continue;
+            }
+            let (distance, heading_change) = arc_between(from, to);
+            let on_arc = drive_arc(from, distance, heading_change, 0.0);
+            step.push((to.x - from.x).hypot(to.y - from.y));
+            turn.push(heading_change.abs());
+            residual.push((to.x - on_arc.x).hypot(to.y - on_arc.y));
+        }
+        let median = |v: &mut Vec<f32>| {
+            v.sort_by(f32::total_cmp);
+            v.get(v.len() / 2).copied()
+        };
+        Some(Self {
+            steps: step.len(),
+            median_step_m: median(&mut step)?,
+            median_turn_rad: median(&mut turn)?,
+            median_arc_residual_m: median(&mut residual)?,
+            max_arc_residual_m: residual.last().copied()?,
+        })
+    }
+
+    /// `true` when the median step is longer than [`ScanSpacing::SPARSE_STEP_M`].
+    pub fn is_sparse(&self) -> bool {
+        self.median_step_m > Self::SPARSE_STEP_M
+    }
+}
+
 /// Size and place of a SLAM run's square grid on the host.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct GridPlacement {
@@ -730,6 +792,31 @@ mod tests {
         let localizer = loop_closure_settings(None, true, FilterRole::Localizer).unwrap_err();
         assert!(localizer.to_string().contains("grid SLAM"), "{localizer}");
         assert!(settings("[loop_closure]\n", false, FilterRole::Localizer).is_err());
+    }
+
+    #[test]
+    fn scan_spacing_measures_the_steps_and_what_the_arc_leaves_out() {
+        // Three steps: 1 m straight ahead, then a quarter circle of radius 1 m (on an
+        // arc: nothing left out), then 0.1 m sideways (all of it left out).
+        let poses = [
+            Pose2::new(0.0, 0.0, 0.0),
+            Pose2::new(1.0, 0.0, 0.0),
+            Pose2::new(2.0, 1.0, core::f32::consts::FRAC_PI_2),
+            Pose2::new(f32::NAN, 0.0, 0.0),
+            Pose2::new(2.0, 1.0, 0.0),
+            Pose2::new(2.0, 1.1, 0.0),
+        ];
+        let s = ScanSpacing::of(poses).expect("steps");
+        assert_eq!(s.steps, 3);
+        // Steps 1, √2 and 0.1 m; turns 0, π/2 and 0.
+        assert!((s.median_step_m - 1.0).abs() < 1e-6, "{s:?}");
+        assert_eq!(s.median_turn_rad, 0.0);
+        assert!(s.median_arc_residual_m < 1e-6, "{s:?}");
+        assert!((s.max_arc_residual_m - 0.1).abs() < 1e-6, "{s:?}");
+        assert!(s.is_sparse());
+        let dense = ScanSpacing::of((0..10).map(|i| Pose2::new(0.05 * i as f32, 0.0, 0.0)));
+        assert!(!dense.expect("steps").is_sparse());
+        assert_eq!(ScanSpacing::of([Pose2::new(0.0, 0.0, 0.0)]), None);
     }
 }
 

@@ -9,7 +9,7 @@
 //! with no usable beam is counted ([`GridRun::skipped_scans`]) and the pose held.
 
 use super::loop_closure::{Correction, LoopCloser, LoopClosureSummary};
-use crate::domain::grid::{LoopClosureConfig, MAX_BEAMS, SUPPORTED_PARTICLES};
+use crate::domain::grid::{LoopClosureConfig, MAX_BEAMS, SUPPORTED_PARTICLES, ScanSpacing};
 use crate::inputs::readers::carmen::LaserMessage;
 use crate::inputs::sim::lidar_world::LidarRecording;
 use anyhow::{Result, anyhow, bail};
@@ -76,6 +76,8 @@ pub struct GridRun {
     pub off_grid_end_points: u64,
     /// Scans with at least one end point off the grid.
     pub scans_off_grid: usize,
+    /// How far apart the scans are, from their odometry poses (`None` with fewer than two).
+    pub scan_spacing: Option<ScanSpacing>,
     /// The map as it grew ([`run_slam_observed`] with `snapshot_every` > 0; empty otherwise): the first entry holds
     /// the known cells of the starting map, each later one the cells changed since.
     pub snapshots: Vec<MapChanges>,
@@ -135,6 +137,7 @@ impl GridRun {
             non_finite_beams: 0,
             off_grid_end_points: 0,
             scans_off_grid: 0,
+            scan_spacing: None,
             snapshots: Vec::new(),
             localizer: None,
             loop_closure: None,
@@ -268,6 +271,7 @@ fn drive(
         shadow = vec![0; filter.cells().len()];
         run.snapshots.push(changes(&mut shadow, filter.cells(), 0));
     }
+    run.scan_spacing = ScanSpacing::of(inputs.iter().map(|input| input.odometry));
     for (i, input) in inputs.iter().enumerate() {
         let odom = input.odometry;
         if !odom.is_finite() {
