@@ -140,8 +140,9 @@ pub fn drive_arc(
 }
 
 /// The arc `(distance, heading_change)` that takes odometry pose `from` to `to`: the inverse
-/// of [`drive_arc`] (the tiny sideways part of the odometry step is dropped). Signed:
-/// driving backwards gives a negative distance.
+/// of [`drive_arc`] (the sideways part of the odometry step is dropped: tiny for steps a
+/// few centimetres long, tens of millimetres for steps a metre long). Signed: driving
+/// backwards gives a negative distance.
 pub fn arc_between(from: &Pose2<f32>, to: &Pose2<f32>) -> (f32, f32) {
     let dth = wrap(to.theta - from.theta);
     let (s, c) = libm::sincosf(from.theta + 0.5 * dth);
