@@ -187,13 +187,7 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
         );
     }
     crate::drivers::hil::check_protocol(&comparison)?;
-    if let Some(ToHost::Refused { seq, reason, .. }) = run
-        .replies
-        .iter()
-        .find(|r| matches!(r, ToHost::Refused { .. }))
-    {
-        bail!("the device refused command {seq}: {reason}");
-    }
+    crate::drivers::hil::check_refusals(&run.replies)?;
     if comparison
         .device_frames_bad
         .is_some_and(|bad| bad as usize != corrupted)

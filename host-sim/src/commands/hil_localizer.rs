@@ -222,6 +222,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
         );
     }
     crate::drivers::hil::check_protocol(&report.comparison)?;
+    crate::drivers::hil::check_refusals(&run.replies)?;
     if report.replies_received != report.replies_expected
         || report.replies_identical != report.replies_expected
     {

@@ -525,6 +525,20 @@ pub fn check_protocol(comparison: &Comparison) -> Result<()> {
     }
 }
 
+/// Stops at the first command the device refused (`ToHost::Refused`), naming its sequence
+/// number and the reason: a refused command (no map in flash, an EKF setting out of its
+/// range, …) makes the rest of the run meaningless even where the host's reference,
+/// refusing the same command, replies alike.
+pub fn check_refusals(replies: &[ToHost]) -> Result<()> {
+    match replies.iter().find_map(|r| match r {
+        ToHost::Refused { seq, reason, .. } => Some((seq, reason)),
+        _ => None,
+    }) {
+        Some((seq, reason)) => bail!("the device refused command {seq}: {reason}"),
+        None => Ok(()),
+    }
+}
+
 /// The error for a device that speaks wire protocol `device`, not this host's.
 fn other_protocol(device: u16) -> anyhow::Error {
     anyhow::anyhow!(
@@ -602,7 +616,7 @@ mod tests {
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::sync::{Arc, Mutex};
 
-    use microslam::wire::{EstimatorKind, Status};
+    use microslam::wire::{EstimatorKind, PROTOCOL_VERSION, Refusal, Status};
 
     use super::*;
 
@@ -869,6 +883,29 @@ mod tests {
         assert!(
             dropped.load(Ordering::SeqCst),
             "the reader thread still holds the port"
+        );
+    }
+
+    #[test]
+    fn the_first_refused_command_stops_the_run_with_its_reason() {
+        let refused = |seq, reason| ToHost::Refused {
+            seq,
+            reason,
+            estimator: EstimatorKind::Ekf,
+        };
+        let mut replies = vec![answer(PROTOCOL_VERSION, None)];
+        assert!(check_refusals(&replies).is_ok());
+        replies.push(refused(1, Refusal::NoMap));
+        replies.push(refused(5, Refusal::InvalidEkfSetting { field: 11 }));
+        let error = check_refusals(&replies).expect_err("a refusal stops the run");
+        assert_eq!(
+            error.to_string(),
+            "the device refused command 1: the firmware carries no map"
+        );
+        let error = check_refusals(&replies[2..]).expect_err("a refusal stops the run");
+        assert_eq!(
+            error.to_string(),
+            "the device refused command 5: EKF setting `bearing_std` is out of its range"
         );
     }
 }
