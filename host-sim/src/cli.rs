@@ -70,7 +70,7 @@ pub enum Command {
     ExportRosbag(ExportRosbagArgs),
 }
 
-/// Topics and lidar mount of a ROS 2 bag (`rosbag:<file.mcap>`, `export-rosbag`).
+/// Topics and lidar mount of a ROS 2 bag (`rosbag:<bag>`, `export-rosbag`).
 #[derive(Debug, Clone, Args)]
 pub struct BagArgs {
     /// `sensor_msgs/msg/LaserScan` topic.
@@ -188,8 +188,8 @@ pub struct LocalizeArgs {
     #[arg(long)]
     pub map: PathBuf,
     /// Dataset: `carmen:<log>` (a CARMEN log file, or a path under `$SLAM_DATASETS/carmen`,
-    /// e.g. `carmen:intel/intel-raw-part.clf`) or `rosbag:<file.mcap>` (a ROS 2 bag; its
-    /// topics: `--scan-topic`, `--odom-topic`).
+    /// e.g. `carmen:intel/intel-raw-part.clf`) or `rosbag:<bag>` (a ROS 2 bag: an `.mcap`
+    /// or `.db3` file or a rosbag2 bag folder; its topics: `--scan-topic`, `--odom-topic`).
     #[arg(long, short)]
     pub dataset: DatasetSpec,
     /// Grid filter settings (TOML): `base = "default" | "seed" | "microcontroller"` and any
@@ -305,8 +305,9 @@ impl From<&GlobalArgs> for GlobalOptions {
 /// Options of `host-sim replay`.
 #[derive(Debug, Clone, Args)]
 pub struct ReplayArgs {
-    /// Dataset: `mrclam:<dir>` (landmarks), `carmen:<log>` or `rosbag:<file.mcap>`
-    /// (lidar; a ROS 2 bag's topics: `--scan-topic`, `--odom-topic`) or `thor:<dir>`
+    /// Dataset: `mrclam:<dir>` (landmarks), `carmen:<log>` or `rosbag:<bag>` (lidar; a
+    /// ROS 2 bag: an `.mcap` or `.db3` file or a rosbag2 bag folder, its topics:
+    /// `--scan-topic`, `--odom-topic`) or `thor:<dir>`
     /// (encoders + IMU): a path, or a name under `$SLAM_DATASETS/<family>`, e.g.
     /// `mrclam:dataset6`, `carmen:intel/intel-raw-part.clf`, `thor:thor`;
     /// `mrclam:dataset6/robot3` picks the robot (overrides `--robot`).

@@ -75,7 +75,7 @@ pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
     );
     if args.animate.is_some() && !(grid && lidar_log) {
         bail!(
-            "--animate draws grid SLAM on a lidar log (carmen:<file> or rosbag:<file.mcap>), not a {} replay",
+            "--animate draws grid SLAM on a lidar log (carmen:<file> or rosbag:<bag>), not a {} replay",
             args.dataset.family()
         );
     }
@@ -554,7 +554,7 @@ pub(crate) fn lidar_log(
 ) -> Result<LidarLog> {
     let (DatasetSpec::Carmen(file) | DatasetSpec::Rosbag(file)) = spec else {
         bail!(
-            "a grid run needs a lidar dataset (carmen:<file> or rosbag:<file.mcap>), not {}",
+            "a grid run needs a lidar dataset (carmen:<file> or rosbag:<bag>), not {}",
             spec.family()
         );
     };

@@ -193,11 +193,11 @@ pub fn front_scans(log: &CarmenLog) -> Vec<&LaserMessage> {
     log.lasers().filter(|l| !l.rear).collect()
 }
 
-/// A `carmen:<file>` location: the path itself when it exists, else relative to the
-/// datasets folder.
+/// A `carmen:<file>` or `rosbag:<file or folder>` location: the path itself when it
+/// exists, else relative to the datasets folder.
 pub fn resolve_log(spec: &str) -> Result<PathBuf> {
     let direct = PathBuf::from(spec);
-    if direct.is_file() {
+    if direct.exists() {
         return Ok(direct);
     }
     crate::domain::datasets::dataset_path(spec)

@@ -3,6 +3,7 @@
 //! Readers do no estimation; the replay loop does no parsing. A truncated or corrupt line
 //! is an error naming the file and the line number.
 
+pub mod bag_storage;
 pub mod carmen;
 pub mod map;
 pub mod mrclam;
@@ -29,8 +30,8 @@ pub enum DatasetSpec {
     Carmen(String),
     /// THOR `.npz` files: a folder, or a name under the datasets folder (`thor:thor`).
     Thor(String),
-    /// A ROS 2 bag: an MCAP file with `sensor_msgs/msg/LaserScan` and
-    /// `nav_msgs/msg/Odometry` messages (`rosbag:<file.mcap>`).
+    /// A ROS 2 bag with `sensor_msgs/msg/LaserScan` and `nav_msgs/msg/Odometry` messages:
+    /// an MCAP or SQLite 3 file, or a rosbag2 bag folder (`rosbag:<bag>`).
     Rosbag(String),
 }
 
@@ -43,7 +44,7 @@ impl FromStr for DatasetSpec {
             Some(("thor", dir)) if !dir.is_empty() => Ok(Self::Thor(dir.to_owned())),
             Some(("rosbag", file)) if !file.is_empty() => Ok(Self::Rosbag(file.to_owned())),
             _ => Err(format!(
-                "unknown dataset `{s}`: expected `mrclam:<dir>` (e.g. mrclam:dataset6, or mrclam:dataset6/robot3 for one robot), `carmen:<file>`, `thor:<dir>` or `rosbag:<file.mcap>`"
+                "unknown dataset `{s}`: expected `mrclam:<dir>` (e.g. mrclam:dataset6, or mrclam:dataset6/robot3 for one robot), `carmen:<file>`, `thor:<dir>` or `rosbag:<bag>` (an .mcap or .db3 file, or a rosbag2 bag folder)"
             )),
         }
     }

@@ -1,11 +1,13 @@
-//! ROS 2 bag reader (`rosbag:<file.mcap>`): `sensor_msgs/msg/LaserScan`,
-//! `nav_msgs/msg/Odometry` and `sensor_msgs/msg/Imu` messages, CDR-encoded, in an MCAP
-//! file (the default rosbag2 storage), read with the `mcap` crate and decoded with
-//! `cdr-encoding` (serde).
+//! ROS 2 bag reader (`rosbag:<bag>`): `sensor_msgs/msg/LaserScan`,
+//! `nav_msgs/msg/Odometry` and `sensor_msgs/msg/Imu` messages, CDR-encoded, in either of
+//! rosbag2's storages — an MCAP file (read with the `mcap` crate), an SQLite 3 file
+//! (`.db3`, read with `rusqlite`), or a bag folder of split files ([`super::bag_storage`])
+//! — and decoded with `cdr-encoding` (serde).
 //!
 //! The scans become the same laser messages a CARMEN log gives ([`LaserMessage`]: ranges,
 //! the odometry pose at the scan, the stamp), so a bag goes through the same drivers as a
-//! CARMEN log. Messages are taken in **file order** (the order rosbag2 received them);
+//! CARMEN log. Messages are taken in the order rosbag2 plays them (the order it received
+//! them: an MCAP file's order, an SQLite file's receive times);
 //! the odometry pose of a scan is interpolated at the scan's header stamp between the
 //! odometry messages received just before and just after it (an odometry message with
 //! exactly the scan's stamp is taken as it is). The lidar geometry comes from the scans
@@ -18,8 +20,9 @@
 //! that does not decode, and a missing scan or odometry topic are errors naming the file
 //! and the topic.
 
+use super::bag_storage::{BagFiles, Channel};
 use super::carmen::LaserMessage;
-use anyhow::{Context, Result, anyhow, bail};
+use anyhow::{Result, anyhow, bail};
 use byteorder::{BigEndian, LittleEndian};
 use microslam::geometry::{Pose2, wrap_angle};
 use microslam::sensors::lidar::LidarGeometry;
@@ -347,12 +350,6 @@ impl RosBag {
     }
 }
 
-/// A topic's channel as the bag declares it.
-struct Channel {
-    schema: String,
-    encoding: String,
-}
-
 /// Checks that `topic` carries `expected` messages in CDR.
 fn check_type(path: &Path, topic: &str, ch: &Channel, expected: &str) -> Result<()> {
     if ch.schema != expected {
@@ -370,27 +367,6 @@ fn check_type(path: &Path, topic: &str, ch: &Channel, expected: &str) -> Result<
         );
     }
     Ok(())
-}
-
-/// The bag's topics and their channels (from the summary when there is one, else from the
-/// messages themselves).
-fn topics(path: &Path, bytes: &[u8]) -> Result<BTreeMap<String, Channel>> {
-    let mut out = BTreeMap::new();
-    for m in mcap::MessageStream::new(bytes)
-        .with_context(|| format!("{}: not an MCAP file", path.display()))?
-    {
-        let m = m.with_context(|| format!("{}: truncated or corrupt MCAP", path.display()))?;
-        out.entry(m.channel.topic.clone())
-            .or_insert_with(|| Channel {
-                schema: m
-                    .channel
-                    .schema
-                    .as_ref()
-                    .map_or_else(String::new, |s| s.name.clone()),
-                encoding: m.channel.message_encoding.clone(),
-            });
-    }
-    Ok(out)
 }
 
 /// `/tf_static`'s transforms as a child → (parent, pose) table (2D: x, y, yaw).
@@ -457,8 +433,8 @@ fn odometry_at(odom: &[(f64, Pose2<f64>)], before: usize, t: f64) -> Option<Pose
 
 /// Reads a ROS 2 bag (MCAP) for grid SLAM or localization.
 pub fn read(path: &Path, options: &BagOptions) -> Result<RosBag> {
-    let bytes = std::fs::read(path).with_context(|| format!("opening {}", path.display()))?;
-    let channels = topics(path, &bytes)?;
+    let bag = BagFiles::open(path)?;
+    let channels = bag.topics()?;
     let listed = || channels.keys().cloned().collect::<Vec<_>>().join(", ");
     for (topic, expected) in [
         (&options.scan_topic, msg::LASER_SCAN),
@@ -487,21 +463,21 @@ pub fn read(path: &Path, options: &BagOptions) -> Result<RosBag> {
     let mut robot_frame: Option<String> = None;
     let mut imu = Vec::new();
     let mut tf = Vec::new();
-    for (k, m) in mcap::MessageStream::new(&bytes)?.enumerate() {
-        let m = m.with_context(|| format!("{}: truncated or corrupt MCAP", path.display()))?;
-        let topic = m.channel.topic.as_str();
+    bag.for_each_message(|m| {
+        let topic = m.topic;
         let bad = |e: anyhow::Error| {
             anyhow!(
-                "{}: topic {topic}, message {k} (log time {} ns): {e}",
-                path.display(),
+                "{}: topic {topic}, message {} (log time {} ns): {e}",
+                m.file.display(),
+                m.index,
                 m.log_time
             )
         };
         if topic == options.scan_topic {
-            let s: msg::LaserScan = decode_cdr(&m.data).map_err(bad)?;
+            let s: msg::LaserScan = decode_cdr(m.data).map_err(bad)?;
             scans.push((s, odom.len()));
         } else if topic == options.odom_topic {
-            let o: msg::Odometry = decode_cdr(&m.data).map_err(bad)?;
+            let o: msg::Odometry = decode_cdr(m.data).map_err(bad)?;
             let p = &o.pose.pose;
             odom.push((
                 o.header.stamp.seconds(),
@@ -509,7 +485,7 @@ pub fn read(path: &Path, options: &BagOptions) -> Result<RosBag> {
             ));
             robot_frame.get_or_insert(o.child_frame_id.trim_start_matches('/').to_owned());
         } else if topic == options.imu_topic {
-            let i: msg::Imu = decode_cdr(&m.data).map_err(bad)?;
+            let i: msg::Imu = decode_cdr(m.data).map_err(bad)?;
             let a = i.linear_acceleration;
             imu.push(ImuSample {
                 stamp: i.header.stamp.seconds(),
@@ -517,9 +493,10 @@ pub fn read(path: &Path, options: &BagOptions) -> Result<RosBag> {
                 acceleration: [a.x, a.y, a.z],
             });
         } else if topic == options.tf_static_topic {
-            tf.push(decode_cdr::<msg::TfMessage>(&m.data).map_err(bad)?);
+            tf.push(decode_cdr::<msg::TfMessage>(m.data).map_err(bad)?);
         }
-    }
+        Ok(())
+    })?;
     let (first, _) = scans.first().ok_or_else(|| {
         anyhow!(
             "{}: no messages on topic {}",

@@ -1,0 +1,354 @@
+//! Where a ROS 2 bag's messages are stored: the two storages of rosbag2 — MCAP (`.mcap`,
+//! the default since ROS 2 Iron) and SQLite 3 (`.db3`, the default up to Humble) — as one
+//! file, or as a rosbag2 bag folder holding one file or several split ones
+//! (`<name>_0.db3`, `<name>_1.db3`, …, beside `metadata.yaml`).
+//!
+//! A file's storage is told by its first bytes (MCAP's and SQLite's magic), not by its
+//! name. A folder's bag files are the MCAP and SQLite files in it, taken in the order of
+//! their split number (the digits after the last `_` of the name) and then of their name;
+//! other files (`metadata.yaml`) are not read. The messages are read in the order
+//! rosbag2 plays them: an MCAP file in file order (the order rosbag2 received them), an
+//! SQLite file ordered by receive time and then by row (rosbag2's `ORDER BY timestamp,
+//! id`); split files one after the other.
+//!
+//! The SQLite tables read are those every rosbag2 release writes: `topics` (`id`, `name`,
+//! `type`, `serialization_format`) and `messages` (`id`, `topic_id`, `timestamp`,
+//! `data`); the columns later releases added are not needed. The files are opened
+//! read-only with `rusqlite` (SQLite compiled in: no system library).
+
+use anyhow::{Context, Result, anyhow, bail};
+use rusqlite::{Connection, OpenFlags};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// The first bytes of an MCAP file.
+const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
+/// The first bytes of an SQLite 3 database file.
+const SQLITE_MAGIC: &[u8] = b"SQLite format 3\0";
+
+/// What a topic carries, as the bag declares it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Channel {
+    /// The message type (`sensor_msgs/msg/LaserScan`).
+    pub schema: String,
+    /// The serialization (`cdr` for every ROS 2 bag).
+    pub encoding: String,
+}
+
+/// One message as stored.
+#[derive(Clone, Copy, Debug)]
+pub struct StoredMessage<'a> {
+    /// The topic.
+    pub topic: &'a str,
+    /// The time rosbag2 received it (ns).
+    pub log_time: u64,
+    /// The serialized message (CDR with its encapsulation header).
+    pub data: &'a [u8],
+    /// The file it is in.
+    pub file: &'a Path,
+    /// Its position: the index in the MCAP file, or the row id in the SQLite file.
+    pub index: u64,
+}
+
+/// The storage of one bag file.
+enum Storage {
+    /// An MCAP file, read into memory.
+    Mcap(Vec<u8>),
+    /// An SQLite 3 database, opened read-only.
+    Sqlite(Connection),
+}
+
+/// The files of a bag, opened.
+pub struct BagFiles {
+    files: Vec<(PathBuf, Storage)>,
+}
+
+impl BagFiles {
+    /// Opens `path`: a bag file (MCAP or SQLite 3) or a rosbag2 bag folder.
+    pub fn open(path: &Path) -> Result<Self> {
+        let paths = if path.is_dir() {
+            bag_files_in(path)?
+        } else {
+            vec![path.to_path_buf()]
+        };
+        let mut files = Vec::with_capacity(paths.len());
+        for p in paths {
+            let storage = open_file(&p)?;
+            files.push((p, storage));
+        }
+        let mcap = files
+            .iter()
+            .filter(|(_, s)| matches!(s, Storage::Mcap(_)))
+            .count();
+        if mcap != 0 && mcap != files.len() {
+            bail!(
+                "{}: the folder holds both MCAP and SQLite bag files",
+                path.display()
+            );
+        }
+        Ok(Self { files })
+    }
+
+    /// The bag files, in the order their messages are read.
+    pub fn paths(&self) -> impl Iterator<Item = &Path> {
+        self.files.iter().map(|(p, _)| p.as_path())
+    }
+
+    /// Every topic of the bag with its type and encoding (a topic declared by several
+    /// split files with different types is an error).
+    pub fn topics(&self) -> Result<BTreeMap<String, Channel>> {
+        let mut out: BTreeMap<String, Channel> = BTreeMap::new();
+        for (path, storage) in &self.files {
+            let found = match storage {
+                Storage::Mcap(bytes) => mcap_topics(path, bytes)?,
+                Storage::Sqlite(db) => sqlite_topics(path, db)?.into_values().collect(),
+            };
+            for (topic, channel) in found {
+                match out.get(&topic) {
+                    Some(seen) if *seen != channel => bail!(
+                        "{}: topic {topic} carries `{}` ({}), an earlier file of the bag `{}` ({})",
+                        path.display(),
+                        channel.schema,
+                        channel.encoding,
+                        seen.schema,
+                        seen.encoding
+                    ),
+                    Some(_) => {}
+                    None => {
+                        out.insert(topic, channel);
+                    }
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Calls `each` with every message of the bag, in the order rosbag2 plays them; stops
+    /// at the first error (of the storage or of `each`).
+    pub fn for_each_message(
+        &self,
+        mut each: impl FnMut(StoredMessage<'_>) -> Result<()>,
+    ) -> Result<()> {
+        for (path, storage) in &self.files {
+            match storage {
+                Storage::Mcap(bytes) => {
+                    let stream = mcap::MessageStream::new(bytes)
+                        .with_context(|| format!("{}: not an MCAP file", path.display()))?;
+                    for (k, m) in stream.enumerate() {
+                        let m = m.with_context(|| {
+                            format!("{}: truncated or corrupt MCAP", path.display())
+                        })?;
+                        each(StoredMessage {
+                            topic: &m.channel.topic,
+                            log_time: m.log_time,
+                            data: &m.data,
+                            file: path,
+                            index: k as u64,
+                        })?;
+                    }
+                }
+                Storage::Sqlite(db) => sqlite_messages(path, db, &mut each)?,
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The bag files in the folder `dir`, in split order.
+fn bag_files_in(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut found = Vec::new();
+    let entries = std::fs::read_dir(dir).with_context(|| format!("reading {}", dir.display()))?;
+    for entry in entries {
+        let path = entry
+            .with_context(|| format!("reading {}", dir.display()))?
+            .path();
+        if path.is_file() && storage_of(&path)?.is_some() {
+            found.push(path);
+        }
+    }
+    if found.is_empty() {
+        bail!(
+            "{}: a folder without bag files (MCAP or SQLite 3, e.g. `<name>_0.mcap` or `<name>_0.db3`)",
+            dir.display()
+        );
+    }
+    found.sort_by_cached_key(|p| (split_number(p), p.clone()));
+    Ok(found)
+}
+
+/// The split number of a rosbag2 bag file: the digits after the last `_` of its name
+/// without the extension (`run_12.db3` → 12); `u64::MAX` without one.
+fn split_number(path: &Path) -> u64 {
+    path.file_stem()
+        .and_then(|s| s.to_str())
+        .and_then(|s| s.rsplit_once('_'))
+        .and_then(|(_, n)| n.parse().ok())
+        .unwrap_or(u64::MAX)
+}
+
+/// The storage a file's first bytes show: `Some(true)` MCAP, `Some(false)` SQLite,
+/// `None` neither.
+fn storage_of(path: &Path) -> Result<Option<bool>> {
+    use std::io::Read;
+    let mut head = [0u8; 16];
+    let mut file =
+        std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let mut n = 0;
+    while n < head.len() {
+        match file.read(&mut head[n..]) {
+            Ok(0) => break,
+            Ok(k) => n += k,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+        }
+    }
+    let head = &head[..n];
+    Ok(if head.starts_with(MCAP_MAGIC) {
+        Some(true)
+    } else if head.starts_with(SQLITE_MAGIC) {
+        Some(false)
+    } else {
+        None
+    })
+}
+
+fn open_file(path: &Path) -> Result<Storage> {
+    match storage_of(path)? {
+        Some(true) => Ok(Storage::Mcap(
+            std::fs::read(path).with_context(|| format!("opening {}", path.display()))?,
+        )),
+        Some(false) => {
+            let flags = OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX;
+            let db = Connection::open_with_flags(path, flags)
+                .with_context(|| format!("{}: cannot open the SQLite bag", path.display()))?;
+            Ok(Storage::Sqlite(db))
+        }
+        None => bail!(
+            "{}: neither an MCAP nor an SQLite 3 file (ROS 2 bags are `.mcap` or `.db3`)",
+            path.display()
+        ),
+    }
+}
+
+/// The topics of an MCAP file (from its messages' channels).
+fn mcap_topics(path: &Path, bytes: &[u8]) -> Result<Vec<(String, Channel)>> {
+    let mut out = BTreeMap::new();
+    for m in mcap::MessageStream::new(bytes)
+        .with_context(|| format!("{}: not an MCAP file", path.display()))?
+    {
+        let m = m.with_context(|| format!("{}: truncated or corrupt MCAP", path.display()))?;
+        out.entry(m.channel.topic.clone())
+            .or_insert_with(|| Channel {
+                schema: m
+                    .channel
+                    .schema
+                    .as_ref()
+                    .map_or_else(String::new, |s| s.name.clone()),
+                encoding: m.channel.message_encoding.clone(),
+            });
+    }
+    Ok(out.into_iter().collect())
+}
+
+/// The `topics` table of a rosbag2 SQLite file: id → (name, channel).
+fn sqlite_topics(path: &Path, db: &Connection) -> Result<BTreeMap<i64, (String, Channel)>> {
+    let not_a_bag = |e: rusqlite::Error| {
+        anyhow!(
+            "{}: cannot read rosbag2's table `topics` (`id`, `name`, `type`, `serialization_format`): {e}",
+            path.display()
+        )
+    };
+    let mut statement = db
+        .prepare("SELECT id, name, type, serialization_format FROM topics ORDER BY id")
+        .map_err(not_a_bag)?;
+    let rows = statement
+        .query_map([], |row| {
+            Ok((
+                row.get::<_, i64>(0)?,
+                (
+                    row.get::<_, String>(1)?,
+                    Channel {
+                        schema: row.get(2)?,
+                        encoding: row.get(3)?,
+                    },
+                ),
+            ))
+        })
+        .map_err(not_a_bag)?;
+    let mut out = BTreeMap::new();
+    for row in rows {
+        let (id, topic) = row.map_err(not_a_bag)?;
+        out.insert(id, topic);
+    }
+    Ok(out)
+}
+
+/// The `messages` table of a rosbag2 SQLite file, in rosbag2's play order.
+fn sqlite_messages(
+    path: &Path,
+    db: &Connection,
+    each: &mut impl FnMut(StoredMessage<'_>) -> Result<()>,
+) -> Result<()> {
+    let topics = sqlite_topics(path, db)?;
+    let corrupt = |e: rusqlite::Error| {
+        anyhow!(
+            "{}: cannot read rosbag2's table `messages` (`id`, `topic_id`, `timestamp`, `data`): {e}",
+            path.display()
+        )
+    };
+    let mut statement = db
+        .prepare("SELECT id, topic_id, timestamp, data FROM messages ORDER BY timestamp, id")
+        .map_err(corrupt)?;
+    let mut rows = statement.query([]).map_err(corrupt)?;
+    while let Some(row) = rows.next().map_err(corrupt)? {
+        let id: i64 = row.get(0).map_err(corrupt)?;
+        let topic_id: i64 = row.get(1).map_err(corrupt)?;
+        let stamp: i64 = row.get(2).map_err(corrupt)?;
+        let data = row.get_ref(3).map_err(corrupt)?.as_blob().map_err(|e| {
+            anyhow!(
+                "{}: message {id}: its data is not a blob: {e}",
+                path.display()
+            )
+        })?;
+        let Some((topic, _)) = topics.get(&topic_id) else {
+            bail!(
+                "{}: message {id}: topic id {topic_id} is not in the table `topics`",
+                path.display()
+            );
+        };
+        let log_time = u64::try_from(stamp).map_err(|_| {
+            anyhow!(
+                "{}: message {id}: negative receive time {stamp} ns",
+                path.display()
+            )
+        })?;
+        each(StoredMessage {
+            topic,
+            log_time,
+            data,
+            file: path,
+            index: id as u64,
+        })?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn split_files_sort_by_their_number() {
+        let n = |s: &str| split_number(Path::new(s));
+        assert_eq!(n("run_0.db3"), 0);
+        assert_eq!(n("dir/my_run_12.mcap"), 12);
+        assert_eq!(n("run.db3"), u64::MAX);
+        assert_eq!(n("run_x.db3"), u64::MAX);
+        let mut v = ["b_10.db3", "b_2.db3", "a.db3", "b_1.db3"].map(PathBuf::from);
+        v.sort_by_cached_key(|p| (split_number(p), p.clone()));
+        assert_eq!(
+            v.map(|p| p.display().to_string()),
+            ["b_1.db3", "b_2.db3", "b_10.db3", "a.db3"]
+        );
+    }
+}
