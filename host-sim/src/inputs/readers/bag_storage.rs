@@ -89,11 +89,6 @@ impl BagFiles {
         Ok(Self { files })
     }
 
-    /// The bag files, in the order their messages are read.
-    pub fn paths(&self) -> impl Iterator<Item = &Path> {
-        self.files.iter().map(|(p, _)| p.as_path())
-    }
-
     /// Every topic of the bag with its type and encoding (a topic declared by several
     /// split files with different types is an error).
     pub fn topics(&self) -> Result<BTreeMap<String, Channel>> {
