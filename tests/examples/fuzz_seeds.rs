@@ -1,5 +1,7 @@
 //! Writes seed inputs for the wire fuzz targets: valid frames of every message kind (a
-//! fuzzer rarely forges a CRC by itself), alone and in streams.
+//! fuzzer rarely forges a CRC by itself), alone and in streams; and for the ROS 2 bag
+//! reader, a small MCAP bag and the same messages as a structured SQLite bag (the input
+//! layouts of `microslam_replay_tests::fuzzing::rosbag_reader`).
 //!
 //! `cargo run -p microslam-replay-tests --example fuzz_seeds -- fuzz/corpus`
 
@@ -105,5 +107,55 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         std::fs::write(root.join(target).join("seed-stream"), &stream)?;
     }
     println!("wrote {} frames to {}", messages.len(), root.display());
+    rosbag_seeds(&root.join("rosbag_reader"))?;
+    Ok(())
+}
+
+/// Two scans of five beams with their odometry and a static transform: as an MCAP bag
+/// (first byte 0: the file itself) and as structured SQLite messages (first byte 1).
+fn rosbag_seeds(dir: &std::path::Path) -> Result<(), Box<dyn std::error::Error>> {
+    use host_sim::inputs::readers::carmen::LaserMessage;
+    use host_sim::output::rosbag::export;
+    std::fs::create_dir_all(dir)?;
+    let scans: Vec<LaserMessage> = (0..2)
+        .map(|k| LaserMessage {
+            rear: false,
+            ranges: vec![1.0, 2.0, 81.9, 3.5, 4.0],
+            pose: [0.1 * f64::from(k), 0.0, 0.05 * f64::from(k)],
+            odom: [0.1 * f64::from(k), 0.0, 0.05 * f64::from(k)],
+            stamp: 100.0 + f64::from(k),
+        })
+        .collect();
+    let refs: Vec<&LaserMessage> = scans.iter().collect();
+    let mut lidar = host_sim::domain::grid::carmen_lidar(5);
+    lidar.mount = microslam::geometry::Pose2::new(0.1, 0.0, 0.0);
+    let work = tempfile::tempdir()?;
+    let bag = work.path().join("seed.mcap");
+    export(
+        &bag,
+        &refs,
+        &lidar,
+        &host_sim::inputs::readers::rosbag::BagOptions::default(),
+    )?;
+    let bytes = std::fs::read(&bag)?;
+    let mut file = vec![0u8];
+    file.extend_from_slice(&bytes);
+    std::fs::write(dir.join("seed-mcap-bag"), &file)?;
+    // The same messages, structured: topic index, receive time, length, data.
+    let topics = ["/scan", "/odom", "/imu", "/tf_static"];
+    let mut structured = vec![1u8];
+    for m in mcap::MessageStream::new(&bytes)? {
+        let m = m?;
+        let topic = topics
+            .iter()
+            .position(|t| *t == m.channel.topic)
+            .ok_or("an unexpected topic")?;
+        structured.push(topic as u8);
+        structured.extend_from_slice(&(m.log_time as i64).to_le_bytes());
+        structured.extend_from_slice(&u16::try_from(m.data.len())?.to_le_bytes());
+        structured.extend_from_slice(&m.data);
+    }
+    std::fs::write(dir.join("seed-structured-db3"), &structured)?;
+    println!("wrote 2 bags to {}", dir.display());
     Ok(())
 }

@@ -127,20 +127,18 @@ impl BagFiles {
         for (path, storage) in &self.files {
             match storage {
                 Storage::Mcap(bytes) => {
-                    let stream = mcap::MessageStream::new(bytes)
-                        .with_context(|| format!("{}: not an MCAP file", path.display()))?;
-                    for (k, m) in stream.enumerate() {
-                        let m = m.with_context(|| {
-                            format!("{}: truncated or corrupt MCAP", path.display())
-                        })?;
+                    let mut k = 0;
+                    mcap_messages(path, bytes, |channel, log_time, data| {
+                        let index = k;
+                        k += 1;
                         each(StoredMessage {
-                            topic: &m.channel.topic,
-                            log_time: m.log_time,
-                            data: &m.data,
+                            topic: &channel.topic,
+                            log_time,
+                            data,
                             file: path,
-                            index: k as u64,
-                        })?;
-                    }
+                            index,
+                        })
+                    })?;
                 }
                 Storage::Sqlite(db) => sqlite_messages(path, db, &mut each)?,
             }
@@ -228,21 +226,97 @@ fn open_file(path: &Path) -> Result<Storage> {
 /// The topics of an MCAP file (from its messages' channels).
 fn mcap_topics(path: &Path, bytes: &[u8]) -> Result<Vec<(String, Channel)>> {
     let mut out = BTreeMap::new();
-    for m in mcap::MessageStream::new(bytes)
-        .with_context(|| format!("{}: not an MCAP file", path.display()))?
-    {
-        let m = m.with_context(|| format!("{}: truncated or corrupt MCAP", path.display()))?;
-        out.entry(m.channel.topic.clone())
-            .or_insert_with(|| Channel {
-                schema: m
-                    .channel
-                    .schema
-                    .as_ref()
-                    .map_or_else(String::new, |s| s.name.clone()),
-                encoding: m.channel.message_encoding.clone(),
-            });
-    }
+    mcap_messages(path, bytes, |channel, _, _| {
+        out.entry(channel.topic.clone())
+            .or_insert_with(|| channel.channel.clone());
+        Ok(())
+    })?;
     Ok(out.into_iter().collect())
+}
+
+/// The longest record an MCAP bag may hold: 1 GiB, the longest message rosbag2's SQLite
+/// storage takes (SQLite's default blob limit). Longer is a corrupt length.
+const MCAP_RECORD_LIMIT: usize = 1 << 30;
+
+/// A channel of an MCAP file: its topic, type and encoding.
+struct McapChannel {
+    topic: String,
+    channel: Channel,
+}
+
+/// Calls `each` with every message of the MCAP file `bytes` in file order (chunks
+/// decompressed), with its channel, log time and data.
+///
+/// Read with the `mcap` crate's sans-io reader rather than its `MessageStream`, which sets
+/// no record length limit: a corrupt length inside a compressed chunk made it reserve
+/// that many bytes (found by the `rosbag_reader` fuzz target: an abort on 6.9 EB).
+fn mcap_messages(
+    path: &Path,
+    bytes: &[u8],
+    mut each: impl FnMut(&McapChannel, u64, &[u8]) -> Result<()>,
+) -> Result<()> {
+    use mcap::records::Record;
+    use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
+    let corrupt =
+        |e: mcap::McapError| anyhow!("{}: truncated or corrupt MCAP: {e}", path.display());
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default().with_record_length_limit(MCAP_RECORD_LIMIT),
+    );
+    let mut rest = bytes;
+    let mut schemas: BTreeMap<u16, String> = BTreeMap::new();
+    let mut channels: BTreeMap<u16, McapChannel> = BTreeMap::new();
+    while let Some(event) = reader.next_event() {
+        match event.map_err(corrupt)? {
+            LinearReadEvent::ReadRequest(need) => {
+                let n = need.min(rest.len());
+                reader.insert(n).copy_from_slice(&rest[..n]);
+                reader.notify_read(n);
+                rest = &rest[n..];
+            }
+            LinearReadEvent::Record { data, opcode } => {
+                match mcap::parse_record(opcode, data).map_err(corrupt)? {
+                    Record::Schema { header, .. } => {
+                        schemas.insert(header.id, header.name);
+                    }
+                    Record::Channel(c) => {
+                        let schema = match c.schema_id {
+                            0 => String::new(),
+                            id => schemas.get(&id).cloned().ok_or_else(|| {
+                                anyhow!(
+                                    "{}: truncated or corrupt MCAP: channel {} ({}) names schema {id}, which comes nowhere before it",
+                                    path.display(),
+                                    c.id,
+                                    c.topic
+                                )
+                            })?,
+                        };
+                        channels.insert(
+                            c.id,
+                            McapChannel {
+                                topic: c.topic,
+                                channel: Channel {
+                                    schema,
+                                    encoding: c.message_encoding,
+                                },
+                            },
+                        );
+                    }
+                    Record::Message { header, data } => {
+                        let channel = channels.get(&header.channel_id).ok_or_else(|| {
+                            anyhow!(
+                                "{}: truncated or corrupt MCAP: a message of channel {}, which comes nowhere before it",
+                                path.display(),
+                                header.channel_id
+                            )
+                        })?;
+                        each(channel, header.log_time, &data)?;
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The `topics` table of a rosbag2 SQLite file: id → (name, channel).
