@@ -492,7 +492,7 @@ fn structured_db3(path: &std::path::Path, mut data: &[u8]) {
 /// Fuzzes the ROS 2 bag reader (`host-sim --dataset rosbag:`). An even first byte: the
 /// rest is the bag file itself (MCAP, SQLite 3 or neither, as its first bytes say); an odd
 /// one: the rest lists messages that are stored into a rosbag2 SQLite file
-/// ([`structured_db3`]), so that the fuzzer reaches the reader's own checks past
+/// (`structured_db3`), so that the fuzzer reaches the reader's own checks past
 /// SQLite's. No panic; an error names the file; a bag read has scans that all have the
 /// first scan's beam count, and a valid lidar geometry.
 pub fn rosbag_reader(data: &[u8]) {
