@@ -179,27 +179,24 @@ fn split_number(path: &Path) -> u64 {
         .unwrap_or(u64::MAX)
 }
 
-/// The storage a file's first bytes show: `Some(true)` MCAP, `Some(false)` SQLite,
-/// `None` neither.
-fn storage_of(path: &Path) -> Result<Option<bool>> {
+/// The two storages of rosbag2.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    Mcap,
+    Sqlite,
+}
+
+/// The storage a file's first bytes show, `None` for neither.
+fn storage_of(path: &Path) -> Result<Option<Kind>> {
     use std::io::Read;
-    let mut head = [0u8; 16];
-    let mut file =
-        std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    let mut n = 0;
-    while n < head.len() {
-        match file.read(&mut head[n..]) {
-            Ok(0) => break,
-            Ok(k) => n += k,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
-        }
-    }
-    let head = &head[..n];
+    let mut head = Vec::with_capacity(SQLITE_MAGIC.len());
+    std::fs::File::open(path)
+        .and_then(|f| f.take(SQLITE_MAGIC.len() as u64).read_to_end(&mut head))
+        .with_context(|| format!("reading {}", path.display()))?;
     Ok(if head.starts_with(MCAP_MAGIC) {
-        Some(true)
+        Some(Kind::Mcap)
     } else if head.starts_with(SQLITE_MAGIC) {
-        Some(false)
+        Some(Kind::Sqlite)
     } else {
         None
     })
@@ -207,10 +204,10 @@ fn storage_of(path: &Path) -> Result<Option<bool>> {
 
 fn open_file(path: &Path) -> Result<Storage> {
     match storage_of(path)? {
-        Some(true) => Ok(Storage::Mcap(
+        Some(Kind::Mcap) => Ok(Storage::Mcap(
             std::fs::read(path).with_context(|| format!("opening {}", path.display()))?,
         )),
-        Some(false) => {
+        Some(Kind::Sqlite) => {
             let flags = OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX;
             let db = Connection::open_with_flags(path, flags)
                 .with_context(|| format!("{}: cannot open the SQLite bag", path.display()))?;
