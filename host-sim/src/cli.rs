@@ -189,7 +189,8 @@ pub struct LocalizeArgs {
     pub map: PathBuf,
     /// Dataset: `carmen:<log>` (a CARMEN log file, or a path under `$SLAM_DATASETS/carmen`,
     /// e.g. `carmen:intel/intel-raw-part.clf`) or `rosbag:<bag>` (a ROS 2 bag: an `.mcap`
-    /// or `.db3` file or a rosbag2 bag folder; its topics: `--scan-topic`, `--odom-topic`).
+    /// or `.db3` file, plain or zstd-compressed, or a rosbag2 bag folder; its topics:
+    /// `--scan-topic`, `--odom-topic`).
     #[arg(long, short)]
     pub dataset: DatasetSpec,
     /// Grid filter settings (TOML): `base = "default" | "seed" | "microcontroller"` and any
@@ -306,7 +307,8 @@ impl From<&GlobalArgs> for GlobalOptions {
 #[derive(Debug, Clone, Args)]
 pub struct ReplayArgs {
     /// Dataset: `mrclam:<dir>` (landmarks), `carmen:<log>` or `rosbag:<bag>` (lidar; a
-    /// ROS 2 bag: an `.mcap` or `.db3` file or a rosbag2 bag folder, its topics:
+    /// ROS 2 bag: an `.mcap` or `.db3` file, plain or zstd-compressed, or a rosbag2 bag
+    /// folder, its topics:
     /// `--scan-topic`, `--odom-topic`) or `thor:<dir>`
     /// (encoders + IMU): a path, or a name under `$SLAM_DATASETS/<family>`, e.g.
     /// `mrclam:dataset6`, `carmen:intel/intel-raw-part.clf`, `thor:thor`;

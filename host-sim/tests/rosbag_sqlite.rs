@@ -2,7 +2,8 @@
 //! rosbag2 bag folders (split files): the Intel log written as an MCAP bag
 //! (`export-rosbag`) and copied message for message into `.db3` files with rosbag2's
 //! tables reads back to the same scans, odometry and lidar; rows are played in receive-time
-//! order; bad files are refused with the file named.
+//! order; bad files are refused with the file named. rosbag2's compressed bags (zstd,
+//! whole files or each message) read like the plain ones.
 
 use host_sim::domain::datasets::dataset_path;
 use host_sim::domain::grid::carmen_lidar;
@@ -164,6 +165,105 @@ fn a_bag_folder_reads_its_split_files_in_order() {
     std::fs::create_dir(&mcap_bag).unwrap();
     std::fs::copy(&mcap, mcap_bag.join("mcap_bag_0.mcap")).unwrap();
     assert_same_bag(&whole, &rosbag::read(&mcap_bag, &options).unwrap());
+}
+
+/// `bytes` compressed as rosbag2's zstd compressor writes them (one Zstandard stream).
+fn zstd(bytes: &[u8]) -> Vec<u8> {
+    zstd::encode_all(bytes, 3).unwrap()
+}
+
+#[test]
+fn compressed_bags_read_like_the_plain_bag() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mcap, messages) = intel_bag(dir.path());
+    let options = BagOptions::default();
+    let whole = rosbag::read(&mcap, &options).unwrap();
+    let db3 = dir.path().join("intel.db3");
+    write_db3(&db3, Tables::Current, &messages, None);
+
+    // `--compression-mode file`: each bag file one zstd stream, of either storage.
+    for (plain, name) in [(&db3, "intel.db3.zstd"), (&mcap, "intel.mcap.zstd")] {
+        let compressed = dir.path().join(name);
+        std::fs::write(&compressed, zstd(&std::fs::read(plain).unwrap())).unwrap();
+        assert_same_bag(&whole, &rosbag::read(&compressed, &options).unwrap());
+    }
+
+    // `--compression-mode message`: each message's data one zstd frame.
+    let per_message: Vec<Stored> = messages
+        .iter()
+        .map(|(topic, schema, stamp, data)| (topic.clone(), schema.clone(), *stamp, zstd(data)))
+        .collect();
+    let message_db3 = dir.path().join("messages.db3");
+    write_db3(&message_db3, Tables::Current, &per_message, None);
+    assert_same_bag(&whole, &rosbag::read(&message_db3, &options).unwrap());
+
+    // A bag folder of compressed split files, in split order (by name `_10` comes first).
+    let bag = dir.path().join("zbag");
+    std::fs::create_dir(&bag).unwrap();
+    let third = messages.len() / 3;
+    let parts = [
+        ("zbag_1.db3", &messages[..third]),
+        ("zbag_2.db3", &messages[third..2 * third]),
+        ("zbag_10.db3", &messages[2 * third..]),
+    ];
+    for (name, part) in parts {
+        let plain = dir.path().join(name);
+        write_db3(&plain, Tables::Current, part, None);
+        let compressed = bag.join(format!("{name}.zstd"));
+        std::fs::write(&compressed, zstd(&std::fs::read(&plain).unwrap())).unwrap();
+    }
+    assert_same_bag(&whole, &rosbag::read(&bag, &options).unwrap());
+}
+
+#[test]
+fn bad_compressed_bags_are_refused_naming_the_file_and_message() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = [odom_at(1.0, 1.0), scan_at(2.0), odom_at(3.0, 2.0)];
+    let db3 = dir.path().join("good.db3");
+    write_db3(&db3, Tables::Current, &good, None);
+    let compressed = zstd(&std::fs::read(&db3).unwrap());
+
+    // A compressed file cut short.
+    let cut = dir.path().join("cut.db3.zstd");
+    std::fs::write(&cut, &compressed[..compressed.len() / 2]).unwrap();
+    let e = error(&cut);
+    assert!(
+        e.contains("cut.db3.zstd") && e.contains("does not decompress"),
+        "{e}"
+    );
+
+    // A compressed file that holds neither storage.
+    let text = dir.path().join("text.zstd");
+    std::fs::write(&text, zstd(b"rosbag2_bagfile_information:\n")).unwrap();
+    let e = error(&text);
+    assert!(
+        e.contains("text.zstd") && e.contains("neither an MCAP nor an SQLite 3 file"),
+        "{e}"
+    );
+
+    // A compressed SQLite file whose pages are overwritten.
+    let mut plain = std::fs::read(&db3).unwrap();
+    for b in &mut plain[100..] {
+        *b = b.wrapping_mul(31).wrapping_add(7);
+    }
+    let garbled = dir.path().join("garbled.db3.zstd");
+    std::fs::write(&garbled, zstd(&plain)).unwrap();
+    let e = error(&garbled);
+    assert!(e.contains("garbled.db3.zstd"), "{e}");
+
+    // A compressed message that does not decompress: its file, row and topic named.
+    let mut bad = good.clone();
+    let frame = zstd(&bad[1].3);
+    bad[1].3 = frame[..frame.len() - 3].to_vec();
+    let messages = dir.path().join("messages.db3");
+    write_db3(&messages, Tables::Current, &bad, None);
+    let e = error(&messages);
+    assert!(
+        e.contains("messages.db3")
+            && e.contains("message 2 on /scan")
+            && e.contains("does not decompress"),
+        "{e}"
+    );
 }
 
 /// An odometry message at `t` s with the robot at `x` m, and a scan at `t`.

@@ -1,6 +1,7 @@
 //! Writes seed inputs for the wire fuzz targets: valid frames of every message kind (a
 //! fuzzer rarely forges a CRC by itself), alone and in streams; and for the ROS 2 bag
-//! reader, a small MCAP bag and the same messages as a structured SQLite bag (the input
+//! reader, a small MCAP bag (plain and zstd-compressed) and the same messages as a
+//! structured SQLite bag (the input
 //! layouts of `microslam_replay_tests::fuzzing::rosbag_reader`).
 //!
 //! `cargo run -p microslam-replay-tests --example fuzz_seeds -- fuzz/corpus`
@@ -112,7 +113,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 }
 
 /// Two scans of five beams with their odometry and a static transform: as an MCAP bag
-/// (first byte 0: the file itself) and as structured SQLite messages (first byte 1).
+/// (first byte 0: the file itself), the same compressed with zstd, and as structured
+/// SQLite messages (first byte 1), plain and each compressed with zstd.
 fn rosbag_seeds(dir: &std::path::Path) -> Result<(), Box<dyn std::error::Error>> {
     use host_sim::inputs::readers::carmen::LaserMessage;
     use host_sim::output::rosbag::export;
@@ -141,21 +143,37 @@ fn rosbag_seeds(dir: &std::path::Path) -> Result<(), Box<dyn std::error::Error>>
     let mut file = vec![0u8];
     file.extend_from_slice(&bytes);
     std::fs::write(dir.join("seed-mcap-bag"), &file)?;
+    // The same bag compressed whole, as rosbag2's `--compression-mode file` writes it.
+    let mut compressed = vec![0u8];
+    compressed.extend_from_slice(&zstd::encode_all(bytes.as_slice(), 3)?);
+    std::fs::write(dir.join("seed-zstd-mcap-bag"), &compressed)?;
     // The same messages, structured: topic index, receive time, length, data.
     let topics = ["/scan", "/odom", "/imu", "/tf_static"];
+    // And with each message compressed, as rosbag2's `--compression-mode message` stores it.
     let mut structured = vec![1u8];
+    let mut compressed_messages = vec![1u8];
     for m in mcap::MessageStream::new(&bytes)? {
         let m = m?;
         let topic = topics
             .iter()
             .position(|t| *t == m.channel.topic)
             .ok_or("an unexpected topic")?;
-        structured.push(topic as u8);
-        structured.extend_from_slice(&(m.log_time as i64).to_le_bytes());
-        structured.extend_from_slice(&u16::try_from(m.data.len())?.to_le_bytes());
-        structured.extend_from_slice(&m.data);
+        let frame = zstd::encode_all(&m.data[..], 3)?;
+        for (out, data) in [
+            (&mut structured, &m.data[..]),
+            (&mut compressed_messages, &frame[..]),
+        ] {
+            out.push(topic as u8);
+            out.extend_from_slice(&(m.log_time as i64).to_le_bytes());
+            out.extend_from_slice(&u16::try_from(data.len())?.to_le_bytes());
+            out.extend_from_slice(data);
+        }
     }
     std::fs::write(dir.join("seed-structured-db3"), &structured)?;
-    println!("wrote 2 bags to {}", dir.display());
+    std::fs::write(
+        dir.join("seed-structured-zstd-messages-db3"),
+        &compressed_messages,
+    )?;
+    println!("wrote 4 bags to {}", dir.display());
     Ok(())
 }

@@ -3,8 +3,16 @@
 //! file, or as a rosbag2 bag folder holding one file or several split ones
 //! (`<name>_0.db3`, `<name>_1.db3`, …, beside `metadata.yaml`).
 //!
-//! A file's storage is told by its first bytes (MCAP's and SQLite's magic), not by its
-//! name. A folder's bag files are the MCAP and SQLite files in it, taken in the order of
+//! rosbag2's compressed bags (`ros2 bag record --compression-format zstd`) are read too:
+//! with `--compression-mode file` each bag file is one Zstandard stream (`<name>_0.db3.zstd`,
+//! `<name>_0.mcap.zstd`), decompressed into memory when it is opened (at most
+//! [`DECOMPRESSED_FILE_LIMIT`]); with `--compression-mode message` each message's data is
+//! a Zstandard frame, decompressed as it is read.
+//!
+//! A file's storage is told by its first bytes (MCAP's, SQLite's and Zstandard's magic),
+//! not by its name; a message is compressed when its data starts with Zstandard's magic
+//! (uncompressed CDR starts with its encapsulation header, `00 00` or `00 01`). A folder's
+//! bag files are the MCAP, SQLite and Zstandard files in it, taken in the order of
 //! their split number (the digits after the last `_` of the name) and then of their name;
 //! other files (`metadata.yaml`) are not read. The messages are read in the order
 //! rosbag2 plays them: an MCAP file in file order (the order rosbag2 received them), an
@@ -25,6 +33,13 @@ use std::path::{Path, PathBuf};
 const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
 /// The first bytes of an SQLite 3 database file.
 const SQLITE_MAGIC: &[u8] = b"SQLite format 3\0";
+/// The first bytes of a Zstandard frame.
+const ZSTD_MAGIC: &[u8] = b"\x28\xb5\x2f\xfd";
+
+/// The largest a compressed bag file may be once decompressed into memory: 4 GiB. A
+/// larger one is refused with a hint to decompress it on disk (`zstd -d`), from where an
+/// SQLite bag is read without loading it.
+pub const DECOMPRESSED_FILE_LIMIT: u64 = 4 << 30;
 
 /// What a topic carries, as the bag declares it.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -48,6 +63,18 @@ pub struct StoredMessage<'a> {
     pub file: &'a Path,
     /// Its position: the index in the MCAP file, or the row id in the SQLite file.
     pub index: u64,
+}
+
+impl StoredMessage<'_> {
+    /// Where the message is, for an error: the file and its position there.
+    fn place(&self) -> String {
+        format!(
+            "{}: message {} on {}",
+            self.file.display(),
+            self.index,
+            self.topic
+        )
+    }
 }
 
 /// The storage of one bag file.
@@ -120,10 +147,28 @@ impl BagFiles {
 
     /// Calls `each` with every message of the bag, in the order rosbag2 plays them; stops
     /// at the first error (of the storage or of `each`).
+    /// A message stored compressed is handed over decompressed.
     pub fn for_each_message(
         &self,
         mut each: impl FnMut(StoredMessage<'_>) -> Result<()>,
     ) -> Result<()> {
+        let mut plain = Vec::new();
+        let mut each = |message: StoredMessage<'_>| {
+            if !message.data.starts_with(ZSTD_MAGIC) {
+                return each(message);
+            }
+            plain.clear();
+            unzstd(message.data, MCAP_RECORD_LIMIT as u64, &mut plain).map_err(|e| {
+                anyhow!(
+                    "{}: its zstd-compressed data does not decompress: {e}",
+                    message.place()
+                )
+            })?;
+            each(StoredMessage {
+                data: &plain,
+                ..message
+            })
+        };
         for (path, storage) in &self.files {
             match storage {
                 Storage::Mcap(bytes) => {
@@ -170,20 +215,39 @@ fn bag_files_in(dir: &Path) -> Result<Vec<PathBuf>> {
 }
 
 /// The split number of a rosbag2 bag file: the digits after the last `_` of its name
-/// without the extension (`run_12.db3` → 12); `u64::MAX` without one.
+/// without the extensions (`run_12.db3` and `run_12.db3.zstd` → 12); `u64::MAX` without one.
 fn split_number(path: &Path) -> u64 {
-    path.file_stem()
+    path.file_name()
         .and_then(|s| s.to_str())
+        .map(|s| s.strip_suffix(".zstd").unwrap_or(s))
+        .and_then(|s| Path::new(s).file_stem()?.to_str())
         .and_then(|s| s.rsplit_once('_'))
         .and_then(|(_, n)| n.parse().ok())
         .unwrap_or(u64::MAX)
 }
 
-/// The two storages of rosbag2.
+/// What a bag file's first bytes show: one of the two storages of rosbag2, or either of
+/// them compressed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Kind {
     Mcap,
     Sqlite,
+    Zstd,
+}
+
+impl Kind {
+    /// The kind `head`, a file's first bytes, shows; `None` for none.
+    fn of(head: &[u8]) -> Option<Self> {
+        if head.starts_with(MCAP_MAGIC) {
+            Some(Self::Mcap)
+        } else if head.starts_with(SQLITE_MAGIC) {
+            Some(Self::Sqlite)
+        } else if head.starts_with(ZSTD_MAGIC) {
+            Some(Self::Zstd)
+        } else {
+            None
+        }
+    }
 }
 
 /// The storage a file's first bytes show, `None` for neither.
@@ -193,13 +257,7 @@ fn storage_of(path: &Path) -> Result<Option<Kind>> {
     std::fs::File::open(path)
         .and_then(|f| f.take(SQLITE_MAGIC.len() as u64).read_to_end(&mut head))
         .with_context(|| format!("reading {}", path.display()))?;
-    Ok(if head.starts_with(MCAP_MAGIC) {
-        Some(Kind::Mcap)
-    } else if head.starts_with(SQLITE_MAGIC) {
-        Some(Kind::Sqlite)
-    } else {
-        None
-    })
+    Ok(Kind::of(&head))
 }
 
 fn open_file(path: &Path) -> Result<Storage> {
@@ -213,11 +271,83 @@ fn open_file(path: &Path) -> Result<Storage> {
                 .with_context(|| format!("{}: cannot open the SQLite bag", path.display()))?;
             Ok(Storage::Sqlite(db))
         }
+        Some(Kind::Zstd) => open_compressed(path),
         None => bail!(
-            "{}: neither an MCAP nor an SQLite 3 file (ROS 2 bags are `.mcap` or `.db3`)",
+            "{}: neither an MCAP nor an SQLite 3 file (ROS 2 bags are `.mcap` or `.db3`, or either compressed with zstd)",
             path.display()
         ),
     }
+}
+
+/// A bag file compressed whole (rosbag2's `--compression-mode file`), decompressed into
+/// memory.
+fn open_compressed(path: &Path) -> Result<Storage> {
+    let compressed = std::fs::read(path).with_context(|| format!("opening {}", path.display()))?;
+    let mut bytes = Vec::new();
+    unzstd(&compressed, DECOMPRESSED_FILE_LIMIT, &mut bytes).map_err(|e| {
+        anyhow!(
+            "{}: a zstd-compressed bag file that does not decompress: {e}",
+            path.display()
+        )
+    })?;
+    drop(compressed);
+    match Kind::of(&bytes) {
+        Some(Kind::Mcap) => Ok(Storage::Mcap(bytes)),
+        Some(Kind::Sqlite) => {
+            let open = || {
+                let mut db = Connection::open_in_memory()?;
+                db.deserialize_read_exact(rusqlite::MAIN_DB, bytes.as_slice(), bytes.len(), true)?;
+                Ok::<_, rusqlite::Error>(db)
+            };
+            let db = open().map_err(|e| {
+                anyhow!(
+                    "{}: cannot open the decompressed SQLite bag: {e}",
+                    path.display()
+                )
+            })?;
+            Ok(Storage::Sqlite(db))
+        }
+        Some(Kind::Zstd) | None => bail!(
+            "{}: zstd-compressed, but what it holds is neither an MCAP nor an SQLite 3 file",
+            path.display()
+        ),
+    }
+}
+
+/// Why a Zstandard stream was not decompressed.
+#[derive(Debug)]
+enum Unzstd {
+    /// Corrupt, cut short, or not Zstandard.
+    Corrupt(std::io::Error),
+    /// It decompresses to more than the limit (bytes).
+    TooLarge(u64),
+}
+
+impl std::fmt::Display for Unzstd {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Corrupt(e) => write!(f, "{e}"),
+            Self::TooLarge(limit) => write!(
+                f,
+                "it decompresses to more than {} MiB; decompress it with `zstd -d` and read that",
+                limit >> 20
+            ),
+        }
+    }
+}
+
+/// Decompresses the Zstandard frames `data` into `out`, at most `limit` bytes.
+fn unzstd(data: &[u8], limit: u64, out: &mut Vec<u8>) -> std::result::Result<(), Unzstd> {
+    use std::io::Read;
+    let decoder = zstd::stream::read::Decoder::with_buffer(data).map_err(Unzstd::Corrupt)?;
+    let read = decoder
+        .take(limit.saturating_add(1))
+        .read_to_end(out)
+        .map_err(Unzstd::Corrupt)?;
+    if read as u64 > limit {
+        return Err(Unzstd::TooLarge(limit));
+    }
+    Ok(())
 }
 
 /// The topics of an MCAP file (from its messages' channels).
