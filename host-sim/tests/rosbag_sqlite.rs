@@ -137,6 +137,30 @@ fn an_sqlite_bag_reads_like_the_mcap_bag() {
     }
 }
 
+/// A rosbag2 bag folder `dir/name` holding `messages` in three split `.db3` files,
+/// numbered 1, 2 and 10 (by name `_10` would come before `_2`), each compressed whole
+/// with zstd (`<name>_1.db3.zstd`, …) when `compressed`.
+fn write_split_bag(dir: &Path, name: &str, messages: &[Stored], compressed: bool) -> PathBuf {
+    let bag = dir.join(name);
+    std::fs::create_dir(&bag).unwrap();
+    let third = messages.len() / 3;
+    let parts = [
+        (1, &messages[..third]),
+        (2, &messages[third..2 * third]),
+        (10, &messages[2 * third..]),
+    ];
+    for (split, part) in parts {
+        let file = bag.join(format!("{name}_{split}.db3"));
+        write_db3(&file, Tables::Current, part, None);
+        if compressed {
+            let bytes = zstd(&std::fs::read(&file).unwrap());
+            std::fs::remove_file(&file).unwrap();
+            std::fs::write(bag.join(format!("{name}_{split}.db3.zstd")), bytes).unwrap();
+        }
+    }
+    bag
+}
+
 #[test]
 fn a_bag_folder_reads_its_split_files_in_order() {
     let dir = tempfile::tempdir().unwrap();
@@ -145,17 +169,7 @@ fn a_bag_folder_reads_its_split_files_in_order() {
     let whole = rosbag::read(&mcap, &options).unwrap();
 
     // Three split files; by name `_10` would come before `_2`.
-    let bag = dir.path().join("intel_bag");
-    std::fs::create_dir(&bag).unwrap();
-    let third = messages.len() / 3;
-    let parts = [
-        ("intel_bag_1.db3", &messages[..third]),
-        ("intel_bag_2.db3", &messages[third..2 * third]),
-        ("intel_bag_10.db3", &messages[2 * third..]),
-    ];
-    for (name, part) in parts {
-        write_db3(&bag.join(name), Tables::Current, part, None);
-    }
+    let bag = write_split_bag(dir.path(), "intel_bag", &messages, false);
     std::fs::write(bag.join("metadata.yaml"), "rosbag2_bagfile_information:\n").unwrap();
     let split = rosbag::read(&bag, &options).unwrap();
     assert_same_bag(&whole, &split);
@@ -198,20 +212,7 @@ fn compressed_bags_read_like_the_plain_bag() {
     assert_same_bag(&whole, &rosbag::read(&message_db3, &options).unwrap());
 
     // A bag folder of compressed split files, in split order (by name `_10` comes first).
-    let bag = dir.path().join("zbag");
-    std::fs::create_dir(&bag).unwrap();
-    let third = messages.len() / 3;
-    let parts = [
-        ("zbag_1.db3", &messages[..third]),
-        ("zbag_2.db3", &messages[third..2 * third]),
-        ("zbag_10.db3", &messages[2 * third..]),
-    ];
-    for (name, part) in parts {
-        let plain = dir.path().join(name);
-        write_db3(&plain, Tables::Current, part, None);
-        let compressed = bag.join(format!("{name}.zstd"));
-        std::fs::write(&compressed, zstd(&std::fs::read(&plain).unwrap())).unwrap();
-    }
+    let bag = write_split_bag(dir.path(), "zbag", &messages, true);
     assert_same_bag(&whole, &rosbag::read(&bag, &options).unwrap());
 }
 
