@@ -327,10 +327,14 @@ impl std::fmt::Display for Unzstd {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::Corrupt(e) => write!(f, "{e}"),
-            Self::TooLarge(limit) => write!(
+            Self::TooLarge(limit) if limit >> 20 > 0 => write!(
                 f,
                 "it decompresses to more than {} MiB; decompress it with `zstd -d` and read that",
                 limit >> 20
+            ),
+            Self::TooLarge(limit) => write!(
+                f,
+                "it decompresses to more than {limit} bytes; decompress it with `zstd -d` and read that"
             ),
         }
     }
@@ -540,11 +544,39 @@ mod tests {
         assert_eq!(n("dir/my_run_12.mcap"), 12);
         assert_eq!(n("run.db3"), u64::MAX);
         assert_eq!(n("run_x.db3"), u64::MAX);
+        assert_eq!(n("run_3.db3.zstd"), 3);
+        assert_eq!(n("run_3.mcap.zstd"), 3);
         let mut v = ["b_10.db3", "b_2.db3", "a.db3", "b_1.db3"].map(PathBuf::from);
         v.sort_by_cached_key(|p| (split_number(p), p.clone()));
         assert_eq!(
             v.map(|p| p.display().to_string()),
             ["b_1.db3", "b_2.db3", "b_10.db3", "a.db3"]
         );
+    }
+
+    #[test]
+    fn a_zstd_stream_decompresses_up_to_its_limit() {
+        let data: Vec<u8> = (0..3000u32).map(|k| (k % 251) as u8).collect();
+        let packed = zstd::encode_all(data.as_slice(), 3).unwrap();
+        let mut out = Vec::new();
+        unzstd(&packed, 3000, &mut out).unwrap();
+        assert_eq!(out, data, "exactly at the limit");
+        out.clear();
+        let e = unzstd(&packed, 2999, &mut out).unwrap_err().to_string();
+        assert!(
+            e.contains("more than 2999 bytes") && e.contains("zstd -d"),
+            "{e}"
+        );
+        let e = Unzstd::TooLarge(DECOMPRESSED_FILE_LIMIT).to_string();
+        assert!(e.contains("more than 4096 MiB"), "{e}");
+        // Two frames one after the other (as a concatenation of compressed parts) are one stream.
+        let twice = [packed.as_slice(), packed.as_slice()].concat();
+        out.clear();
+        unzstd(&twice, 6000, &mut out).unwrap();
+        assert_eq!(out, [data.as_slice(), data.as_slice()].concat());
+        // Cut short.
+        out.clear();
+        let e = unzstd(&packed[..packed.len() - 4], 6000, &mut out).unwrap_err();
+        assert!(matches!(e, Unzstd::Corrupt(_)), "{e}");
     }
 }
