@@ -252,6 +252,17 @@ fn bad_compressed_bags_are_refused_naming_the_file_and_message() {
     let e = error(&garbled);
     assert!(e.contains("garbled.db3.zstd"), "{e}");
 
+    // A split both plain and compressed (a compression that did not finish).
+    let twice = dir.path().join("twice_bag");
+    std::fs::create_dir(&twice).unwrap();
+    std::fs::copy(&db3, twice.join("twice_bag_0.db3")).unwrap();
+    std::fs::write(twice.join("twice_bag_0.db3.zstd"), &compressed).unwrap();
+    let e = error(&twice);
+    assert!(
+        e.contains("twice_bag_0.db3 and") && e.contains("twice_bag_0.db3.zstd are both split 0"),
+        "{e}"
+    );
+
     // A compressed message that does not decompress: its file, row and topic named.
     let mut bad = good.clone();
     let frame = zstd(&bad[1].3);

@@ -13,8 +13,9 @@
 //! not by its name; a message is compressed when its data starts with Zstandard's magic
 //! (uncompressed CDR starts with its encapsulation header, `00 00` or `00 01`). A folder's
 //! bag files are the MCAP, SQLite and Zstandard files in it, taken in the order of
-//! their split number (the digits after the last `_` of the name) and then of their name;
-//! other files (`metadata.yaml`) are not read. The messages are read in the order
+//! their split number (the digits after the last `_` of the name) and then of their name
+//! (two files of one split number are an error); other files (`metadata.yaml`) are not
+//! read. The messages are read in the order
 //! rosbag2 plays them: an MCAP file in file order (the order rosbag2 received them), an
 //! SQLite file ordered by receive time and then by row (rosbag2's `ORDER BY timestamp,
 //! id`); split files one after the other.
@@ -211,6 +212,20 @@ fn bag_files_in(dir: &Path) -> Result<Vec<PathBuf>> {
         );
     }
     found.sort_by_cached_key(|p| (split_number(p), p.clone()));
+    // Two files of one split (`run_0.db3` beside `run_0.db3.zstd`, left by a compression
+    // that did not finish) would play its messages twice.
+    if let Some(pair) = found
+        .windows(2)
+        .find(|w| split_number(&w[0]) != u64::MAX && split_number(&w[0]) == split_number(&w[1]))
+    {
+        bail!(
+            "{}: {} and {} are both split {} of the bag; keep one",
+            dir.display(),
+            pair[0].display(),
+            pair[1].display(),
+            split_number(&pair[0])
+        );
+    }
     Ok(found)
 }
 
