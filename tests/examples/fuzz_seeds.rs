@@ -1,8 +1,8 @@
 //! Writes seed inputs for the wire fuzz targets: valid frames of every message kind (a
 //! fuzzer rarely forges a CRC by itself), alone and in streams; and for the ROS 2 bag
 //! reader, a small MCAP bag (plain and zstd-compressed) and the same messages as a
-//! structured SQLite bag (the input
-//! layouts of `microslam_replay_tests::fuzzing::rosbag_reader`).
+//! structured SQLite bag (plain and each message zstd-compressed; the input layouts of
+//! `microslam_replay_tests::fuzzing::rosbag_reader`).
 //!
 //! `cargo run -p microslam-replay-tests --example fuzz_seeds -- fuzz/corpus`
 

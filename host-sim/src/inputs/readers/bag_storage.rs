@@ -204,7 +204,7 @@ fn bag_files_in(dir: &Path) -> Result<Vec<PathBuf>> {
             .with_context(|| format!("reading {}", dir.display()))?
             .path();
         if path.is_file() && storage_of(&path)?.is_some() {
-            found.push(path);
+            found.push((split_number(&path), path));
         }
     }
     if found.is_empty() {
@@ -213,22 +213,21 @@ fn bag_files_in(dir: &Path) -> Result<Vec<PathBuf>> {
             dir.display()
         );
     }
-    found.sort_by_cached_key(|p| (split_number(p), p.clone()));
+    found.sort();
     // Two files of one split (`run_0.db3` beside `run_0.db3.zstd`, left by a compression
     // that did not finish) would play its messages twice.
-    if let Some(pair) = found
+    if let Some([(split, a), (_, b)]) = found
         .windows(2)
-        .find(|w| split_number(&w[0]) != u64::MAX && split_number(&w[0]) == split_number(&w[1]))
+        .find(|w| w[0].0 != u64::MAX && w[0].0 == w[1].0)
     {
         bail!(
-            "{}: {} and {} are both split {} of the bag; keep one",
+            "{}: {} and {} are both split {split} of the bag; keep one",
             dir.display(),
-            pair[0].display(),
-            pair[1].display(),
-            split_number(&pair[0])
+            a.display(),
+            b.display(),
         );
     }
-    Ok(found)
+    Ok(found.into_iter().map(|(_, path)| path).collect())
 }
 
 /// The split number of a rosbag2 bag file: the digits after the last `_` of its name
