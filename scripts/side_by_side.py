@@ -6,7 +6,6 @@ Not a script of its own; the two scripts import it from this folder.
 
 import os
 import shutil
-import statistics
 import subprocess
 import sys
 import time
@@ -52,10 +51,6 @@ def warn_if_busy():
     if load > 0.5:
         print(f"{TOOL}: warning: the machine is busy (load average {load:.1f} over the last "
               "minute); another process on the cores skews both sides differently", file=sys.stderr)
-
-
-def median(times) -> float:
-    return statistics.median(times)
 
 
 def kf_slam_peer(scratch: Path):
