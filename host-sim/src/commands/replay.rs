@@ -371,9 +371,11 @@ pub(crate) fn report(quiet: bool, dataset: &str, metrics: &serde_json::Value, ou
     }
     if let Some(a) = metrics.get("reference").map(|r| &r["ate"]) {
         println!(
-            "  ATE vs reference ({} of {} poses matched): {:.4} m SE(2), {:.4} m first pose",
+            "  ATE vs reference ({} of {} poses matched, {} in the run's span, within {:.3} s): {:.4} m SE(2), {:.4} m first pose",
             a["matched"],
             a["reference_poses"],
+            a["in_span"],
+            a["tolerance_s"].as_f64().unwrap_or(f64::NAN),
             a["ate_m"]["se2"].as_f64().unwrap_or(f64::NAN),
             a["ate_m"]["first_pose"].as_f64().unwrap_or(f64::NAN)
         );

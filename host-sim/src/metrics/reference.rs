@@ -8,8 +8,12 @@
 //! matched poses) and `se2` (least-squares rotation + translation of the positions).
 //!
 //! Matching: every reference pose is paired with the run pose of the nearest stamp when
-//! the two are at most `tolerance_s` apart; a run pose is used at most once, so stamps
-//! that repeat or go backwards in the run (the Intel log's do) cannot count a pose twice.
+//! the two are at most half a scan period apart ([`matching_tolerance_s`]: half the
+//! median interval between the run's stamps), so every reference pose that has a scan
+//! within half a period is scored; a run pose is used at most once, so stamps that repeat
+//! or go backwards in the run (the Intel log's do) cannot count a pose twice. The figures
+//! always travel with how many reference poses they cover ([`ReferenceAte::matched`],
+//! and [`ReferenceAte::in_span`], the reference poses inside the run's time span).
 
 use super::{Aligned, position_rmse, transforms, yaw_rmse_deg};
 use crate::drivers::grid::GridRun;
@@ -19,18 +23,41 @@ use microslam::geometry::Pose2;
 use serde::Serialize;
 use std::path::Path;
 
-/// Stamps of the run and the reference closer than this (seconds) are the same scan
-/// (`intel.gfs.log` and `intel-raw-part.clf` agree to a few milliseconds: 345 of the
-/// 346 corrected poses inside the raw part match within 5 ms, 319 within 1 ms).
-pub const STAMP_TOLERANCE_S: f64 = 5e-3;
+/// How far apart (seconds) a reference pose and a run pose may be to be paired: half the
+/// median interval between the run's distinct stamps (half a scan period), so that a
+/// reference pose is paired with the scan it was taken at, never with a neighbour. `None`
+/// with fewer than two distinct finite stamps.
+pub fn matching_tolerance_s(run: &[(f64, Pose2<f64>)]) -> Option<f64> {
+    let mut stamps: Vec<f64> = run
+        .iter()
+        .map(|(t, _)| *t)
+        .filter(|t| t.is_finite())
+        .collect();
+    stamps.sort_by(f64::total_cmp);
+    let mut gaps: Vec<f64> = stamps
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|g| *g > 0.0)
+        .collect();
+    if gaps.is_empty() {
+        return None;
+    }
+    gaps.sort_by(f64::total_cmp);
+    Some(0.5 * gaps[gaps.len() / 2])
+}
 
 /// ATE and heading RMSE against a reference trajectory.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct ReferenceAte {
     /// Reference poses in the file.
     pub reference_poses: usize,
+    /// Reference poses whose stamps lie inside the run's time span (first to last scan,
+    /// widened by the tolerance): those a run could be scored on.
+    pub in_span: usize,
     /// Reference poses matched to a run pose (the ATE is over these).
     pub matched: usize,
+    /// The pairing tolerance, seconds ([`matching_tolerance_s`]).
+    pub tolerance_s: f64,
     /// Position RMSE, metres.
     pub ate_m: Aligned,
     /// Heading RMSE, degrees.
@@ -74,6 +101,17 @@ pub fn evaluate(
     tolerance_s: f64,
 ) -> ReferenceAte {
     let pairs = match_by_stamp(run, reference, tolerance_s);
+    let (lo, hi) = run
+        .iter()
+        .map(|(t, _)| *t)
+        .filter(|t| t.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
+            (lo.min(t), hi.max(t))
+        });
+    let in_span = reference
+        .iter()
+        .filter(|r| r.stamp >= lo - tolerance_s && r.stamp <= hi + tolerance_s)
+        .count();
     let (est, gt): (Vec<Pose2<f64>>, Vec<Pose2<f64>>) = pairs.into_iter().unzip();
     let (fp, se2) = transforms(&est, &gt);
     let figure = |f: &dyn Fn(&Pose2<f64>) -> Option<f64>| Aligned {
@@ -82,15 +120,17 @@ pub fn evaluate(
     };
     ReferenceAte {
         reference_poses: reference.len(),
+        in_span,
         matched: est.len(),
+        tolerance_s,
         ate_m: figure(&|t| position_rmse(t, &est, &gt)),
         yaw_deg: figure(&|t| yaw_rmse_deg(t, &est, &gt)),
     }
 }
 
 /// ATE of a grid run's trajectory against the reference trajectory in `path` (TUM or a
-/// corrected CARMEN log, stamps + `offset_s`), matched by stamp within
-/// [`STAMP_TOLERANCE_S`]. A reference that matches no scan is an error.
+/// corrected CARMEN log, stamps + `offset_s`), matched by stamp within half a scan
+/// period ([`matching_tolerance_s`]). A reference that matches no scan is an error.
 pub fn grid_run_ate(run: &GridRun, path: &Path, offset_s: f64) -> Result<ReferenceAte> {
     let poses = reference::read(path, offset_s)?;
     let traj: Vec<(f64, Pose2<f64>)> = run
@@ -103,12 +143,18 @@ pub fn grid_run_ate(run: &GridRun, path: &Path, offset_s: f64) -> Result<Referen
             )
         })
         .collect();
-    let ate = evaluate(&traj, &poses, STAMP_TOLERANCE_S);
+    let Some(tolerance_s) = matching_tolerance_s(&traj) else {
+        bail!(
+            "{}: the run has fewer than two distinct scan stamps: no scan period to match the reference by",
+            path.display()
+        );
+    };
+    let ate = evaluate(&traj, &poses, tolerance_s);
     if ate.matched == 0 {
         bail!(
-            "{}: no reference pose matches a scan's stamp within {} s (is --reference-offset right?)",
+            "{}: no reference pose matches a scan's stamp within half a scan period ({:.4} s; is --reference-offset right?)",
             path.display(),
-            STAMP_TOLERANCE_S
+            tolerance_s
         );
     }
     Ok(ate)
@@ -130,6 +176,44 @@ mod tests {
             .collect()
     }
 
+    /// The pairing tolerance of the hand-made runs below (their scans are 0.25 s and 1 s
+    /// apart; their stamps differ from the reference by at most 0.4 ms).
+    const TOLERANCE_S: f64 = 5e-3;
+
+    #[test]
+    fn the_tolerance_is_half_the_median_scan_period() {
+        // Scans every 0.2 s, one repeated stamp, one going backwards, one NaN, one gap.
+        let mut run: Vec<(f64, Pose2<f64>)> = (0..50)
+            .map(|i| (10.0 + 0.2 * f64::from(i), Pose2::IDENTITY))
+            .collect();
+        run.push((12.0, Pose2::IDENTITY));
+        run.push((f64::NAN, Pose2::IDENTITY));
+        run.push((40.0, Pose2::IDENTITY));
+        let t = matching_tolerance_s(&run).expect("a period");
+        assert!((t - 0.1).abs() < 1e-9, "{t}");
+        assert_eq!(matching_tolerance_s(&[(1.0, Pose2::IDENTITY); 3]), None);
+        // A reference pose 0.09 s from a scan is matched, one 0.11 s from every scan is not.
+        let reference = [
+            ReferencePose {
+                stamp: 10.49,
+                pose: Pose2::IDENTITY,
+                line: 1,
+            },
+            ReferencePose {
+                stamp: 20.0,
+                pose: Pose2::IDENTITY,
+                line: 2,
+            },
+            ReferencePose {
+                stamp: 99.0,
+                pose: Pose2::IDENTITY,
+                line: 3,
+            },
+        ];
+        let r = evaluate(&run, &reference, t);
+        assert_eq!((r.reference_poses, r.in_span, r.matched), (3, 2, 1));
+    }
+
     #[test]
     fn a_rigidly_moved_copy_has_zero_se2_error_and_matching_is_by_stamp() {
         // The reference: a bent path; the run: the same path moved rigidly, with scans the
@@ -148,14 +232,14 @@ mod tests {
         run.insert(5, (100.6, Pose2::new(50.0, 50.0, 0.0))); // no reference at 100.6
         run.swap(10, 11); // out of order
         run.insert(20, run[19]); // a repeated scan
-        let r = evaluate(&run, &reference(&truth), STAMP_TOLERANCE_S);
+        let r = evaluate(&run, &reference(&truth), TOLERANCE_S);
         assert_eq!((r.reference_poses, r.matched), (40, 40));
         assert!(r.ate_m.se2.unwrap() < 1e-9, "{r:?}");
         assert!(r.ate_m.first_pose.unwrap() < 1e-9, "{r:?}");
         assert!(r.yaw_deg.se2.unwrap() < 1e-6, "{r:?}");
         // Past the tolerance nothing matches.
         let late: Vec<_> = run.iter().map(|(s, p)| (s + 0.01, *p)).collect();
-        let r = evaluate(&late, &reference(&truth), STAMP_TOLERANCE_S);
+        let r = evaluate(&late, &reference(&truth), TOLERANCE_S);
         assert_eq!(r.matched, 0);
         assert_eq!(r.ate_m, Aligned::default());
     }
@@ -177,7 +261,7 @@ mod tests {
                 (*s, Pose2::new(p.x, dy, 0.0))
             })
             .collect();
-        let r = evaluate(&run, &reference(&truth), STAMP_TOLERANCE_S);
+        let r = evaluate(&run, &reference(&truth), TOLERANCE_S);
         assert!((r.ate_m.se2.unwrap() - 0.1).abs() < 1e-9, "{r:?}");
         assert!(
             (r.ate_m.first_pose.unwrap() - 0.02f64.sqrt()).abs() < 1e-9,
