@@ -1,6 +1,6 @@
 //! The seed's observation model: map correlation of a scan's end points with the occupied
 //! cells, optionally range-weighted, over a `(2k+1) × (2k+1)` window of cell shifts
-//! (seed 2, eqs. 21 and 24).
+//! (Du, n.d., eqs. 21 and 24).
 //!
 //! `corr(shift) = Σ_i w_i · 1[cell(end point i) + shift is occupied]`, with
 //! `w_i = range_i^γ` (γ = 0: the plain count). Weights are fixed point
@@ -19,9 +19,14 @@
 //! [`crate::grid::OccupancyGrid`] with a `BITMAP`) the search is sparse
 //! ([`search_window_sparse`]): each window row is cut from the bitmap by one 4-byte read
 //! and only its set bits add the beam's weight. Walls are thin, so most rows are empty
-//! and the rest hold a few bits: on a Cortex-M4F a third of the byte-wise search's
-//! instructions (on x86 the vectorised byte-wise search is the faster one).
-//! [`search_window_brute_force`] is the plain triple loop, kept as the reference.
+//! and the rest hold a few bits (what that saves against the byte-wise search is measured
+//! in `docs/speed.md`). [`search_window_brute_force`] is the plain triple loop, kept as
+//! the reference.
+//!
+//! # References
+//!
+//! - Du, C. (n.d.). *ECE 276 Project: Particle Filter SLAM*. Department of Electrical
+//!   Computer Engineering, University of California, San Diego.
 
 #[cfg(all(feature = "std", target_arch = "x86_64"))]
 mod avx512;

@@ -31,11 +31,10 @@ pub fn search_window_sparse(
 /// [`search_window_sparse`] for a map whose occupied-cell bitmap has `S` bytes a row
 /// (`⌈width / 8⌉`), known when the program is built: the 9 × 9 window's row offsets are
 /// then constants — no bounds check per row, the offsets inside the load instructions:
-/// on the Cortex-M4F about a sixth fewer instructions per grid step, on the host about a
-/// tenth less time (see `docs/speed.md`). Same scores. Another window size, or a map of
-/// another width, takes the general sparse path for any window size (correct, slower);
-/// `S = 0` is that path alone. [`search_window_packed`] is the same for a 3 × 3 or 5 × 5
-/// window.
+/// fewer instructions per grid step on the Cortex-M4F, less time on the host (measured in
+/// `docs/speed.md`). Same scores. Another window size, or a map of another width, takes
+/// the general sparse path for any window size (correct, slower); `S = 0` is that path
+/// alone. [`search_window_packed`] is the same for a 3 × 3 or 5 × 5 window.
 ///
 /// A build uses only the copies it names: [`crate::pf::GridSlam`] takes this for its
 /// grid of compile-time width, [`crate::pf::GridLocalizer::with_bitmap_row_bytes`] for a

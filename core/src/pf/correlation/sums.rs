@@ -88,8 +88,8 @@ impl<const R: usize> WindowSums for RowSums<R> {
 /// are: the window's `N` rows of `N` bits are packed into one 32-bit mask (row `r` at
 /// bits `r·N ..`), so that one loop over its set bits adds to the shift of each
 /// occupied cell — no loop per row, and the sums are already in the scores' order. (On
-/// the Cortex-M4F, localizer step at P = 64 on the Intel map, 5 × 5 window: 950 126
-/// instructions against 981 507 with `RowSums<5>`.)
+/// the Cortex-M4F fewer instructions than `RowSums<5>` for a 5 × 5 window: measured in
+/// `docs/speed.md`.)
 pub(super) struct PackedSums<const N: usize>([u32; 32]);
 
 impl<const N: usize> WindowSums for PackedSums<N> {
@@ -147,9 +147,8 @@ pub(super) type SeedWindow = WideSums;
 /// 81 bits are packed into a 128-bit mask held as two 64-bit words (row `r` at bits
 /// `9r .. 9r + 9`), and one loop per word over its set bits adds the weight to the shift
 /// of each occupied cell: two loop exits per window instead of nine. On the Intel log
-/// with the seed's settings, a third fewer mispredicted branches (valgrind
-/// `--branch-sim`) and about 5 % less time than [`RowSums`] (`docs/speed.md`). Same
-/// integer sums.
+/// with the seed's settings, fewer mispredicted branches and less time than [`RowSums`]
+/// (measured in `docs/speed.md`). Same integer sums.
 #[cfg(not(target_os = "none"))]
 pub(super) struct WideSums([u32; 128]);
 
