@@ -88,7 +88,6 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// After predictions the robot's coupling rows are stored as they were before them
     /// (the predictions are applied at the next update or new landmark); read the factor
     /// through [`EkfSlam::active_covariance`].
-    /// Read the covariance through [`EkfSlam::active_covariance`].
     pub fn factor_storage(&self) -> &[T; P] {
         &self.factor
     }

@@ -17,11 +17,11 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     }
 
     /// Adds a landmark seen at `z` with measurement covariance `r`, by the inverse
-    /// observation model `g` (seed 1, eqs. 20–24): mean `g(x_R, z)`, covariance
-    /// `P_pp = G_R P_RR G_Rᵀ + G_z R G_zᵀ`, `P_pX = G_R [P_RR P_RM]`, kept factorised:
-    /// the landmark's rows `G_R L_rm`, and the 5 × 5 block of the landmark and the robot
-    /// re-factored from `[[G_R L_rr, G_z L_R], [L_rr, 0]]` with weights `(D_r, D_R)`.
-    /// Returns its index.
+    /// observation model `g` (El Masri El Chaarani et al. n.d., eqs. 20–24): mean
+    /// `g(x_R, z)`, covariance `P_pp = G_R P_RR G_Rᵀ + G_z R G_zᵀ`,
+    /// `P_pX = G_R [P_RR P_RM]`, kept factorised: the landmark's rows `G_R L_rm`, and the
+    /// 5 × 5 block of the landmark and the robot re-factored from
+    /// `[[G_R L_rr, G_z L_R], [L_rr, 0]]` with weights `(D_r, D_R)`. Returns its index.
     ///
     /// Errors (state unchanged): [`EkfError::MapFull`] when all `L` slots are used (the
     /// filter goes on with the landmarks it has), non-finite input, non-positive range,

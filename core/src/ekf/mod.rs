@@ -20,6 +20,16 @@
 //! (the `deferred` module). A robot driving for a minute between two sightings pays one
 //! O(n) pass, not one per odometry sample.
 //!
+//! # Models
+//!
+//! The filter is the landmark EKF-SLAM of El Masri El Chaarani et al. (n.d.): the robot
+//! moves by an odometry increment composed with its pose (their eqs. 4–8) or by
+//! velocities held for a time step (Du n.d., eq. 6), and a new landmark is placed by the
+//! inverse observation model (their eqs. 20–24). A sighting is predicted in the form it is
+//! measured, range and bearing from the sensor (their eq. 12 predicts Cartesian
+//! coordinates instead). All noise is configured ([`EkfConfig`]): the odometry's grows
+//! with the motion, a sighting's is its own covariance or the configured one.
+//!
 //! # Self-calibration
 //!
 //! Systematic sensor errors can be estimated as states instead of being covered by
@@ -32,10 +42,6 @@
 //! left of the robot block (deferred with the rest of the coupling rows), so the factor
 //! stays triangular and `D` is computed as before.
 //!
-//! Corrections to seed 1: the measurement model is polar on both sides (eq. 12 mixes a
-//! Cartesian prediction with a polar measurement), and all noise is configuration (eq. 9's
-//! constant `Q` is gone).
-//!
 //! # Why `P` stays positive semi-definite
 //!
 //! `P = L D Lᵀ` is positive semi-definite for *any* `L` as long as `D ≥ 0`, and every
@@ -43,19 +49,28 @@
 //! - a prediction `P' = F P Fᵀ + G Q Gᵀ` leaves the landmark rows alone, multiplies the
 //!   robot's coupling to the landmarks by `F`, and re-factors the robot's own block
 //!   `[F L_rr | G] diag(D_r, Q) [F L_rr | G]ᵀ` by a modified weighted Gram–Schmidt
-//!   (Thornton): each new pivot is a sum of weighted squares;
+//!   (Thornton and Bierman 1977): each new pivot is a sum of weighted squares;
 //! - a new landmark `l = g(robot, z)` gets the rows `G_r L_rm` and, together with the
 //!   robot, a 5 × 5 block re-factored the same way from `[[G_r L_rr, G_z L_R], [L_rr, 0]]`
 //!   with weights `diag(D_r, D_R)` (`R = L_R D_R L_Rᵀ`);
 //! - an update is processed as two scalar measurements (range, then bearing, both
-//!   linearised at the prior; a correlated `R` is decorrelated first). Bierman's scalar
-//!   update sets `Dⱼ' = Dⱼ αⱼ₋₁ / αⱼ` with `α` a running sum of `r` and non-negative
-//!   terms `Dⱼ fⱼ²`: a product and quotient of non-negative numbers.
+//!   linearised at the prior; a correlated `R` is decorrelated first). Bierman's (1977)
+//!   scalar update sets `Dⱼ' = Dⱼ αⱼ₋₁ / αⱼ` with `α` a running sum of `r` and
+//!   non-negative terms `Dⱼ fⱼ²`: a product and quotient of non-negative numbers.
 //!
-//! There are no variance caps, no diagonal loading and no symmetrisation: a lost robot
-//! with 10⁸ m² variances next to millimetre landmarks stays positive semi-definite. Each
-//! scalar update treats the sighting as no more precise than `ε · H P Hᵀ` (`ε` the
-//! machine epsilon), which keeps its gain finite; it is not needed for `D ≥ 0`.
+//! There is no diagonal loading and no symmetrisation. The variances are capped, but not
+//! for definiteness: without the caps a sighting could move a lost robot or landmark by
+//! thousands of kilometres and `f32` variances could overflow (see
+//! [`MAX_POSITION_VARIANCE`]). A prediction, or [`EkfSlam::inflate_pose_covariance`], that
+//! would leave the robot's x or y variance above [`MAX_POSITION_VARIANCE`] or its heading
+//! variance above [`MAX_HEADING_VARIANCE`] is made again with the robot's rows scaled by
+//! `S = diag(s_x, s_y, s_θ)`, `s = √(cap / v)` for a variance `v` above its cap and 1 for
+//! the others; a new landmark whose x or y variance, `G_r P_RR G_rᵀ + G_z R G_zᵀ`, would
+//! exceed [`MAX_POSITION_VARIANCE`] has its rows scaled the same way. The covariance is
+//! then `S P' Sᵀ` for the `P'` the step would have given: the capped variances come down
+//! to their cap, every correlation coefficient stays, and the scaled Jacobians go through
+//! the same steps as above, so `D ≥ 0` holds as before. Each scalar update treats the sighting as no more precise than `ε · H P Hᵀ`
+//! (`ε` the machine epsilon), which keeps its gain finite; it is not needed for `D ≥ 0`.
 //!
 //! # Numerical safeguards
 //!
@@ -100,6 +115,21 @@
 //! // 4 = 3 + 2·0.5: no whole number of landmarks fits.
 //! let ekf = EkfSlam::<f32, 4, 10>::new(EkfConfig::DEFAULT_F32);
 //! ```
+//!
+//! # References
+//!
+//! - El Masri El Chaarani, A., Ashraf, J., and Abu Hara, R. (n.d.). *EKF-SLAM with
+//!   Traffic sign images*. Undated report. The filter: its state, the prediction by an
+//!   odometry increment (eqs. 4–8), the inverse observation model (eqs. 20–24).
+//! - Du, C. (n.d.). *ECE 276 Project: Particle Filter SLAM*. Undated report, University of
+//!   California, San Diego. The prediction by velocities (eq. 6).
+//! - Bierman, G. J. (1977). *Factorization Methods for Discrete Sequential Estimation*.
+//!   Academic Press. The scalar measurement update of a `U D Uᵀ` factorisation, applied
+//!   here to `L D Lᵀ`.
+//! - Thornton, C. L., and Bierman, G. J. (1977). Gram–Schmidt algorithms for covariance
+//!   propagation. *International Journal of Control* 25(2), 243–260. The modified
+//!   weighted Gram–Schmidt that re-factors the robot's block after a prediction and the
+//!   block of a new landmark.
 
 use crate::error::EkfError;
 use crate::geometry::{Pose2, wrap_angle};

@@ -17,7 +17,7 @@ use nalgebra::Matrix3;
 
 impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
     /// Prediction with an odometry increment `(dx, dy, dθ)` in the previous robot frame
-    /// (seed 1, eqs. 4–8), with the configured
+    /// (El Masri El Chaarani et al. n.d., eqs. 4–8), with the configured
     /// [`IncrementNoise`](crate::motion::IncrementNoise).
     ///
     /// Touches only the robot mean and the robot's rows of the factor. Non-finite input →
@@ -31,7 +31,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
         self.apply_motion(&step, &[q[(0, 0)], q[(1, 1)], q[(2, 2)]], None)
     }
 
-    /// Prediction with velocities `(v, ω)` held for `dt` seconds (seed 2, eq. 6), with the
+    /// Prediction with velocities `(v, ω)` held for `dt` seconds (Du n.d., eq. 6), with the
     /// configured [`VelocityNoise`](crate::motion::VelocityNoise).
     ///
     /// `dt = 0` is a no-op; `dt < 0` (out-of-order stamps) → [`EkfError::NegativeTimeStep`];
@@ -60,9 +60,10 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
 
     /// Adds the positive semi-definite `added` to the robot pose covariance, `P_RR`,
     /// leaving the mean and every other covariance entry as they are: a prediction with
-    /// `F = I` and noise `added` (O(n), like a prediction). For recovery logic that
-    /// declares the robot lost. The robot's variances stay within
-    /// [`MAX_POSITION_VARIANCE`] and [`MAX_HEADING_VARIANCE`] as after any prediction.
+    /// `F = I` and noise `added`, as cheap as one (O(1), O(n) for the first after another
+    /// step). For recovery logic that declares the robot lost. The robot's variances stay
+    /// within [`MAX_POSITION_VARIANCE`] and [`MAX_HEADING_VARIANCE`] as after any
+    /// prediction.
     ///
     /// Errors (state unchanged): [`EkfError::NonFiniteInput`] for a non-finite `added`,
     /// [`EkfError::InvalidNoise`] when it is not symmetric positive semi-definite (its
