@@ -61,10 +61,15 @@
 //! at [`MAX_SEARCH_BEAMS`]) lives in a [`GlobalSearch`]; a slice adds the end cells and
 //! the tabled dilations (≈ 3.5 KB of stack).
 
+mod beams;
+mod bound;
 mod config;
 mod hypotheses;
+mod node;
 mod report;
+mod tables;
 
+pub use beams::heading_step_for;
 pub use config::{
     GlobalSearchConfig, MAX_HEADING_PEAKS, MAX_HEADINGS, MAX_SEARCH_BEAMS, NODE_WORK,
 };
@@ -72,9 +77,13 @@ pub use hypotheses::{Hypotheses, Hypothesis};
 pub use report::{GlobalError, SearchReport};
 
 use super::correlation::ScanPoint;
-use crate::geometry::{Pose2, wrap_angle, wrap_near};
-use crate::grid::{GridView, MaxPoolLayers, floor_i32};
+use crate::geometry::Pose2;
+use crate::grid::{GridView, MaxPoolLayers};
+use beams::{Selected, prepare};
+use bound::{Levels, block_free, bound, leaf_score};
 use hypotheses::below_relative;
+use node::{Expansion, Node, STACK, sort_decreasing};
+use tables::{Dilations, EndCells, Rotations, dilation, end_cells, heading_angle};
 
 /// Most heading windows: two headings per peak, each split in two at most where it
 /// wraps around.
@@ -82,399 +91,6 @@ const MAX_WINDOWS: usize = 4 * MAX_HEADING_PEAKS;
 /// A scan whose line-like end points weigh less than this in all (about as many
 /// points) searches every heading: its wall directions say too little.
 const MIN_SCAN_LINES: f32 = 8.0;
-
-/// Beams chosen for the search, robot frame.
-#[derive(Clone)]
-struct Selected {
-    /// Each beam's weight ([`ScanPoint::weight`]).
-    weights: [u32; MAX_SEARCH_BEAMS],
-    /// Distance of each point from the robot origin, in cells.
-    rho_cells: [f32; MAX_SEARCH_BEAMS],
-    /// Each point divided by the cell size (cells, robot frame).
-    scaled: [(f32, f32); MAX_SEARCH_BEAMS],
-    len: usize,
-    extent: f32,
-    total: u32,
-}
-
-/// The beams the search uses, for cells of `resolution` metres.
-fn select(points: &[ScanPoint], config: &GlobalSearchConfig, resolution: f32) -> Selected {
-    let mut s = Selected {
-        weights: [0; MAX_SEARCH_BEAMS],
-        rho_cells: [0.0; MAX_SEARCH_BEAMS],
-        scaled: [(0.0, 0.0); MAX_SEARCH_BEAMS],
-        len: 0,
-        extent: 0.0,
-        total: 0,
-    };
-    let usable = |p: &&ScanPoint| p.range.is_finite() && p.range <= config.max_range;
-    let n = points.iter().filter(usable).count();
-    let cap = usize::from(config.max_beams).min(MAX_SEARCH_BEAMS);
-    if n == 0 || cap == 0 {
-        return s;
-    }
-    let step = n.div_ceil(cap);
-    for p in points.iter().filter(usable).step_by(step) {
-        if let (Some(w), Some(rho), Some(scaled)) = (
-            s.weights.get_mut(s.len),
-            s.rho_cells.get_mut(s.len),
-            s.scaled.get_mut(s.len),
-        ) {
-            *w = p.weight;
-            *rho = libm::hypotf(p.x, p.y) / resolution;
-            *scaled = (p.x / resolution, p.y / resolution);
-            s.len += 1;
-            s.extent = s.extent.max(p.range);
-            s.total = s.total.saturating_add(p.weight);
-        }
-    }
-    s
-}
-
-/// The heading step for cells of `resolution` metres and the farthest beam at `extent`
-/// metres: `acos(1 − r² / (2 d²))`, the turn that moves that beam's end by one cell.
-pub fn heading_step_for(resolution: f32, extent: f32) -> f32 {
-    let d = extent.max(resolution);
-    libm::acosf(1.0 - resolution * resolution / (2.0 * d * d))
-}
-
-/// `(sin, cos)` of every heading `j · step` without a trigonometric call per heading
-/// (libm's `sincosf` works in `f64`, which the Cortex-M4F computes in software: several
-/// thousand instructions a call): the rotations by `2^b · step` are computed once per
-/// search and heading `j`'s is the product of those of its set bits.
-struct Rotations {
-    powers: [(f32, f32); HEADING_LEVELS],
-}
-
-impl Rotations {
-    fn new(step: f32) -> Self {
-        let mut powers = [(0.0, 1.0); HEADING_LEVELS];
-        for (b, p) in powers.iter_mut().enumerate() {
-            *p = libm::sincosf(wrap_angle((1u32 << b) as f32 * step));
-        }
-        Self { powers }
-    }
-
-    /// `(sin, cos)` of heading `j` (`j < 2^HEADING_LEVELS`).
-    fn at(&self, j: u32) -> (f32, f32) {
-        let (mut s, mut c) = (0.0f32, 1.0f32);
-        for (b, (sb, cb)) in self.powers.iter().enumerate() {
-            if (j >> b) & 1 == 1 {
-                (s, c) = (s * cb + c * sb, c * cb - s * sb);
-            }
-        }
-        (s, c)
-    }
-}
-
-/// End cells of the selected beams for the robot at the centre of cell (0, 0) facing
-/// the heading of rotation `(sin, cos)`, with their weights.
-///
-/// The robot at the centre of cell (0, 0) puts a robot-frame point `p` at grid
-/// coordinates `0.5 + R(θ) p / r` (cells of `r` metres): two products and a sum per
-/// axis, with `p / r` computed once per search.
-fn end_cells(
-    sel: &Selected,
-    (sin, cos): (f32, f32),
-    out: &mut [(i32, i32, u32); MAX_SEARCH_BEAMS],
-) {
-    for ((slot, w), (u, v)) in out
-        .iter_mut()
-        .zip(sel.weights.iter().take(sel.len))
-        .zip(sel.scaled.iter())
-    {
-        let cx = floor_i32(0.5 + (cos * u - sin * v));
-        let cy = floor_i32(0.5 + (sin * u + cos * v));
-        *slot = (cx, cy, *w);
-    }
-}
-
-/// The beams' end cells for one reference heading, recomputed only when the heading
-/// changes (the depth-first search visits many nodes of one heading in a row).
-struct EndCells {
-    heading: u32,
-    rotations: Rotations,
-    cells: [(i32, i32, u32); MAX_SEARCH_BEAMS],
-}
-
-impl EndCells {
-    fn new(step: f32) -> Self {
-        Self {
-            heading: u32::MAX,
-            rotations: Rotations::new(step),
-            cells: [(0, 0, 0); MAX_SEARCH_BEAMS],
-        }
-    }
-
-    /// The end cells for heading index `j` (computed when not held already).
-    fn at(&mut self, sel: &Selected, j: u32, report: &mut SearchReport) -> &[(i32, i32, u32)] {
-        if self.heading != j {
-            end_cells(sel, self.rotations.at(j), &mut self.cells);
-            self.heading = j;
-            report.rotations += 1;
-        }
-        self.cells.get(..sel.len).unwrap_or(&[])
-    }
-}
-
-/// Heading `j` of the candidate set, radians in (−π, π] (`j · step` is within one turn:
-/// no trigonometry).
-fn heading_angle(j: u32, step: f32) -> f32 {
-    wrap_near(j as f32 * step)
-}
-
-/// Cells an end cell may move, at most, when the heading moves by up to `delta` radians
-/// from the reference: the end moves along a chord of at most `ρ · δ` cells, and
-/// `|⌊u⌋ − ⌊v⌋| ≤ ⌈|u − v|⌉`; 0.01 cell more covers the float rounding.
-#[inline]
-fn dilation(rho_cells: f32, delta: f32) -> i32 {
-    // trunc(v) + 1 ≥ ⌈v⌉ (equal unless v is a whole number), without a call to ceilf.
-    (rho_cells * delta + 0.01) as i32 + 1
-}
-
-/// Most heading levels of a node (`2^a` headings, `a` ≤ 13 for [`MAX_HEADINGS`]).
-const HEADING_LEVELS: usize = 14;
-
-/// [`dilation`] of every selected beam for every heading level `a ≥ 1` of a node
-/// (`δ = 2^(a−1)` steps), saturated at 255 cells (a window that wide covers every level),
-/// computed once per search: the bound's inner loop then only looks it up.
-struct Dilations {
-    cells: [[u8; MAX_SEARCH_BEAMS]; HEADING_LEVELS],
-}
-
-impl Dilations {
-    fn new(sel: &Selected, step: f32) -> Self {
-        let mut d = Self {
-            cells: [[0; MAX_SEARCH_BEAMS]; HEADING_LEVELS],
-        };
-        for (a, row) in d.cells.iter_mut().enumerate().skip(1) {
-            let delta = (1u32 << (a - 1)) as f32 * step;
-            for (e, rho) in row.iter_mut().zip(sel.rho_cells.iter().take(sel.len)) {
-                *e = dilation(*rho, delta).clamp(0, 255) as u8;
-            }
-        }
-        d
-    }
-}
-
-/// Bound of the node `(headings [j0, j0 + 2^a), block 2^k × 2^k at (x, y))` given the
-/// end cells at the reference heading `j0 + 2^(a−1)` (`j0` for `a = 0`): each beam counts
-/// when any cell is occupied in its window grown by the cells its end may move over the
-/// headings of the node. With `a = 0` and `k = 0`: the exact score.
-///
-/// Stops as soon as the beams still to look at cannot lift the bound above `thr` (the
-/// node is dropped then): the value returned is then some number ≤ `thr`. Returns the
-/// bound and the beams looked at (the work of [`GlobalSearchConfig::work_budget`]).
-#[allow(clippy::too_many_arguments)]
-fn bound(
-    map: &GridView<'_>,
-    levels: &Levels<'_>,
-    dilations: &Dilations,
-    cells: &[(i32, i32, u32)],
-    total: u32,
-    thr: u32,
-    a: u8,
-    k: u8,
-    x: i32,
-    y: i32,
-) -> (u32, u32) {
-    // The most the node can still score: the total less the beams that missed.
-    let mut possible = total;
-    let mut looked = 0u32;
-    if a == 0 {
-        for (cx, cy, w) in cells {
-            looked += 1;
-            let (u, v) = (cx.wrapping_add(x), cy.wrapping_add(y));
-            let hit = if k == 0 {
-                map.is_occupied(u, v)
-            } else {
-                levels.any(k, u, v)
-            };
-            if !hit {
-                possible = possible.wrapping_sub(*w);
-                if possible <= thr {
-                    return (possible, looked);
-                }
-            }
-        }
-        return (possible, looked);
-    }
-    let Some(row) = dilations.cells.get(usize::from(a)) else {
-        return (total, looked);
-    };
-    let block = 1i32 << k;
-    for ((cx, cy, w), e) in cells.iter().zip(row.iter()) {
-        let e = i32::from(*e);
-        looked += 1;
-        let missed = !levels.any_in_square(
-            cx.wrapping_add(x).wrapping_sub(e),
-            cy.wrapping_add(y).wrapping_sub(e),
-            block + 2 * e,
-        );
-        if missed {
-            possible = possible.wrapping_sub(*w);
-            if possible <= thr {
-                return (possible, looked);
-            }
-        }
-    }
-    (possible, looked)
-}
-
-/// The occupied levels' bitmaps, looked up once per search (the bound's inner loop).
-struct Levels<'a> {
-    bits: [&'a [u8]; crate::grid::layers::MAX_LEVELS as usize + 1],
-    stride: usize,
-    width: i32,
-    height: i32,
-    top: u8,
-}
-
-impl<'a> Levels<'a> {
-    fn new(layers: &MaxPoolLayers<'a>) -> Self {
-        let mut bits: [&'a [u8]; crate::grid::layers::MAX_LEVELS as usize + 1] =
-            [&[]; crate::grid::layers::MAX_LEVELS as usize + 1];
-        for (k, b) in bits.iter_mut().enumerate().skip(1) {
-            *b = layers.occupied_level(k as u8).unwrap_or(&[]);
-        }
-        Self {
-            bits,
-            stride: layers.width().div_ceil(8),
-            width: layers.width() as i32,
-            height: layers.height() as i32,
-            top: layers.levels(),
-        }
-    }
-
-    /// `true` when a cell of the `size × size` square at `(x, y)` may be occupied (also
-    /// when the square is wider than the top level's windows: then it is not looked at).
-    ///
-    /// The square is covered by the four windows of the level below the one whose
-    /// window holds it (`2^(l−1) < size ≤ 2^l`: windows of `2^(l−1)` at its four corners),
-    /// not by one window of `2^l`, up to four times its area: on the Intel map that
-    /// halves the nodes of a search (`docs/global-localization.md`). The one window of
-    /// `2^l` is looked at first: it rules most squares out alone.
-    #[inline]
-    fn any_in_square(&self, x: i32, y: i32, size: i32) -> bool {
-        let level = (32 - (size.max(1) as u32 - 1).leading_zeros()) as u8;
-        if level > self.top.saturating_add(1) {
-            return true;
-        }
-        if level <= self.top && !self.any(level, x, y) {
-            return false;
-        }
-        let fine = level.saturating_sub(1);
-        if fine == 0 {
-            // Level 0 is the map, not a layer (the bound's squares are ≥ 3 cells wide).
-            return true;
-        }
-        let o = size - (1i32 << fine);
-        self.any(fine, x, y)
-            || self.any(fine, x.wrapping_add(o), y)
-            || self.any(fine, x, y.wrapping_add(o))
-            || self.any(fine, x.wrapping_add(o), y.wrapping_add(o))
-    }
-
-    /// [`MaxPoolLayers::any_occupied`] without recomputing the level's place.
-    #[inline]
-    fn any(&self, k: u8, x: i32, y: i32) -> bool {
-        let size = 1i32 << (k & 15);
-        if x >= self.width || y >= self.height || x <= -size || y <= -size {
-            return false;
-        }
-        let (x, y) = (x.max(0) as usize, y.max(0) as usize);
-        self.bits
-            .get(usize::from(k))
-            .and_then(|b| b.get(y * self.stride + x / 8))
-            .is_some_and(|b| (b >> (x % 8)) & 1 == 1)
-    }
-}
-
-/// Exact score of the robot at cell `(x, y)` given the end cells (level 0).
-fn leaf_score(map: &GridView<'_>, cells: &[(i32, i32, u32)], x: i32, y: i32) -> u32 {
-    let mut s = 0u32;
-    for (cx, cy, w) in cells {
-        if map.is_occupied(cx.wrapping_add(x), cy.wrapping_add(y)) {
-            s = s.wrapping_add(*w);
-        }
-    }
-    s
-}
-
-/// `true` when the robot may stand somewhere in the level-`k` block at `(x, y)`.
-///
-/// At level 0 that is a free cell. A map kept as its occupied-cell bitmap alone (a map
-/// image in flash: [`GridView::from_occupancy_bits`], no log-odds) cannot tell a free
-/// cell from an unknown one; there a candidate is a cell that is not occupied in a
-/// 2 × 2 block of level 1 holding a free cell, the finest free information the layers
-/// carry (without it no leaf would ever be a candidate, and the search on a device
-/// could never find a pose).
-fn block_free(map: &GridView<'_>, layers: &MaxPoolLayers<'_>, k: u8, x: i32, y: i32) -> bool {
-    if k == 0 && !map.cells().is_empty() {
-        return map.log_odds(x, y).is_some_and(|v| v < layers.free_below());
-    }
-    if k == 0 {
-        return map.geometry().contains(x, y)
-            && !map.is_occupied(x, y)
-            && layers.any_free(1, (x >> 1) as usize, (y >> 1) as usize);
-    }
-    x >= 0 && y >= 0 && layers.any_free(k, (x >> k) as usize, (y >> k) as usize)
-}
-
-/// A node of the search: headings `[j0, j0 + 2^a)`, positions `[x, x + 2^k) × [y, y + 2^k)`.
-#[derive(Clone, Copy, Default)]
-struct Node {
-    x: i32,
-    y: i32,
-    j0: u32,
-    bound: u32,
-    a: u8,
-    k: u8,
-}
-
-impl Node {
-    /// The heading the node's end cells are computed at.
-    fn reference(&self) -> u32 {
-        if self.a == 0 {
-            self.j0
-        } else {
-            self.j0 + (1 << (self.a - 1))
-        }
-    }
-}
-
-/// Checks the inputs and prepares the beams: `(selection, step, headings)`.
-fn prepare(
-    map: &GridView<'_>,
-    layers: &MaxPoolLayers<'_>,
-    points: &[ScanPoint],
-    config: &GlobalSearchConfig,
-) -> Result<(Selected, f32, u32), GlobalError> {
-    if !config.is_valid() {
-        return Err(GlobalError::InvalidConfig);
-    }
-    if !layers.matches(map) {
-        return Err(GlobalError::LayersMismatch);
-    }
-    let res = map.geometry().resolution;
-    let sel = select(points, config, res);
-    if sel.len == 0 || sel.total == 0 {
-        return Err(GlobalError::EmptyScan);
-    }
-    let wanted = if config.heading_step > 0.0 {
-        config.heading_step
-    } else {
-        heading_step_for(res, sel.extent)
-    };
-    let turn = 2.0 * core::f32::consts::PI;
-    let n = libm::ceilf(turn / wanted.max(1e-6));
-    let n = if n.is_finite() && n >= 1.0 {
-        (n as u32).min(MAX_HEADINGS)
-    } else {
-        MAX_HEADINGS
-    };
-    Ok((sel, turn / n as f32, n))
-}
 
 /// The heading windows `(first, last)` (indices into the `headings` candidates of
 /// `step`) the search visits, best peak first; their number. One window of every
@@ -555,9 +171,6 @@ fn heading_windows(
     len
 }
 
-/// Deepest stack of the search: four children per level of headings and of positions.
-const STACK: usize = 4 * (14 + crate::grid::layers::MAX_LEVELS as usize + 1);
-
 /// The global search: the best `N` hypotheses for the scan `points` (robot frame, as
 /// [`super::ScanPoints`] loads them) anywhere in `map`, bounded by `layers` (built from
 /// the same map). See the module documentation for the method and its guarantees.
@@ -587,20 +200,6 @@ pub fn search_with_walls<const N: usize>(
     run.conclude();
     *out = run.hypotheses;
     Ok(run.report)
-}
-
-/// The children of a node being evaluated: kept across a pause of the search (see
-/// [`GlobalSearch::resume`]), so that a search run in slices visits exactly the nodes of
-/// one run with the same number of node evaluations.
-#[derive(Clone, Copy, Default)]
-struct Expansion {
-    children: [Node; 4],
-    /// Children made.
-    made: u8,
-    /// Children evaluated.
-    evaluated: u8,
-    /// Children kept (their bound is above the threshold), at the front of `children`.
-    kept: u8,
 }
 
 /// What one slice of the search reads and does not keep: the occupied levels, the
@@ -1217,23 +816,6 @@ fn outside(
         k += 1;
     }
     k
-}
-
-/// Stable insertion sort by decreasing bound.
-fn sort_decreasing(nodes: &mut [Node]) {
-    for i in 1..nodes.len() {
-        let mut j = i;
-        while j > 0 {
-            let (Some(a), Some(b)) = (nodes.get(j - 1), nodes.get(j)) else {
-                break;
-            };
-            if a.bound >= b.bound {
-                break;
-            }
-            nodes.swap(j - 1, j);
-            j -= 1;
-        }
-    }
 }
 
 /// The robot pose at the centre of cell `(x, y)` facing `theta`.
