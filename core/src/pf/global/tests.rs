@@ -1,9 +1,14 @@
 //! Tests of the global search: against the brute force, in slices, with the heading
 //! windows and the full turn, with a work budget and refused inputs.
 
+use super::beams::prepare;
+use super::bound::leaf_score;
+use super::tables::{Rotations, end_cells};
 use super::*;
-use crate::grid::{GridGeometry, MaxPoolLayers};
+use crate::geometry::Pose2;
+use crate::grid::{GridGeometry, GridView, MaxPoolLayers};
 use crate::pf::ScanPoints;
+use crate::pf::correlation::ScanPoint;
 use crate::sensors::lidar::{LidarGeometry, LidarScan};
 use rand::{Rng, SeedableRng};
 
