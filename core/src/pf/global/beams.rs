@@ -1,6 +1,6 @@
 //! The beams a search uses ([`ScanPoint`]s thinned to at most [`MAX_SEARCH_BEAMS`], in
-//! cells), the heading step their farthest one sets, and the checks of a search's
-//! inputs.
+//! cells), the heading step their farthest one sets, and a search's inputs checked and
+//! turned into its beams and candidate headings.
 
 use super::{GlobalError, GlobalSearchConfig, MAX_HEADINGS, MAX_SEARCH_BEAMS};
 use crate::grid::{GridView, MaxPoolLayers};

@@ -1,6 +1,6 @@
 //! Global localization: where in the whole map was this scan taken? An exact
 //! correlative search (Olson 2009, "Real-time correlative scan matching"; Cartographer's
-//! fast correlative scan matcher) by branch and bound.
+//! fast correlative scan matcher, Hess et al. 2016) by branch and bound.
 //!
 //! **Score.** The particle filter's correlation ([`super::correlation`]): a candidate
 //! pose's score is `Σ_i w_i · 1[end cell of beam i is occupied]`, with the beams' fixed
@@ -47,7 +47,7 @@
 //! a floor per beam. The unit of work is one beam looked at, and a node evaluation counts
 //! [`NODE_WORK`] more for making, bounding and stacking it: so counted, a unit costs no
 //! more on the Cortex-M4F when the nodes look at few beams than when they look at many
-//! (29 instructions a unit at 1 beam to 55 at 45, measured), and the work budget
+//! (measured in `docs/global-localization.md`), and the work budget
 //! ([`GlobalSearchConfig::work_budget`]) bounds a search's instructions however its nodes
 //! are pruned. When the budget is spent the search stops (the best found so far is
 //! returned, [`SearchReport::complete`] is `false`).
@@ -57,9 +57,20 @@
 //! kept): a robot spends a work budget per scan on one search over several scans
 //! ([`super::RelocalizationConfig::search_scans`]).
 //!
-//! No allocation: a search's state (the selected beams and the depth-first stack, ≈ 4.5 KB
-//! at [`MAX_SEARCH_BEAMS`]) lives in a [`GlobalSearch`]; a slice adds the end cells and
-//! the tabled dilations (≈ 3.5 KB of stack).
+//! No allocation: a search's state (the selected beams, at most [`MAX_SEARCH_BEAMS`], and
+//! the depth-first stack) lives in a [`GlobalSearch`]; a slice adds the end cells and the
+//! tabled dilations on the stack (the sizes of both: `docs/global-localization.md`).
+//!
+//! # References
+//!
+//! - Olson 2009: E. Olson, "Real-time correlative scan matching", IEEE International
+//!   Conference on Robotics and Automation (ICRA), 2009, pp. 4387–4393. The exhaustive
+//!   correlative search over a grid of candidate poses, with a low-resolution look-up
+//!   table (each cell the maximum of the cells it covers) that bounds the fine search.
+//! - Hess et al. 2016: W. Hess, D. Kohler, H. Rapp, D. Andor, "Real-time loop closure in
+//!   2D LIDAR SLAM", IEEE ICRA 2016, pp. 1271–1278. Branch and bound over the
+//!   precomputation grids (Cartographer's fast correlative scan matcher), depth first,
+//!   children in decreasing order of bound.
 
 // The search over one map and its layers: the beams a scan gives (`beams`), the
 // per-heading tables (`tables`), a node's bound and exact score against the map

@@ -1,6 +1,7 @@
-//! Tables a search computes once per heading step: the rotations of every candidate
-//! heading, the beams' end cells at a heading, and how far each end may move over a
-//! node's headings (the dilations of the bound).
+//! The candidate headings and the tables a search keeps of them: the rotation of every
+//! heading from a few computed once, the beams' end cells at the heading last used, and
+//! how far each end may move over a node's span of headings (the dilations of the
+//! bound).
 
 #[cfg(doc)]
 use super::MAX_HEADINGS;
