@@ -72,6 +72,7 @@ pub mod pf;
 pub mod profile;
 pub mod scalar;
 pub mod sensors;
+pub mod slam;
 #[cfg(feature = "wire")]
 pub mod wire;
 

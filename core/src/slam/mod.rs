@@ -1,0 +1,5 @@
+//! Grid SLAM at the scale of a building, in fixed memory: the particle filter of
+//! [`crate::pf`] tracks the robot on a local map that moves with it, keyframes of its
+//! scans are kept in an append-only store (flash on a microcontroller), and a pose graph
+//! over the keyframes closes loops by matching a new keyframe against the old ones
+//! nearby.
