@@ -16,8 +16,8 @@ use crate::sensors::lidar::LidarScan;
 /// byte-wise search; same scores). Write the type as
 /// `OccupancyGrid<256, 256, { occupancy_bytes(256, 256) }>`.
 ///
-/// RAM: `W · H + BITMAP` bytes plus 40 bytes (256 × 256: 65,576 bytes without the
-/// bitmap, 73,768 with it). On a microcontroller, put it in a `static` built with
+/// RAM: `W · H + BITMAP` bytes plus 48 bytes on a 32-bit microcontroller (256 × 256:
+/// 65,584 bytes without the bitmap, 73,776 with it; 64 bytes on a 64-bit host). On a microcontroller, put it in a `static` built with
 /// [`OccupancyGrid::zeroed`] — all zero bytes, so it lands in `.bss` and costs no flash —
 /// and set its geometry in place at start-up with [`OccupancyGrid::init_centred`] (or
 /// [`OccupancyGrid::init`] for another origin). The `const fn`s [`OccupancyGrid::new`] and
@@ -48,6 +48,11 @@ pub struct OccupancyGrid<const W: usize, const H: usize, const BITMAP: usize = 0
     geometry: GridGeometry,
     log_odds: LogOdds,
     off_grid: u32,
+    /// The origin the grid was given (by `new`, `init` or `set_origin`) …
+    anchor: [f32; 2],
+    /// … and the cells it has scrolled since: the origin is computed from both, so that
+    /// scrolling never accumulates rounding.
+    scrolled: [i32; 2],
 }
 
 /// Sets the bitmap of a `width`-cell-wide grid whose cells are all occupied (`on`) or
@@ -69,6 +74,29 @@ const fn set_uniform_bits(bits: &mut [u8], width: usize, on: bool) {
         };
         i += 1;
     }
+}
+
+/// Moves the rows of a row-major array of `row_len`-element rows so that new row `y` is
+/// old row `y + shift`; rows that come from outside are zero.
+fn shift_rows<T: Copy + Default>(items: &mut [T], row_len: usize, shift: isize) {
+    let n = items.len();
+    let by = shift.unsigned_abs().saturating_mul(row_len).min(n);
+    if shift > 0 {
+        items.copy_within(by.., 0);
+        if let Some(tail) = items.get_mut(n - by..) {
+            tail.fill(T::default());
+        }
+    } else if shift < 0 {
+        items.copy_within(..n - by, by);
+        if let Some(head) = items.get_mut(..by) {
+            head.fill(T::default());
+        }
+    }
+}
+
+/// [`shift_rows`] within one row: new element `x` is old element `x + shift`.
+fn shift_row<T: Copy + Default>(row: &mut [T], shift: isize) {
+    shift_rows(row, 1, shift);
 }
 
 /// What writing one scan did.
@@ -109,6 +137,8 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
             },
             log_odds,
             off_grid: 0,
+            anchor: [origin_x, origin_y],
+            scrolled: [0, 0],
         }
     }
 
@@ -136,6 +166,8 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
                 max: 0,
             },
             off_grid: 0,
+            anchor: [0.0, 0.0],
+            scrolled: [0, 0],
         }
     }
 
@@ -163,6 +195,8 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
             origin_x,
             origin_y,
         };
+        self.anchor = [origin_x, origin_y];
+        self.scrolled = [0, 0];
         self.log_odds = log_odds;
         self.reset();
         Ok(())
@@ -209,7 +243,98 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
         }
         self.geometry.origin_x = origin_x;
         self.geometry.origin_y = origin_y;
+        self.anchor = [origin_x, origin_y];
+        self.scrolled = [0, 0];
         Ok(())
+    }
+
+    /// Moves the grid by `(dx, dy)` cells over the world, keeping what it knows: the
+    /// origin moves by `(dx, dy)` cells and cell `(x, y)` takes the value of the cell
+    /// that was at `(x + dx, y + dy)`; cells the grid did not cover before are unknown
+    /// (0). A grid that follows the robot (a window over a larger world) calls this when
+    /// the robot nears its edge. The bitmap follows: rows move whole, and a column shift
+    /// that is a multiple of 8 moves whole bytes; any other shift recomputes the bits of
+    /// each row from its cells. In place, O(W · H).
+    ///
+    /// The origin is the one the grid was given plus the cells scrolled since, rounded
+    /// once: scrolling accumulates no rounding, and a grid moved there and back is where
+    /// it started, bit for bit. A shift of a whole width or more clears the grid.
+    ///
+    /// ```
+    /// use microslam::grid::{LogOdds, OccupancyGrid};
+    ///
+    /// let mut grid = OccupancyGrid::<16, 16>::new(0.5, 0.0, 0.0, LogOdds::SEED);
+    /// grid.set_cell(10, 3, 60);
+    /// grid.scroll(8, -2); // 4 m right, 1 m down
+    /// assert_eq!(grid.geometry().origin_x, 4.0);
+    /// assert_eq!(grid.geometry().origin_y, -1.0);
+    /// assert_eq!(grid.cell(2, 5), Some(60), "the same place in the world");
+    /// assert_eq!(grid.cell(10, 3), Some(0), "unknown: seen before only from the old cell");
+    /// ```
+    pub fn scroll(&mut self, dx: i32, dy: i32) {
+        if dx == 0 && dy == 0 || self.geometry.width == 0 {
+            return;
+        }
+        let (w, h) = (W as i64, H as i64);
+        let (dx64, dy64) = (i64::from(dx), i64::from(dy));
+        self.scrolled = [
+            self.scrolled[0].saturating_add(dx),
+            self.scrolled[1].saturating_add(dy),
+        ];
+        let g = &mut self.geometry;
+        // The anchor plus whole cells, in f64 (exact for any i32 count of cells), rounded
+        // once to f32.
+        let res = f64::from(g.resolution);
+        g.origin_x = (f64::from(self.anchor[0]) + f64::from(self.scrolled[0]) * res) as f32;
+        g.origin_y = (f64::from(self.anchor[1]) + f64::from(self.scrolled[1]) * res) as f32;
+        if dx64.abs() >= w || dy64.abs() >= h {
+            self.clear_cells();
+            return;
+        }
+        let (sx, sy) = (dx64 as isize, dy64 as isize);
+        // Rows: new row y is old row y + dy.
+        let cells = self.cells.as_flattened_mut();
+        shift_rows(cells, W, sy);
+        for row in self.cells.iter_mut() {
+            shift_row(row, sx);
+        }
+        if BITMAP > 0 {
+            let bytes_per_row = W.div_ceil(8);
+            let t = self.log_odds.occupied_above;
+            if sx % 8 == 0 && t >= 0 {
+                // Whole bytes move; what comes from off the grid is unknown, not occupied.
+                shift_rows(&mut self.occupied, bytes_per_row, sy);
+                let padding = (8 - W % 8) % 8;
+                for row in self.occupied.chunks_exact_mut(bytes_per_row) {
+                    shift_row(row, sx / 8);
+                    // Bits past the last column stay clear.
+                    if let Some(last) = row.last_mut() {
+                        *last &= u8::MAX >> padding;
+                    }
+                }
+            } else {
+                for (bits, cells) in self
+                    .occupied
+                    .chunks_exact_mut(bytes_per_row)
+                    .zip(self.cells.iter())
+                {
+                    for (byte, eight) in bits.iter_mut().zip(cells.chunks(8)) {
+                        *byte = eight
+                            .iter()
+                            .enumerate()
+                            .fold(0u8, |b, (k, v)| b | (u8::from(*v > t) << k));
+                    }
+                }
+            }
+        }
+    }
+
+    /// Sets every cell unknown and the bitmap to match, leaving the counters.
+    fn clear_cells(&mut self) {
+        for row in self.cells.iter_mut() {
+            row.fill(0);
+        }
+        set_uniform_bits(&mut self.occupied, W, 0 > self.log_odds.occupied_above);
     }
 
     /// The log-odds model.
@@ -474,6 +599,56 @@ mod tests {
     }
 
     #[test]
+    fn scroll_keeps_what_the_grid_knows_of_the_world() {
+        // Random cells (across the occupied threshold), scrolled by shifts that move whole
+        // bytes of the bitmap and shifts that do not, on a width that is not a multiple of
+        // 8: every cell holds what the cell at the same world position held, the bitmap
+        // matches the cells, and the origin moves by whole cells.
+        const BITMAP: usize = crate::grid::occupancy_bytes(61, 37);
+        let model = LogOdds::SEED;
+        let mut before = OccupancyGrid::<61, 37, BITMAP>::new(0.05, -1.5, 2.0, model);
+        let mut state = 7u32;
+        for y in 0..37 {
+            for x in 0..61 {
+                state = state.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+                before.set_cell(x, y, (((state >> 8) % 200) as i32 - 100) as i8);
+            }
+        }
+        for (dx, dy) in [
+            (8, 0),
+            (-16, 8),
+            (3, -5),
+            (-7, 2),
+            (24, -36),
+            (0, 1),
+            (61, 0),
+            (-2, -40),
+        ] {
+            let mut grid = before.clone();
+            grid.scroll(dx, dy);
+            for y in 0..37 {
+                for x in 0..61 {
+                    let want = before.cell(x + dx, y + dy).unwrap_or(0);
+                    assert_eq!(grid.cell(x, y), Some(want), "({dx}, {dy}): cell ({x}, {y})");
+                }
+            }
+            assert_bitmap_matches(&grid);
+            let g = grid.geometry();
+            assert!(
+                (g.origin_x - (-1.5 + 0.05 * dx as f32)).abs() < 1e-5,
+                "{g:?}"
+            );
+            assert!(
+                (g.origin_y - (2.0 + 0.05 * dy as f32)).abs() < 1e-5,
+                "{g:?}"
+            );
+            // Back where it started: the same origin bit for bit.
+            grid.scroll(-dx, -dy);
+            assert_eq!(grid.geometry(), before.geometry());
+        }
+    }
+
+    #[test]
     fn miss_ray_writes_the_cells_of_the_walk() {
         // Rays from inside, from outside (crossing the grid or not), along the borders,
         // degenerate and long, against the cell-by-cell writes they stand for.
@@ -697,7 +872,20 @@ mod tests {
         static GRID: OccupancyGrid<8, 4> = OccupancyGrid::centred(0.05, LogOdds::SEED);
         assert_eq!(GRID.cells().len(), 32);
         assert_eq!(GRID.geometry().origin_x, -0.2);
-        assert!(core::mem::size_of::<OccupancyGrid<256, 256>>() <= 256 * 256 + 48);
+        // Documented: W · H + BITMAP + 48 bytes on a 32-bit target, 64 on a 64-bit host.
+        let overhead = if cfg!(target_pointer_width = "32") {
+            48
+        } else {
+            64
+        };
+        assert_eq!(
+            core::mem::size_of::<OccupancyGrid<256, 256>>(),
+            256 * 256 + overhead
+        );
+        assert_eq!(
+            core::mem::size_of::<OccupancyGrid<256, 256, { occupancy_bytes(256, 256) }>>(),
+            256 * 256 + 8192 + overhead
+        );
     }
 
     #[test]
