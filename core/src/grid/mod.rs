@@ -11,6 +11,9 @@
 //!   scans with Bresenham rays; end points off the grid are skipped and counted. Optionally
 //!   it keeps a bitmap of its occupied cells ([`occupancy_bytes`]; 8 KB more for
 //!   256 × 256), which makes the particle filter's shift search sparse.
+//! - [`OccupancyBitmap`]: a fixed `W × H` bitmap of occupied cells placed in the world
+//!   (an eighth of the bytes of log-odds cells), which scrolls with the robot like an
+//!   [`OccupancyGrid`] ([`OccupancyGrid::scroll`]): the far part of grid SLAM's local map.
 //! - [`GridView`]: a borrowed read-only map (`&[i8]` + geometry), e.g. a `&'static` map in
 //!   flash, which is what the particle filter scores scans against.
 //! - [`MaxPoolLayers`]: max-pooled copies of a map (any occupied cell in each `2^k × 2^k`
@@ -20,6 +23,7 @@
 //!   for flash, read in place.
 //! - `ros_map` (feature `std`): reading a ROS `map_server` map (`map.yaml` + PGM).
 
+mod bitmap;
 mod bresenham;
 pub mod layers;
 #[cfg(feature = "map-image")]
@@ -27,8 +31,10 @@ pub mod map_image;
 mod occupancy;
 #[cfg(feature = "std")]
 pub mod ros_map;
+mod scroll;
 mod view;
 
+pub use bitmap::OccupancyBitmap;
 pub use bresenham::Bresenham;
 pub use layers::{LayersError, MaxPoolLayers};
 #[cfg(feature = "map-image")]

@@ -1,6 +1,7 @@
 //! The owned, fixed-size occupancy grid that SLAM writes scans into.
 
 use super::bresenham::walk_to_end;
+use super::scroll::{ScrollOrigin, shift_row, shift_rows};
 use super::{Bresenham, GridError, GridGeometry, GridView, LogOdds, floor_i32, occupancy_bytes};
 use crate::geometry::Pose2;
 use crate::sensors::lidar::LidarScan;
@@ -48,11 +49,8 @@ pub struct OccupancyGrid<const W: usize, const H: usize, const BITMAP: usize = 0
     geometry: GridGeometry,
     log_odds: LogOdds,
     off_grid: u32,
-    /// The origin the grid was given (by `new`, `init` or `set_origin`) …
-    anchor: [f32; 2],
-    /// … and the cells it has scrolled since: the origin is computed from both, so that
-    /// scrolling never accumulates rounding.
-    scrolled: [i32; 2],
+    /// The origin the grid was given and the cells it has scrolled since.
+    scroll: ScrollOrigin,
 }
 
 /// Sets the bitmap of a `width`-cell-wide grid whose cells are all occupied (`on`) or
@@ -74,29 +72,6 @@ const fn set_uniform_bits(bits: &mut [u8], width: usize, on: bool) {
         };
         i += 1;
     }
-}
-
-/// Moves the rows of a row-major array of `row_len`-element rows so that new row `y` is
-/// old row `y + shift`; rows that come from outside are zero.
-fn shift_rows<T: Copy + Default>(items: &mut [T], row_len: usize, shift: isize) {
-    let n = items.len();
-    let by = shift.unsigned_abs().saturating_mul(row_len).min(n);
-    if shift > 0 {
-        items.copy_within(by.., 0);
-        if let Some(tail) = items.get_mut(n - by..) {
-            tail.fill(T::default());
-        }
-    } else if shift < 0 {
-        items.copy_within(..n - by, by);
-        if let Some(head) = items.get_mut(..by) {
-            head.fill(T::default());
-        }
-    }
-}
-
-/// [`shift_rows`] within one row: new element `x` is old element `x + shift`.
-fn shift_row<T: Copy + Default>(row: &mut [T], shift: isize) {
-    shift_rows(row, 1, shift);
 }
 
 /// What writing one scan did.
@@ -137,8 +112,7 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
             },
             log_odds,
             off_grid: 0,
-            anchor: [origin_x, origin_y],
-            scrolled: [0, 0],
+            scroll: ScrollOrigin::new(origin_x, origin_y),
         }
     }
 
@@ -166,8 +140,7 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
                 max: 0,
             },
             off_grid: 0,
-            anchor: [0.0, 0.0],
-            scrolled: [0, 0],
+            scroll: ScrollOrigin::new(0.0, 0.0),
         }
     }
 
@@ -195,8 +168,7 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
             origin_x,
             origin_y,
         };
-        self.anchor = [origin_x, origin_y];
-        self.scrolled = [0, 0];
+        self.scroll = ScrollOrigin::new(origin_x, origin_y);
         self.log_odds = log_odds;
         self.reset();
         Ok(())
@@ -243,8 +215,7 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
         }
         self.geometry.origin_x = origin_x;
         self.geometry.origin_y = origin_y;
-        self.anchor = [origin_x, origin_y];
-        self.scrolled = [0, 0];
+        self.scroll = ScrollOrigin::new(origin_x, origin_y);
         Ok(())
     }
 
@@ -277,16 +248,7 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
         }
         let (w, h) = (W as i64, H as i64);
         let (dx64, dy64) = (i64::from(dx), i64::from(dy));
-        self.scrolled = [
-            self.scrolled[0].saturating_add(dx),
-            self.scrolled[1].saturating_add(dy),
-        ];
-        let g = &mut self.geometry;
-        // The anchor plus whole cells, in f64 (exact for any i32 count of cells), rounded
-        // once to f32.
-        let res = f64::from(g.resolution);
-        g.origin_x = (f64::from(self.anchor[0]) + f64::from(self.scrolled[0]) * res) as f32;
-        g.origin_y = (f64::from(self.anchor[1]) + f64::from(self.scrolled[1]) * res) as f32;
+        self.scroll.scroll(dx, dy, &mut self.geometry);
         if dx64.abs() >= w || dy64.abs() >= h {
             self.clear_cells();
             return;
@@ -313,18 +275,14 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
                     }
                 }
             } else {
-                for (bits, cells) in self
-                    .occupied
-                    .chunks_exact_mut(bytes_per_row)
-                    .zip(self.cells.iter())
-                {
-                    for (byte, eight) in bits.iter_mut().zip(cells.chunks(8)) {
-                        *byte = eight
-                            .iter()
-                            .enumerate()
-                            .fold(0u8, |b, (k, v)| b | (u8::from(*v > t) << k));
-                    }
-                }
+                // The cells and the bitmap have this grid's own sizes: this cannot fail.
+                let _ = super::fill_occupancy_bits(
+                    self.cells.as_flattened(),
+                    W,
+                    H,
+                    t,
+                    &mut self.occupied,
+                );
             }
         }
     }
