@@ -3,3 +3,8 @@
 //! scans are kept in an append-only store (flash on a microcontroller), and a pose graph
 //! over the keyframes closes loops by matching a new keyframe against the old ones
 //! nearby.
+//!
+//! - [`local_map`]: the map the filter tracks the robot on, a near log-odds window and a
+//!   far occupancy bitmap that move with the robot.
+
+pub mod local_map;
