@@ -6,5 +6,7 @@
 //!
 //! - [`local_map`]: the map the filter tracks the robot on, a near log-odds window and a
 //!   far occupancy bitmap that move with the robot.
+//! - [`matcher`]: where near a guess a scan fits a map best (the loop closure's match).
 
 pub mod local_map;
+pub mod matcher;

@@ -1,0 +1,497 @@
+//! Where, near a guess, does a scan fit a map best? A correlative scan matcher (Olson
+//! 2009) over a window of headings and positions around the guess, exact by branch and
+//! bound on max-pooled copies of the map (Hess et al. 2016), in fixed memory.
+//!
+//! **Score.** A candidate pose scores the number of the scan's end points that fall on an
+//! occupied cell of the map (an [`OccupancyBitmap`]).
+//!
+//! **Candidates.** Headings `guess.θ + j·δ` for `|j·δ| ≤` the window's half angle, tried
+//! in the order 0, −δ, +δ, −2δ, …; positions: the guess moved by whole cells, up to the
+//! window's half width each way.
+//!
+//! **Bound.** Level `k` of a [`MatcherLevels`] holds, for each cell, whether any cell of
+//! the `b × b` block starting there is occupied (`b = 4^k`): a scan scored against it at
+//! a translation bounds its score at every one of the `b × b` translations starting
+//! there. Per heading, the window's translations are covered by blocks of the top level;
+//! a block whose bound does not beat the best score so far is dropped with all its
+//! translations, the others are split into 16 blocks of the level below, best bound
+//! first, down to exact scores. The answer is the best candidate of the whole window, the
+//! first found among equals (the same as trying every candidate: a test checks it).
+//!
+//! **Uncertainty.** Around the best candidate the exact scores of its neighbours (± a few
+//! cells and heading steps) weighted by `exp((score − best) / τ)` give a covariance:
+//! long along a corridor, where moving along it scores the same, short across it.
+//!
+//! # References
+//!
+//! - Olson 2009: E. Olson, "Real-time correlative scan matching", IEEE ICRA 2009,
+//!   pp. 4387–4393.
+//! - Hess et al. 2016: W. Hess, D. Kohler, H. Rapp, D. Andor, "Real-time loop closure in
+//!   2D LIDAR SLAM", IEEE ICRA 2016, pp. 1271–1278.
+
+use crate::geometry::{Pose2, sin_cos_f32, wrap_angle};
+use crate::grid::{GridGeometry, OccupancyBitmap, floor_i32};
+use core::fmt;
+
+/// Most end points a match uses (more are thinned evenly).
+pub const MAX_MATCH_POINTS: usize = 128;
+/// Most levels of max-pooled copies ([`MatcherLevels`]).
+pub const MAX_LEVELS: usize = 4;
+
+/// The window of candidates around the guess.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MatchWindow {
+    /// Positions up to this many cells from the guess along x and along y.
+    pub half_width_cells: u16,
+    /// Headings up to this far from the guess's, radians.
+    pub half_angle: f32,
+    /// Step between headings, radians (> 0).
+    pub angle_step: f32,
+    /// A match is reported only when at least this fraction of the end points hit (0..1).
+    pub min_hit_fraction: f32,
+    /// Work after which the search stops (end points looked up, all levels): bounds the
+    /// instructions of one match.
+    pub work_budget: u32,
+}
+
+/// Why a match was not made.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MatchError {
+    /// A setting is out of range or not finite, or the guess is not finite.
+    InvalidInput,
+    /// No end point to match (all non-finite or none given).
+    NoPoints,
+    /// The levels were made for another map (size or placement): call
+    /// [`MatcherLevels::build`] for this one first.
+    StaleLevels,
+}
+
+impl fmt::Display for MatchError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::InvalidInput => "a match window setting or the guess is out of range",
+            Self::NoPoints => "no usable end point to match",
+            Self::StaleLevels => "the matcher's levels were built for another map",
+        })
+    }
+}
+
+impl core::error::Error for MatchError {}
+
+/// The best candidate of a window.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ScanMatch {
+    /// The scan's pose at the best candidate.
+    pub pose: Pose2<f32>,
+    /// End points on occupied cells there.
+    pub hits: u32,
+    /// End points used.
+    pub points: u32,
+    /// `true` when `hits ≥ min_hit_fraction · points` and the search covered the whole
+    /// window within its work budget.
+    pub accepted: bool,
+    /// `false` when the work budget ran out (the best found so far is reported).
+    pub complete: bool,
+    /// Work done by the search (end points looked up); the covariance adds
+    /// `5 · 7 · 7 = 245` scores of the end points.
+    pub work: u32,
+    /// Covariance of the position (m²: xx, xy, yy) and the heading (rad²) from the scores
+    /// around the best candidate (see the module).
+    pub covariance: [f32; 4],
+}
+
+/// Max-pooled copies of an `N × N` map, levels `1..=LEVELS` with blocks of `4^k` cells,
+/// each `BYTES = occupancy_bytes(N, N)` bytes: `LEVELS · BYTES` of RAM (256 × 256 cells,
+/// 2 levels: 16 KB), built from a map with [`MatcherLevels::build`].
+#[derive(Clone, Debug)]
+pub struct MatcherLevels<const N: usize, const BYTES: usize, const LEVELS: usize> {
+    levels: [[u8; BYTES]; LEVELS],
+    geometry: GridGeometry,
+}
+
+impl<const N: usize, const BYTES: usize, const LEVELS: usize> MatcherLevels<N, BYTES, LEVELS> {
+    const LEVELS_OK: () = assert!(
+        LEVELS >= 1 && LEVELS <= MAX_LEVELS && BYTES == crate::grid::occupancy_bytes(N, N),
+        "MatcherLevels<N, BYTES, LEVELS>: 1 ≤ LEVELS ≤ MAX_LEVELS, BYTES = occupancy_bytes(N, N)"
+    );
+
+    /// Zero bytes only, for a `static` in `.bss`.
+    pub const fn zeroed() -> Self {
+        let () = Self::LEVELS_OK;
+        Self {
+            levels: [[0; BYTES]; LEVELS],
+            geometry: GridGeometry {
+                width: 0,
+                height: 0,
+                resolution: 0.0,
+                origin_x: 0.0,
+                origin_y: 0.0,
+            },
+        }
+    }
+
+    /// Makes the levels of `map`: level `k` is the map with every set bit spread to the
+    /// `4^k × 4^k` block ending there (each cell: any set bit in the block starting at
+    /// it). O(`LEVELS · BYTES`) word operations.
+    pub fn build(&mut self, map: &OccupancyBitmap<N, N, BYTES>) {
+        self.geometry = *map.geometry();
+        let mut source: &[u8] = map.bits();
+        let mut block = 1usize;
+        for level in self.levels.iter_mut() {
+            level.copy_from_slice(source);
+            // Two doublings per level: blocks of 4× the size of the level below.
+            for _ in 0..2 {
+                spread(level, N, block);
+                block *= 2;
+            }
+            source = level;
+        }
+    }
+
+    /// Matches `points` (robot frame, metres) on `map` around `guess` over `window`.
+    /// `map` must be the one the levels were built from.
+    pub fn search(
+        &self,
+        map: &OccupancyBitmap<N, N, BYTES>,
+        points: &[(f32, f32)],
+        guess: &Pose2<f32>,
+        window: &MatchWindow,
+    ) -> Result<ScanMatch, MatchError> {
+        let valid = guess.is_finite()
+            && window.half_angle.is_finite()
+            && window.half_angle >= 0.0
+            && window.angle_step.is_finite()
+            && window.angle_step > 0.0
+            && (0.0..=1.0).contains(&window.min_hit_fraction);
+        if !valid {
+            return Err(MatchError::InvalidInput);
+        }
+        if *map.geometry() != self.geometry || self.geometry.width != N {
+            return Err(MatchError::StaleLevels);
+        }
+        let mut used = [(0.0f32, 0.0f32); MAX_MATCH_POINTS];
+        let n = thin(points, &mut used);
+        if n == 0 {
+            return Err(MatchError::NoPoints);
+        }
+        let used = used.get(..n).unwrap_or(&[]);
+        let mut search = Search {
+            levels: &self.levels,
+            base: map.bits(),
+            geometry: &self.geometry,
+            work: 0,
+            budget: window.work_budget,
+            best: Candidate::default(),
+            cells: [(0, 0); MAX_MATCH_POINTS],
+            n,
+        };
+        let steps = (window.half_angle / window.angle_step) as i32;
+        let half = i32::from(window.half_width_cells);
+        let mut complete = true;
+        'headings: for k in 0..=2 * steps {
+            // 0, −1, +1, −2, +2, …
+            let j = if k % 2 == 0 { -(k / 2) } else { (k + 1) / 2 };
+            let theta = guess.theta + j as f32 * window.angle_step;
+            search.end_cells(used, guess, theta);
+            if !search.window(j, half) {
+                complete = false;
+                break 'headings;
+            }
+        }
+        let best = search.best;
+        let theta = wrap_angle(guess.theta + best.heading as f32 * window.angle_step);
+        let res = self.geometry.resolution;
+        let pose = Pose2::new(
+            guess.x + best.dx as f32 * res,
+            guess.y + best.dy as f32 * res,
+            theta,
+        );
+        let work = search.work;
+        let covariance = search.covariance(used, guess, window, &best);
+        let points = n as u32;
+        Ok(ScanMatch {
+            pose,
+            hits: best.score,
+            points,
+            accepted: complete && best.score as f32 >= window.min_hit_fraction * points as f32,
+            complete,
+            work,
+            covariance,
+        })
+    }
+}
+
+/// Thins `points` evenly to at most [`MAX_MATCH_POINTS`] finite ones into `out`; the
+/// number kept.
+fn thin(points: &[(f32, f32)], out: &mut [(f32, f32); MAX_MATCH_POINTS]) -> usize {
+    let finite = points
+        .iter()
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .count();
+    let stride = finite.div_ceil(MAX_MATCH_POINTS).max(1);
+    let mut n = 0;
+    for p in points
+        .iter()
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .step_by(stride)
+    {
+        if let Some(slot) = out.get_mut(n) {
+            *slot = *p;
+            n += 1;
+        }
+    }
+    n
+}
+
+/// In place: every set bit also sets the `shift` cells before it along x and the `shift`
+/// rows below it (so that a cell holds the OR of the `2·shift`-wide block starting at it,
+/// when it held that of the `shift`-wide block).
+fn spread(bits: &mut [u8], width: usize, shift: usize) {
+    let bpr = width.div_ceil(8);
+    // Rows: row y |= row y + shift, in increasing y (row y + shift not yet changed).
+    let rows = bits.len() / bpr.max(1);
+    for y in 0..rows.saturating_sub(shift) {
+        for b in 0..bpr {
+            let above = bits.get((y + shift) * bpr + b).copied().unwrap_or(0);
+            if let Some(v) = bits.get_mut(y * bpr + b) {
+                *v |= above;
+            }
+        }
+    }
+    // Columns: bit x |= bit x + shift.
+    for row in bits.chunks_exact_mut(bpr) {
+        let bytes = shift / 8;
+        let s = (shift % 8) as u32;
+        for i in 0..row.len() {
+            let a = row.get(i + bytes).copied().unwrap_or(0);
+            let b = row.get(i + bytes + 1).copied().unwrap_or(0);
+            let moved = if s == 0 { a } else { (a >> s) | (b << (8 - s)) };
+            if let Some(v) = row.get_mut(i) {
+                *v |= moved;
+            }
+        }
+    }
+}
+
+/// A candidate: heading index, cell offsets from the guess, its score.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Candidate {
+    heading: i32,
+    dx: i32,
+    dy: i32,
+    score: u32,
+}
+
+/// One search's state.
+struct Search<'a, const BYTES: usize, const LEVELS: usize> {
+    levels: &'a [[u8; BYTES]; LEVELS],
+    base: &'a [u8],
+    geometry: &'a GridGeometry,
+    work: u32,
+    budget: u32,
+    best: Candidate,
+    /// End cells of the points at the current heading, the robot at the guess.
+    cells: [(i32, i32); MAX_MATCH_POINTS],
+    n: usize,
+}
+
+impl<const BYTES: usize, const LEVELS: usize> Search<'_, BYTES, LEVELS> {
+    fn end_cells(&mut self, points: &[(f32, f32)], guess: &Pose2<f32>, theta: f32) {
+        let (s, c) = sin_cos_f32(theta);
+        let g = self.geometry;
+        for (cell, (px, py)) in self.cells.iter_mut().zip(points) {
+            let (x, y) = (guess.x + c * px - s * py, guess.y + s * px + c * py);
+            let (u, v) = g.world_to_grid(x, y);
+            *cell = (floor_i32(u), floor_i32(v));
+        }
+    }
+
+    /// Score of the end cells moved by `(dx, dy)` on `bits` (level or base).
+    fn score(&mut self, bits: &[u8], dx: i32, dy: i32) -> u32 {
+        let w = self.geometry.width as i32;
+        let h = self.geometry.height as i32;
+        let bpr = (w as usize).div_ceil(8);
+        let mut hits = 0u32;
+        for &(cx, cy) in self.cells.iter().take(self.n) {
+            let (x, y) = (cx.saturating_add(dx), cy.saturating_add(dy));
+            if (0..w).contains(&x) && (0..h).contains(&y) {
+                let byte = bits
+                    .get(y as usize * bpr + x as usize / 8)
+                    .copied()
+                    .unwrap_or(0);
+                hits += u32::from(byte >> (x % 8) & 1);
+            }
+        }
+        self.work = self.work.saturating_add(self.n as u32);
+        hits
+    }
+
+    /// Every translation of the window at heading index `j`, by branch and bound; `false`
+    /// when the work budget ran out.
+    fn window(&mut self, j: i32, half: i32) -> bool {
+        let top = LEVELS;
+        let block = 1i32 << (2 * top);
+        let blocks = (2 * half + 1 + block - 1) / block;
+        let levels = self.levels;
+        let Some(bits) = levels.get(top - 1) else {
+            return true;
+        };
+        for by in 0..blocks {
+            for bx in 0..blocks {
+                let (x0, y0) = (-half + bx * block, -half + by * block);
+                let bound = self.score(bits, x0, y0);
+                if bound > self.best.score && !self.expand(j, top, x0, y0, half) {
+                    return false;
+                }
+                if self.work >= self.budget {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+
+    /// The 16 blocks of the level below the block of level `level` starting at `(x0, y0)`
+    /// (those inside the window): at level 0 their exact scores, above it their bounds,
+    /// then each whose bound beats the best so far, best bound first (equal bounds in row
+    /// order). `false` when the work budget ran out.
+    fn expand(&mut self, j: i32, level: usize, x0: i32, y0: i32, half: i32) -> bool {
+        if self.work >= self.budget {
+            return false;
+        }
+        let below = level - 1;
+        let child = 1i32 << (2 * below);
+        let levels = self.levels;
+        let bits = if below == 0 {
+            self.base
+        } else {
+            match levels.get(below - 1) {
+                Some(b) => &b[..],
+                None => return true,
+            }
+        };
+        let mut children = [(0u32, 0i32, 0i32); 16];
+        let mut count = 0;
+        for cy in 0..4 {
+            for cx in 0..4 {
+                let (x, y) = (x0 + cx * child, y0 + cy * child);
+                if x > half || y > half {
+                    continue;
+                }
+                let score = self.score(bits, x, y);
+                if below == 0 {
+                    if score > self.best.score {
+                        self.best = Candidate {
+                            heading: j,
+                            dx: x,
+                            dy: y,
+                            score,
+                        };
+                    }
+                } else if let Some(slot) = children.get_mut(count) {
+                    *slot = (score, x, y);
+                    count += 1;
+                }
+            }
+        }
+        let children = children.get_mut(..count).unwrap_or(&mut []);
+        // Insertion sort by decreasing bound, stable (16 at most).
+        for i in 1..children.len() {
+            let mut k = i;
+            while k > 0 && children.get(k - 1).map(|c| c.0) < children.get(k).map(|c| c.0) {
+                children.swap(k - 1, k);
+                k -= 1;
+            }
+        }
+        for &(bound, x, y) in children.iter() {
+            if bound <= self.best.score {
+                break;
+            }
+            if !self.expand(j, below, x, y, half) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// Covariance from the exact scores of the best candidate's neighbours (see the
+    /// module): ±3 cells and ±2 heading steps, weights `exp((score − top) / τ)` with `top`
+    /// the best score among them and τ a tenth of it (at least 1). Zero when no end
+    /// point hits there.
+    fn covariance(
+        &mut self,
+        points: &[(f32, f32)],
+        guess: &Pose2<f32>,
+        window: &MatchWindow,
+        best: &Candidate,
+    ) -> [f32; 4] {
+        const CELLS: i32 = 3;
+        const STEPS: i32 = 2;
+        const SIDE: usize = (2 * CELLS + 1) as usize;
+        let mut scores = [0u32; (2 * STEPS + 1) as usize * SIDE * SIDE];
+        let mut k = 0;
+        for dj in -STEPS..=STEPS {
+            let theta = guess.theta + (best.heading + dj) as f32 * window.angle_step;
+            self.end_cells(points, guess, theta);
+            for dy in -CELLS..=CELLS {
+                for dx in -CELLS..=CELLS {
+                    let base = self.base;
+                    let s = self.score(base, best.dx + dx, best.dy + dy);
+                    if let Some(slot) = scores.get_mut(k) {
+                        *slot = s;
+                    }
+                    k += 1;
+                }
+            }
+        }
+        let top = scores.iter().copied().max().unwrap_or(0);
+        if top == 0 {
+            return [0.0; 4];
+        }
+        let tau = (top as f32 * 0.1).max(1.0);
+        let res = self.geometry.resolution;
+        let (mut sw, mut sx, mut sy, mut st) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        let (mut sxx, mut sxy, mut syy, mut stt) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        let mut k = 0;
+        for dj in -STEPS..=STEPS {
+            for dy in -CELLS..=CELLS {
+                for dx in -CELLS..=CELLS {
+                    let s = scores.get(k).copied().unwrap_or(0);
+                    k += 1;
+                    let w = libm::expf((s as f32 - top as f32) / tau);
+                    let (x, y, t) = (
+                        dx as f32 * res,
+                        dy as f32 * res,
+                        dj as f32 * window.angle_step,
+                    );
+                    sw += w;
+                    sx += w * x;
+                    sy += w * y;
+                    st += w * t;
+                    sxx += w * x * x;
+                    sxy += w * x * y;
+                    syy += w * y * y;
+                    stt += w * t * t;
+                }
+            }
+        }
+        let (mx, my, mt) = (sx / sw, sy / sw, st / sw);
+        let c = [
+            sxx / sw - mx * mx,
+            sxy / sw - mx * my,
+            syy / sw - my * my,
+            stt / sw - mt * mt,
+        ];
+        if c.iter().all(|v| v.is_finite()) {
+            c
+        } else {
+            [0.0; 4]
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;
