@@ -6,7 +6,7 @@ use super::correlation::{
 use super::filter::ShiftSearch;
 use super::{GridPfConfig, ParticleFilter, PfError};
 use crate::geometry::Pose2;
-use crate::grid::{OccupancyGrid, ScanIntegration};
+use crate::grid::{GridView, OccupancyGrid, ScanIntegration};
 use crate::sensors::lidar::LidarScan;
 
 /// Grid SLAM with `P` particles, at most `B` beams per scan, on a borrowed `W × H` grid
@@ -206,30 +206,14 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const B
     /// to their best shifts, resamples if needed, and writes the scan into the map at the
     /// estimate.
     pub fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
-        let beams = self.config.load_scan(&mut self.points, scan)?;
-        let mut report = StepReport {
-            pose: self.pose,
-            n_eff: P as f32,
-            resampled: false,
-            beams,
-            score: 0,
-            map: ScanIntegration::default(),
-        };
-        if self.scans == 0 {
-            report.pose = self.filter.best_pose();
-        } else {
-            let search: ShiftSearch = const { shift_search::<W, BITMAP>() };
-            let u = self.filter.update_with_prior(
-                &self.map.view(),
-                self.points.as_slice(),
-                search,
-                self.config.shift_penalty(),
-            )?;
-            report.pose = u.best_pose;
-            report.n_eff = u.n_eff;
-            report.resampled = u.resampled;
-            report.score = u.best_shift.score;
-        }
+        let search: ShiftSearch = const { shift_search::<W, BITMAP>() };
+        let mut report = score_scan(
+            &mut self.filter,
+            &mut self.points,
+            &self.config,
+            scan,
+            (self.scans > 0).then(|| (self.map.view(), search)),
+        )?;
         report.map = self
             .map
             .integrate_points(
@@ -244,12 +228,44 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const B
     }
 }
 
+/// The scoring half of a SLAM step: loads `scan` into `points` and, with a map to score
+/// on (`None` for the first scan, which only starts the map), scores and moves the
+/// particles ([`ParticleFilter::update_with_prior`] with the configured shift prior).
+/// The report's pose is the heaviest particle's; its map part is left for the caller,
+/// which writes the scan.
+pub(crate) fn score_scan<const P: usize, const B: usize>(
+    filter: &mut ParticleFilter<P>,
+    points: &mut ScanPoints<B>,
+    config: &GridPfConfig,
+    scan: &LidarScan<'_>,
+    map: Option<(GridView<'_>, ShiftSearch)>,
+) -> Result<StepReport, PfError> {
+    let beams = config.load_scan(points, scan)?;
+    let mut report = StepReport {
+        pose: filter.best_pose(),
+        n_eff: P as f32,
+        resampled: false,
+        beams,
+        score: 0,
+        map: ScanIntegration::default(),
+    };
+    if let Some((view, search)) = map {
+        let u =
+            filter.update_with_prior(&view, points.as_slice(), search, config.shift_penalty())?;
+        report.pose = u.best_pose;
+        report.n_eff = u.n_eff;
+        report.resampled = u.resampled;
+        report.score = u.best_shift.score;
+    }
+    Ok(report)
+}
+
 /// The shift search of a grid `W` cells wide, chosen when the program is built, so that
 /// a build carries only the one it uses: without a bitmap the byte-wise search; with one
 /// the sparse search, with the bitmap's row offsets as constants for grids 256, 512 and
 /// 1024 cells wide (the firmware's and the host's grids;
 /// [`search_window_sparse_rows`]), else reading them from the map.
-const fn shift_search<const W: usize, const BITMAP: usize>() -> ShiftSearch {
+pub(crate) const fn shift_search<const W: usize, const BITMAP: usize>() -> ShiftSearch {
     if BITMAP == 0 {
         return search_window;
     }
