@@ -4,9 +4,12 @@
 //! over the keyframes closes loops by matching a new keyframe against the old ones
 //! nearby.
 //!
+//! - [`graph`]: the pose graph over the keyframes (chain and loop edges) and its solver,
+//!   LAGO's two linear steps over the chain's increments by conjugate gradients.
 //! - [`local_map`]: the map the filter tracks the robot on, a near log-odds window and a
 //!   far occupancy bitmap that move with the robot.
 //! - [`matcher`]: where near a guess a scan fits a map best (the loop closure's match).
 
+pub mod graph;
 pub mod local_map;
 pub mod matcher;
