@@ -154,6 +154,8 @@ use crate::geometry::{Pose2, sin_cos_f32, wrap_near};
 use core::fmt;
 
 mod solver;
+#[cfg(test)]
+mod tests;
 
 /// The edge that joins a new node to the one before it: the particle filter's motion
 /// between the two keyframes, with its noise.
