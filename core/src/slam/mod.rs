@@ -6,10 +6,13 @@
 //!
 //! - [`graph`]: the pose graph over the keyframes (chain and loop edges) and its solver,
 //!   LAGO's two linear steps over the chain's increments by conjugate gradients.
+//! - [`keyframes`]: the append-only keyframe store (records of fixed size with a CRC,
+//!   on NOR flash or in RAM, that survive a reset mid-write).
 //! - [`local_map`]: the map the filter tracks the robot on, a near log-odds window and a
 //!   far occupancy bitmap that move with the robot.
 //! - [`matcher`]: where near a guess a scan fits a map best (the loop closure's match).
 
 pub mod graph;
+pub mod keyframes;
 pub mod local_map;
 pub mod matcher;
