@@ -125,6 +125,8 @@ mod error;
 mod format;
 mod storage;
 mod store;
+#[cfg(test)]
+mod tests;
 
 pub use error::StoreError;
 pub use format::{
