@@ -14,6 +14,9 @@
 //!   log-odds [`grid::OccupancyGrid`] (SLAM) or a fixed, borrowed map (localization, e.g.
 //!   from flash); wheel odometry, IMU yaw-rate filtering and stream alignment in
 //!   [`sensors`].
+//! - [`slam::GraphSlam`]: grid SLAM at the scale of a building in fixed memory: the
+//!   particle filter on a local map that follows the robot, keyframes kept in flash, a
+//!   pose graph that closes loops.
 //! - [`event::Event`]: one time-stamped sensor sample; readers produce them, and
 //!   [`feed::EventFeed`] turns a stream of them into estimator steps.
 //! - `wire` (feature `wire`): the messages between a host and the device on a serial line,
@@ -46,6 +49,8 @@
 //! ## Features
 //! - `std`: build against the standard library (host tools). Off by default.
 //! - `defmt`: `defmt::Format` for public types and log lines through defmt.
+//! - `serde`: `Serialize`/`Deserialize` for the settings (grid filters, building-scale
+//!   SLAM), for host tools that read and write them.
 //! - `wire`: `microslam::wire`, the serial-line messages (serde + postcard, COBS, CRC-16).
 //! - `map-image`: `grid::map_image`, a map as a versioned, CRC-32-checked image for flash.
 //! - `libm-force`: use libm for float math even with `std`, so host and target agree

@@ -146,6 +146,7 @@ pub fn floor_i32(v: f32) -> i32 {
 /// `free_below` (−20 = −2 log 4): the seed's model with `p(hit | occupied) = 0.8`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct LogOdds {
     /// Added to the cell a beam ends in.
     pub hit: i8,

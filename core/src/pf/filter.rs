@@ -149,6 +149,63 @@ impl<const P: usize> ParticleFilter<P> {
         Ok(())
     }
 
+    /// Turns every particle by `delta` radians about its own position (headings wrapped),
+    /// weights unchanged: what a heading search (building-scale SLAM, [`crate::slam`]) found
+    /// the odometry's turn to be missing. A non-finite `delta` is refused and nothing
+    /// changes.
+    pub fn turn(&mut self, delta: f32) -> Result<(), PfError> {
+        if !delta.is_finite() {
+            return Err(PfError::NonFiniteInput);
+        }
+        for p in self.poses.iter_mut() {
+            p.theta = super::prediction::wrap(p.theta + delta);
+        }
+        Ok(())
+    }
+
+    /// The weighted mean pose of all particles (headings averaged as their differences to
+    /// the first particle's, so that a cloud across ±π is not torn apart); the first
+    /// particle's pose when the weights or sums are not finite.
+    pub fn mean_pose(&self) -> Pose2<f32> {
+        let first = self.poses.first().copied().unwrap_or_default();
+        self.local_mean(&first, f32::INFINITY, f32::INFINITY)
+    }
+
+    /// Which heading offset makes the scan fit the map best around `around`: each offset
+    /// `j · step` with `|j · step| ≤ span` (tried 0, −step, +step, −2 step, …) is scored
+    /// by the shift search at `around` turned by it. Returns the offset whose best shift
+    /// scores highest and that score, and the score of no offset; `(0, s, s)` when none
+    /// scores more than no offset. For a robot that turns faster than its odometry
+    /// follows: the particles' heading noise covers the odometry's usual errors, not a
+    /// turn off by ten degrees.
+    pub(crate) fn search_heading(
+        map: &GridView<'_>,
+        around: &Pose2<f32>,
+        points: &[ScanPoint],
+        half_width: u8,
+        search: ShiftSearch,
+        span: f32,
+        step: f32,
+    ) -> (f32, u32, u32) {
+        let mut scores = [0u32; MAX_SHIFTS];
+        let none = search(map, around, points, half_width, &mut scores).score;
+        if !(span.is_finite() && step.is_finite() && step > 0.0) {
+            return (0.0, none, none);
+        }
+        let steps = libm::floorf(span / step) as i32;
+        let mut best = (0.0f32, none);
+        for k in 1..=2 * steps {
+            let j = if k % 2 == 1 { -(k + 1) / 2 } else { k / 2 };
+            let delta = j as f32 * step;
+            let turned = Pose2::new(around.x, around.y, around.theta + delta);
+            let s = search(map, &turned, points, half_width, &mut scores).score;
+            if s > best.1 {
+                best = (delta, s);
+            }
+        }
+        (best.0, best.1, none)
+    }
+
     /// Normalised log-weights (`log Σ exp = 0` after every update).
     pub fn log_weights(&self) -> &[f32; P] {
         &self.log_weights
@@ -177,6 +234,35 @@ impl<const P: usize> ParticleFilter<P> {
             .get(self.best_index())
             .copied()
             .unwrap_or_default()
+    }
+
+    /// The weighted mean of the particles within `radius_m` (along x and along y) and
+    /// `radius_rad` (in heading) of `around` (usually the heaviest particle), headings
+    /// averaged as their differences to `around`'s: an estimate that does not jump with
+    /// the heaviest particle from scan to scan. `around` itself when no particle is that
+    /// close, the weights vanish or a sum is not finite.
+    pub fn local_mean(&self, around: &Pose2<f32>, radius_m: f32, radius_rad: f32) -> Pose2<f32> {
+        let (mut sw, mut sx, mut sy, mut st) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        for (p, lw) in self.poses.iter().zip(&self.log_weights) {
+            let (dx, dy) = (p.x - around.x, p.y - around.y);
+            let dt = crate::geometry::wrap_near(p.theta - around.theta);
+            if dx.abs() <= radius_m && dy.abs() <= radius_m && dt.abs() <= radius_rad {
+                let w = libm::expf(*lw);
+                sw += w;
+                sx += w * dx;
+                sy += w * dy;
+                st += w * dt;
+            }
+        }
+        if sw <= 0.0 || !sw.is_finite() {
+            return *around;
+        }
+        let mean = Pose2::new(
+            around.x + sx / sw,
+            around.y + sy / sw,
+            crate::geometry::wrap_near(around.theta + st / sw),
+        );
+        if mean.is_finite() { mean } else { *around }
     }
 
     /// Weighted covariance of the particle poses about their weighted mean, its upper

@@ -37,6 +37,9 @@ pub use localizer::{
 pub use prediction::MotionNoise;
 pub use resampling::Resampling;
 pub use slam::{GridSlam, StepReport};
+pub(crate) use slam::{
+    HeadingSearch, score_scan as score_slam_scan, shift_search as slam_shift_search,
+};
 
 use crate::error::InvalidSetting;
 use crate::grid::LogOdds;
@@ -49,6 +52,7 @@ pub const LOCALIZER_SHIFT_WINDOW: u8 = 1;
 /// Settings of the particle filter proper.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct FilterConfig {
     /// Input noise of the prediction.
     pub motion_noise: MotionNoise,
@@ -100,6 +104,7 @@ impl FilterConfig {
 /// size `W × H` is the [`crate::grid::OccupancyGrid`]'s.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct GridPfConfig {
     /// Cell edge length, metres (seed: 0.05); build the grid with it.
     pub resolution: f32,

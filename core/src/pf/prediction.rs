@@ -21,6 +21,7 @@ use crate::geometry::Pose2;
 /// σ_s = `sideways_std_per_metre`·|d|.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct MotionNoise {
     /// Distance noise per step, metres.
     pub distance_std: f32,

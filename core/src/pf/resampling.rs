@@ -12,6 +12,7 @@ use rand_distr::{Distribution, StandardUniform};
 /// Which low-variance scheme to use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum Resampling {
     /// One uniform draw per stratum (the seed).
     Stratified,

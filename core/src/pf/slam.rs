@@ -207,12 +207,13 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const B
     /// estimate.
     pub fn observe(&mut self, scan: &LidarScan<'_>) -> Result<StepReport, PfError> {
         let search: ShiftSearch = const { shift_search::<W, BITMAP>() };
-        let mut report = score_scan(
+        let (mut report, _) = score_scan(
             &mut self.filter,
             &mut self.points,
             &self.config,
             scan,
             (self.scans > 0).then(|| (self.map.view(), search)),
+            None,
         )?;
         report.map = self
             .map
@@ -228,18 +229,30 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const B
     }
 }
 
+/// A heading search before the particles are scored ([`score_scan`]): offsets up to
+/// `span` radians either way in steps of `step`, kept when the best scores more than
+/// `1 + min_gain` times no offset.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct HeadingSearch {
+    pub(crate) span: f32,
+    pub(crate) step: f32,
+    pub(crate) min_gain: f32,
+}
+
 /// The scoring half of a SLAM step: loads `scan` into `points` and, with a map to score
 /// on (`None` for the first scan, which only starts the map), scores and moves the
-/// particles ([`ParticleFilter::update_with_prior`] with the configured shift prior).
-/// The report's pose is the heaviest particle's; its map part is left for the caller,
-/// which writes the scan.
+/// particles ([`ParticleFilter::update_with_prior`] with the configured shift prior),
+/// after turning them all by what a `heading` search around their mean pose found (the
+/// turn is returned, 0 without one). The report's pose is the heaviest particle's; its
+/// map part is left for the caller, which writes the scan.
 pub(crate) fn score_scan<const P: usize, const B: usize>(
     filter: &mut ParticleFilter<P>,
     points: &mut ScanPoints<B>,
     config: &GridPfConfig,
     scan: &LidarScan<'_>,
     map: Option<(GridView<'_>, ShiftSearch)>,
-) -> Result<StepReport, PfError> {
+    heading: Option<HeadingSearch>,
+) -> Result<(StepReport, f32), PfError> {
     let beams = config.load_scan(points, scan)?;
     let mut report = StepReport {
         pose: filter.best_pose(),
@@ -249,7 +262,23 @@ pub(crate) fn score_scan<const P: usize, const B: usize>(
         score: 0,
         map: ScanIntegration::default(),
     };
+    let mut turn = 0.0;
     if let Some((view, search)) = map {
+        if let Some(h) = heading {
+            let (delta, best, none) = ParticleFilter::<P>::search_heading(
+                &view,
+                &filter.mean_pose(),
+                points.as_slice(),
+                config.filter.shift_window_cells,
+                search,
+                h.span,
+                h.step,
+            );
+            if delta != 0.0 && best as f32 > (1.0 + h.min_gain) * none as f32 {
+                filter.turn(delta)?;
+                turn = delta;
+            }
+        }
         let u =
             filter.update_with_prior(&view, points.as_slice(), search, config.shift_penalty())?;
         report.pose = u.best_pose;
@@ -257,7 +286,7 @@ pub(crate) fn score_scan<const P: usize, const B: usize>(
         report.resampled = u.resampled;
         report.score = u.best_shift.score;
     }
-    Ok(report)
+    Ok((report, turn))
 }
 
 /// The shift search of a grid `W` cells wide, chosen when the program is built, so that

@@ -195,6 +195,7 @@ pub struct LoopEdge {
 /// Settings of [`PoseGraph::optimise`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct SolverSettings {
     /// Conjugate-gradient iterations at most, for each of the two steps (1 or more).
     pub max_iterations: u16,

@@ -19,8 +19,9 @@
 //! (multiples of 8 cells). Cells that leave the near window keep their occupancy in the
 //! far bitmap; cells that enter it start from the far bitmap (an occupied bit becomes the
 //! log-odds of a cell seen occupied once more than the threshold needs, a clear one is
-//! unknown). Cells that leave the far bitmap are forgotten; the caller can put back what
-//! it knows of the cells that enter it ([`LocalMap::import_far`]).
+//! unknown). Cells that leave the far bitmap are forgotten: what the robot saw long ago
+//! and far away is the pose graph's business ([`super::GraphSlam`] closes loops against
+//! the stored keyframes), not the tracking map's.
 
 use crate::geometry::Pose2;
 use crate::grid::{
@@ -30,28 +31,6 @@ use crate::grid::{
 
 /// Cells a window moves by at least (and always a multiple of): one byte of the bitmap.
 const STEP: i32 = 8;
-
-/// How far the far bitmap moved in one [`LocalMap::follow`], cells: the rows and columns
-/// it uncovered are empty until [`LocalMap::import_far`] fills them.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct FarScroll {
-    /// Columns moved (positive: the bitmap moved towards +x; the uncovered columns are the
-    /// last `dx`).
-    pub dx: i32,
-    /// Rows moved (positive: towards +y; the uncovered rows are the last `dy`).
-    pub dy: i32,
-}
-
-impl FarScroll {
-    /// `true` when cell `(ix, iy)` of a `width × height` bitmap was uncovered by this move.
-    pub fn uncovered(&self, ix: i32, iy: i32, width: i32, height: i32) -> bool {
-        (self.dx > 0 && ix >= width - self.dx)
-            || (self.dx < 0 && ix < -self.dx)
-            || (self.dy > 0 && iy >= height - self.dy)
-            || (self.dy < 0 && iy < -self.dy)
-    }
-}
 
 /// The near log-odds window and the far bitmap around it (see the module).
 ///
@@ -127,10 +106,12 @@ impl<const NEAR: usize, const NEAR_BITS: usize, const FAR: usize, const FAR_BITS
             g.origin_y + offset as f32 * resolution,
             log_odds,
         )?;
-        // The near window may move a quarter of its width before it scrolls; the far one
-        // until the near window would come within a byte of its edge.
-        self.near_margin = (NEAR as i32 / 8).max(STEP);
-        self.far_margin = ((FAR - NEAR) as i32 / 2 - STEP).max(STEP);
+        // Both windows keep the robot within a byte's width (8 cells) of their centre, so
+        // that the far bitmap reaches as far ahead of the robot as behind it, whichever
+        // way it drives: the beams that look far ahead are what keep the filter from
+        // sliding along a corridor.
+        self.near_margin = STEP;
+        self.far_margin = STEP;
         Ok(())
     }
 
@@ -205,62 +186,16 @@ impl<const NEAR: usize, const NEAR_BITS: usize, const FAR: usize, const FAR_BITS
         off
     }
 
-    /// Sets the far bits of world points `points` that lie in the cells `scroll`
-    /// uncovered (what the caller knows of the place the far bitmap just moved over,
-    /// e.g. the end points of stored scans); other points are left out. Returns the bits
-    /// set.
-    pub fn import_far(
-        &mut self,
-        scroll: FarScroll,
-        points: impl Iterator<Item = (f32, f32)>,
-    ) -> u32 {
-        let g = *self.far.geometry();
-        let (w, h) = (FAR as i32, FAR as i32);
-        let mut set = 0u32;
-        for (x, y) in points {
-            let (u, v) = g.world_to_grid(x, y);
-            if !(u.is_finite() && v.is_finite()) {
-                continue;
-            }
-            let (ix, iy) = (floor_i32(u), floor_i32(v));
-            if scroll.uncovered(ix, iy, w, h) && self.far.set(ix, iy) {
-                set = set.saturating_add(1);
-            }
-        }
-        set
-    }
-
-    /// Sets far bits of world points anywhere on the far bitmap but inside the near
-    /// window (for a rebuild from stored scans: [`LocalMap::integrate`] then writes the
-    /// near window). Returns the bits set.
-    pub fn set_far(&mut self, points: impl Iterator<Item = (f32, f32)>) -> u32 {
-        let near = *self.near.geometry();
-        let mut set = 0u32;
-        for (x, y) in points {
-            let (u, v) = near.world_to_grid(x, y);
-            if u.is_finite() && v.is_finite() && near.contains(floor_i32(u), floor_i32(v)) {
-                continue;
-            }
-            if self.far.set_world(x, y) {
-                set = set.saturating_add(1);
-            }
-        }
-        set
-    }
-
-    /// Moves the windows so that `(x, y)` stays well inside both: the near window when
-    /// the point is more than an eighth of its width from its centre, the far bitmap when
-    /// the near window would come within a byte of its edge; both by multiples of 8
-    /// cells. Returns the far bitmap's move (its uncovered cells are empty:
-    /// [`LocalMap::import_far`]), `None` when it did not move. A non-finite point moves
-    /// nothing.
-    pub fn follow(&mut self, x: f32, y: f32) -> Option<FarScroll> {
+    /// Moves the windows so that `(x, y)` stays within 8 cells (a byte of the bitmap) of
+    /// both centres, by multiples of 8 cells. Returns `true` when the far bitmap moved (the cells it uncovered are
+    /// empty). A non-finite point moves nothing.
+    pub fn follow(&mut self, x: f32, y: f32) -> bool {
         if !(x.is_finite() && y.is_finite()) || self.far.geometry().width == 0 {
-            return None;
+            return false;
         }
-        let far_scroll = self.follow_far(x, y);
+        let far_moved = self.follow_far(x, y);
         self.follow_near(x, y);
-        far_scroll
+        far_moved
     }
 
     /// Cells (rounded to multiples of [`STEP`]) by which a window centred at cell
@@ -278,7 +213,7 @@ impl<const NEAR: usize, const NEAR_BITS: usize, const FAR: usize, const FAR_BITS
         }
     }
 
-    fn follow_far(&mut self, x: f32, y: f32) -> Option<FarScroll> {
+    fn follow_far(&mut self, x: f32, y: f32) -> bool {
         let g = *self.far.geometry();
         let (u, v) = g.world_to_grid(x, y);
         let centre = 0.5 * FAR as f32;
@@ -287,10 +222,10 @@ impl<const NEAR: usize, const NEAR_BITS: usize, const FAR: usize, const FAR_BITS
             Self::steps(v, centre, self.far_margin),
         );
         if dx == 0 && dy == 0 {
-            return None;
+            return false;
         }
         self.far.scroll(dx, dy);
-        Some(FarScroll { dx, dy })
+        true
     }
 
     fn follow_near(&mut self, x: f32, y: f32) {
@@ -324,7 +259,12 @@ impl<const NEAR: usize, const NEAR_BITS: usize, const FAR: usize, const FAR_BITS
     /// unknown).
     fn fill_near_from_far(&mut self, dx: i32, dy: i32) {
         let n = NEAR as i32;
-        let scroll = FarScroll { dx, dy };
+        let uncovered = |ix: i32, iy: i32| {
+            (dx > 0 && ix >= n - dx)
+                || (dx < 0 && ix < -dx)
+                || (dy > 0 && iy >= n - dy)
+                || (dy < 0 && iy < -dy)
+        };
         let near = *self.near.geometry();
         let far = *self.far.geometry();
         let (fu, fv) = far.world_to_grid(near.origin_x, near.origin_y);
@@ -332,7 +272,7 @@ impl<const NEAR: usize, const NEAR_BITS: usize, const FAR: usize, const FAR_BITS
         let occupied = self.near.log_odds_model().occupied_above.saturating_add(1);
         for iy in 0..n {
             for ix in 0..n {
-                if scroll.uncovered(ix, iy, n, n) && self.far.is_set(col + ix, row + iy) {
+                if uncovered(ix, iy) && self.far.is_set(col + ix, row + iy) {
                     self.near.set_cell(ix, iy, occupied);
                 }
             }

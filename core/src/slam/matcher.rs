@@ -41,6 +41,7 @@ pub const MAX_LEVELS: usize = 4;
 /// The window of candidates around the guess.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct MatchWindow {
     /// Positions up to this many cells from the guess along x and along y.
     pub half_width_cells: u16,
@@ -51,8 +52,14 @@ pub struct MatchWindow {
     /// A match is reported only when at least this fraction of the end points hit (0..1).
     pub min_hit_fraction: f32,
     /// Work after which the search stops (end points looked up, all levels): bounds the
-    /// instructions of one match.
+    /// instructions of one match (each of its two passes).
     pub work_budget: u32,
+    /// The runner-up is the best candidate at least this many cells (along x or y) or
+    /// heading steps from the best one …
+    pub distinct_cells: u16,
+    /// … and a match is reported only when the runner-up scores at most this fraction of
+    /// the best (0..1; 1: no test): in a corridor whose doors repeat, two places fit.
+    pub max_runner_up: f32,
 }
 
 /// Why a match was not made.
@@ -86,10 +93,17 @@ impl core::error::Error for MatchError {}
 pub struct ScanMatch {
     /// The scan's pose at the best candidate.
     pub pose: Pose2<f32>,
-    /// End points on occupied cells there.
+    /// The mean of the candidates around the best one weighted as for
+    /// [`ScanMatch::covariance`]: the best candidate refined below a cell and a heading
+    /// step.
+    pub centroid: Pose2<f32>,
+    /// End points on occupied cells at the best candidate.
     pub hits: u32,
     /// End points used.
     pub points: u32,
+    /// The best score of the candidates distinct from the best (see
+    /// [`MatchWindow::distinct_cells`]); 0 when the runner-up test is off.
+    pub runner_up: u32,
     /// `true` when `hits ≥ min_hit_fraction · points` and the search covered the whole
     /// window within its work budget.
     pub accepted: bool,
@@ -185,23 +199,23 @@ impl<const N: usize, const BYTES: usize, const LEVELS: usize> MatcherLevels<N, B
             work: 0,
             budget: window.work_budget,
             best: Candidate::default(),
+            exclude: None,
             cells: [(0, 0); MAX_MATCH_POINTS],
             n,
         };
-        let steps = (window.half_angle / window.angle_step) as i32;
-        let half = i32::from(window.half_width_cells);
-        let mut complete = true;
-        'headings: for k in 0..=2 * steps {
-            // 0, −1, +1, −2, +2, …
-            let j = if k % 2 == 0 { -(k / 2) } else { (k + 1) / 2 };
-            let theta = guess.theta + j as f32 * window.angle_step;
-            search.end_cells(used, guess, theta);
-            if !search.window(j, half) {
-                complete = false;
-                break 'headings;
-            }
-        }
+        let mut complete = search.pass(used, guess, window);
         let best = search.best;
+        // The runner-up: the same search with the best candidate's neighbourhood left out.
+        let mut runner_up = 0;
+        if window.max_runner_up < 1.0 && best.score > 0 {
+            let first = search.work;
+            search.work = 0;
+            search.best = Candidate::default();
+            search.exclude = Some((best, i32::from(window.distinct_cells)));
+            complete &= search.pass(used, guess, window);
+            runner_up = search.best.score;
+            search.work = search.work.saturating_add(first);
+        }
         let theta = wrap_angle(guess.theta + best.heading as f32 * window.angle_step);
         let res = self.geometry.resolution;
         let pose = Pose2::new(
@@ -210,13 +224,22 @@ impl<const N: usize, const BYTES: usize, const LEVELS: usize> MatcherLevels<N, B
             theta,
         );
         let work = search.work;
-        let covariance = search.covariance(used, guess, window, &best);
+        let (mean, covariance) = search.spread(used, guess, window, &best);
+        let centroid = Pose2::new(
+            pose.x + mean[0],
+            pose.y + mean[1],
+            wrap_angle(pose.theta + mean[2]),
+        );
         let points = n as u32;
         Ok(ScanMatch {
             pose,
+            centroid,
             hits: best.score,
             points,
-            accepted: complete && best.score as f32 >= window.min_hit_fraction * points as f32,
+            accepted: complete
+                && best.score as f32 >= window.min_hit_fraction * points as f32
+                && runner_up as f32 <= window.max_runner_up * best.score as f32,
+            runner_up,
             complete,
             work,
             covariance,
@@ -293,12 +316,38 @@ struct Search<'a, const BYTES: usize, const LEVELS: usize> {
     work: u32,
     budget: u32,
     best: Candidate,
+    /// Candidates within this many cells or heading steps of this one are not scored (the
+    /// runner-up pass).
+    exclude: Option<(Candidate, i32)>,
     /// End cells of the points at the current heading, the robot at the guess.
     cells: [(i32, i32); MAX_MATCH_POINTS],
     n: usize,
 }
 
 impl<const BYTES: usize, const LEVELS: usize> Search<'_, BYTES, LEVELS> {
+    /// Every heading of the window, 0, −1, +1, −2, … steps; `false` when the work budget
+    /// ran out.
+    fn pass(&mut self, points: &[(f32, f32)], guess: &Pose2<f32>, window: &MatchWindow) -> bool {
+        let steps = (window.half_angle / window.angle_step) as i32;
+        let half = i32::from(window.half_width_cells);
+        for k in 0..=2 * steps {
+            let j = if k % 2 == 0 { -(k / 2) } else { (k + 1) / 2 };
+            let theta = guess.theta + j as f32 * window.angle_step;
+            self.end_cells(points, guess, theta);
+            if !self.window(j, half) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// `true` when the runner-up pass leaves this candidate out.
+    fn excluded(&self, j: i32, dx: i32, dy: i32) -> bool {
+        self.exclude.is_some_and(|(c, r)| {
+            (j - c.heading).abs() < r && (dx - c.dx).abs() < r && (dy - c.dy).abs() < r
+        })
+    }
+
     fn end_cells(&mut self, points: &[(f32, f32)], guess: &Pose2<f32>, theta: f32) {
         let (s, c) = sin_cos_f32(theta);
         let g = self.geometry;
@@ -381,6 +430,9 @@ impl<const BYTES: usize, const LEVELS: usize> Search<'_, BYTES, LEVELS> {
                 if x > half || y > half {
                     continue;
                 }
+                if below == 0 && self.excluded(j, x, y) {
+                    continue;
+                }
                 let score = self.score(bits, x, y);
                 if below == 0 {
                     if score > self.best.score {
@@ -417,17 +469,17 @@ impl<const BYTES: usize, const LEVELS: usize> Search<'_, BYTES, LEVELS> {
         true
     }
 
-    /// Covariance from the exact scores of the best candidate's neighbours (see the
-    /// module): ±3 cells and ±2 heading steps, weights `exp((score − top) / τ)` with `top`
-    /// the best score among them and τ a tenth of it (at least 1). Zero when no end
-    /// point hits there.
-    fn covariance(
+    /// Mean offset `[x, y, θ]` from the best candidate and covariance from the exact
+    /// scores of its neighbours (see the module): ±3 cells and ±2 heading steps, weights
+    /// `exp((score − top) / τ)` with `top` the best score among them and τ a tenth of it
+    /// (at least 1). Zero when no end point hits there.
+    fn spread(
         &mut self,
         points: &[(f32, f32)],
         guess: &Pose2<f32>,
         window: &MatchWindow,
         best: &Candidate,
-    ) -> [f32; 4] {
+    ) -> ([f32; 3], [f32; 4]) {
         const CELLS: i32 = 3;
         const STEPS: i32 = 2;
         const SIDE: usize = (2 * CELLS + 1) as usize;
@@ -449,7 +501,7 @@ impl<const BYTES: usize, const LEVELS: usize> Search<'_, BYTES, LEVELS> {
         }
         let top = scores.iter().copied().max().unwrap_or(0);
         if top == 0 {
-            return [0.0; 4];
+            return ([0.0; 3], [0.0; 4]);
         }
         let tau = (top as f32 * 0.1).max(1.0);
         let res = self.geometry.resolution;
@@ -485,10 +537,10 @@ impl<const BYTES: usize, const LEVELS: usize> Search<'_, BYTES, LEVELS> {
             syy / sw - my * my,
             stt / sw - mt * mt,
         ];
-        if c.iter().all(|v| v.is_finite()) {
-            c
+        if c.iter().all(|v| v.is_finite()) && [mx, my, mt].iter().all(|v| v.is_finite()) {
+            ([mx, my, mt], c)
         } else {
-            [0.0; 4]
+            ([0.0; 3], [0.0; 4])
         }
     }
 }

@@ -11,8 +11,17 @@
 //! - [`local_map`]: the map the filter tracks the robot on, a near log-odds window and a
 //!   far occupancy bitmap that move with the robot.
 //! - [`matcher`]: where near a guess a scan fits a map best (the loop closure's match).
+//! - [`GraphSlam`]: all of it together, with its settings in [`config`].
 
+pub mod config;
 pub mod graph;
+mod graph_slam;
 pub mod keyframes;
 pub mod local_map;
 pub mod matcher;
+
+pub use config::{ChainNoise, EstimateRadius, GraphSlamConfig, KeyframeSpacing, LoopClosureConfig};
+pub use graph_slam::{
+    ClosureOutcome, GraphCounters, GraphSlam, GraphStep, MATCH_BYTES, MATCH_CELLS, MATCH_LEVELS,
+    SlamError,
+};

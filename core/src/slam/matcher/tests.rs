@@ -13,6 +13,8 @@ fn window(half_width_cells: u16, half_angle: f32) -> MatchWindow {
         angle_step: 0.01,
         min_hit_fraction: 0.5,
         work_budget: u32::MAX,
+        distinct_cells: 10,
+        max_runner_up: 1.0,
     }
 }
 
@@ -232,4 +234,51 @@ fn refused_inputs_and_budgets() {
     let m = levels.search(&map, &points, &guess, &tight).unwrap();
     assert!(!m.complete && !m.accepted, "{m:?}");
     assert!(m.work < 500 + 2 * 128 * 17, "{m:?}");
+}
+
+#[test]
+fn two_places_that_fit_alike_are_no_match() {
+    // A row of identical pillars 1 m apart: a scan fits at every pillar alike.
+    let mut map = Box::new(Map::zeroed());
+    map.init(0.05, -3.2, -3.2, 20).unwrap();
+    for k in -3..=3 {
+        for dx in 0..4 {
+            for dy in 0..4 {
+                map.set(64 + 20 * k + dx, 70 + dy);
+            }
+        }
+    }
+    for i in 0..128 {
+        map.set(i, 50);
+    }
+    let mut levels = Box::new(Levels2::zeroed());
+    levels.build(&map);
+    let truth = Pose2::new(0.02, 0.0, 0.0);
+    let points = cast(&map, &truth);
+    let guess = Pose2::new(0.0, 0.0, 0.0);
+    let unique = levels
+        .search(&map, &points, &guess, &window(30, 0.05))
+        .unwrap();
+    assert!(unique.accepted, "without the runner-up test: {unique:?}");
+    let strict = MatchWindow {
+        max_runner_up: 0.85,
+        ..window(30, 0.05)
+    };
+    let m = levels.search(&map, &points, &guess, &strict).unwrap();
+    assert_eq!(m.hits, unique.hits);
+    assert!(m.runner_up as f32 > 0.85 * m.hits as f32, "{m:?}");
+    assert!(!m.accepted, "{m:?}");
+    // With the window around one pillar only, the match is unique again.
+    let narrow = levels
+        .search(
+            &map,
+            &points,
+            &guess,
+            &MatchWindow {
+                half_width_cells: 6,
+                ..strict
+            },
+        )
+        .unwrap();
+    assert!(narrow.accepted, "{narrow:?}");
 }

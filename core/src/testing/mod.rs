@@ -1,5 +1,7 @@
 //! Helpers shared by the unit tests (compiled only for `cargo test`).
 
+pub mod world;
+
 use crate::error::InvalidSetting;
 use crate::geometry::wrap_angle;
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};

@@ -1,0 +1,158 @@
+//! The whole of building-scale grid SLAM on a simulated ring corridor larger than its
+//! local map: the loop closes through the graph, not through the map.
+
+use super::*;
+use crate::grid::occupancy_bytes;
+use crate::slam::LoopClosureConfig;
+use crate::slam::graph::scratch_len;
+use crate::slam::keyframes::RamStorage;
+use crate::testing::world::{LIDAR_270, RING_WAYPOINTS, drive, laps, position_rmse, ring_corridor};
+
+const NEAR: usize = 128;
+const FAR: usize = 256;
+const NODES: usize = 256;
+const LOOPS: usize = 64;
+/// 32 particles, 90 beams; a near window of 3.2 m and a far bitmap of 8 m: the 68 m ring
+/// is far larger than what the filter's map holds.
+type Slam = GraphSlam<
+    32,
+    90,
+    NEAR,
+    { occupancy_bytes(NEAR, NEAR) },
+    FAR,
+    { occupancy_bytes(FAR, FAR) },
+    NODES,
+    LOOPS,
+    { scratch_len(NODES, LOOPS) },
+>;
+type Store = KeyframeStore<RamStorage<{ 256 * 1024 }>>;
+
+fn store() -> Box<Store> {
+    Box::new(KeyframeStore::create(RamStorage::new(), &LIDAR_270, 2, 90).expect("an empty store"))
+}
+
+/// Runs the slam over a drive; the graph's trajectory (every scan at its keyframe's final
+/// pose ⊕ the filter's motion since) and the run's counters.
+fn run(config: GraphSlamConfig, seed: u64) -> (Vec<Pose2<f32>>, Vec<Pose2<f32>>, GraphCounters) {
+    let walls = ring_corridor();
+    let d = drive(
+        &walls,
+        &laps(&RING_WAYPOINTS, 1, 2),
+        &LIDAR_270,
+        180,
+        0.01,
+        seed,
+    );
+    let mut slam = Box::new(Slam::zeroed());
+    let mut store = store();
+    slam.init(config, d.truth[0]).unwrap();
+    let mut offsets = Vec::new();
+    for i in 0..d.scans.len() {
+        if i > 0 {
+            slam.predict_odometry(&d.odometry[i - 1], &d.odometry[i])
+                .unwrap();
+        }
+        slam.observe(&LidarScan::new(&d.scans[i], LIDAR_270), &mut store)
+            .unwrap();
+        let (node, at) = slam
+            .newest_keyframe()
+            .expect("a keyframe from the first scan");
+        offsets.push((node, at.between(&slam.filter_pose())));
+    }
+    assert_eq!(
+        store.len() as usize,
+        slam.graph().len(),
+        "one record a node"
+    );
+    assert_eq!(slam.counters().keyframes as usize, slam.graph().len());
+    let est = offsets
+        .iter()
+        .map(|(node, motion)| {
+            slam.graph()
+                .pose(usize::from(*node))
+                .unwrap()
+                .compose(motion)
+        })
+        .collect();
+    (est, d.truth, slam.counters())
+}
+
+fn config() -> GraphSlamConfig {
+    GraphSlamConfig {
+        grid: crate::pf::GridPfConfig {
+            beam_decimation: 2,
+            ..crate::pf::GridPfConfig::MICROCONTROLLER
+        },
+        ..GraphSlamConfig::MICROCONTROLLER
+    }
+}
+
+#[test]
+fn the_loop_closes_through_the_graph() {
+    let (closed, truth, counters) = run(config(), 1);
+    let open_config = GraphSlamConfig {
+        loop_closure: LoopClosureConfig {
+            enabled: false,
+            ..config().loop_closure
+        },
+        ..config()
+    };
+    let (open, _, open_counters) = run(open_config, 1);
+    let (e_closed, e_open) = (position_rmse(&closed, &truth), position_rmse(&open, &truth));
+    println!("closed {e_closed:.3} m {counters:?}; open {e_open:.3} m {open_counters:?}");
+    assert_eq!(open_counters.attempts, 0);
+    // Measured (seed 1): 29 closures of 73 attempts; 0.784 m closed against 1.140 m open.
+    // The filter loses along-track distance in the ring's 2 m corridor (the shift search
+    // pulls the particles back at the edge of what is mapped), which is what the loop
+    // closure has to take out.
+    assert!(counters.closures >= 25, "{counters:?}");
+    assert!(e_closed < 0.85, "{e_closed}");
+    assert!(e_open > 1.1, "{e_open}");
+}
+
+#[test]
+fn runs_are_repeatable() {
+    let (a, _, ca) = run(config(), 2);
+    let (b, _, cb) = run(config(), 2);
+    assert_eq!(a, b);
+    assert_eq!(ca, cb);
+}
+
+#[test]
+fn refused_inputs_leave_the_estimator_usable() {
+    let mut slam = Box::new(Slam::zeroed());
+    let mut store = store();
+    let ranges = [2.0f32; 180];
+    let scan = LidarScan::new(&ranges, LIDAR_270);
+    assert_eq!(slam.observe(&scan, &mut store), Err(SlamError::NotStarted));
+    assert_eq!(
+        slam.predict_velocity(0.1, 0.0, 0.1),
+        Err(SlamError::NotStarted)
+    );
+    assert_eq!(
+        slam.init(config(), Pose2::new(f32::NAN, 0.0, 0.0)),
+        Err(SlamError::Filter(PfError::NonFiniteInput))
+    );
+    let mut bad = config();
+    bad.keyframes.distance_m = -1.0;
+    assert_eq!(
+        slam.init(bad, Pose2::new(0.0, 0.0, 0.0)),
+        Err(SlamError::Filter(PfError::InvalidConfig))
+    );
+    slam.init(config(), Pose2::new(0.0, 0.0, 0.0)).unwrap();
+    slam.observe(&scan, &mut store).unwrap();
+    let before = (slam.filter_pose(), slam.scans(), store.len());
+    assert_eq!(
+        slam.predict_odometry(&Pose2::new(0.0, 0.0, 0.0), &Pose2::new(f32::NAN, 0.0, 0.0)),
+        Err(SlamError::Filter(PfError::NonFiniteInput))
+    );
+    let empty = [f32::NAN; 180];
+    assert_eq!(
+        slam.observe(&LidarScan::new(&empty, LIDAR_270), &mut store),
+        Err(SlamError::Filter(PfError::EmptyScan))
+    );
+    assert_eq!((slam.filter_pose(), slam.scans(), store.len()), before);
+    // Still usable.
+    slam.observe(&scan, &mut store).unwrap();
+    assert_eq!(slam.scans(), 2);
+}
