@@ -236,9 +236,9 @@ fn a_setting_out_of_range_is_named_with_its_file_and_rule() {
     );
     let err = refused(&grid, "hit = -3\n");
     assert!(err.contains("`hit` must be 0 or more"), "{err}");
-    let err = refused(&grid, "[loop_closure]\nloop_std_m = -1.0\n");
+    let err = refused(&grid, "[loop_closure]\nposition_std_floor_m = -1.0\n");
     assert!(
-        err.contains("[loop_closure]: `loop_std_m` must be finite and positive"),
+        err.contains("[loop_closure]: `position_std_floor_m` must be finite and positive"),
         "{err}"
     );
     // EKF settings.

@@ -290,7 +290,10 @@ pub(crate) fn metrics_json(
         "seed": options.config.filter.seed,
         "localizer": run.localizer,
         "loop_closure": run.loop_closure.map(|summary| serde_json::json!({
-            "settings": options.loop_closure,
+            "settings": options.loop_closure.map(|g| microslam::slam::GraphSlamConfig {
+                grid: options.config,
+                ..g
+            }),
             "summary": summary,
         })),
     })

@@ -189,7 +189,7 @@ pub struct SimGridOutputs<'a> {
 pub fn run_and_write(
     rec: &LidarRecording,
     configs: [GridPfConfig; 2],
-    loop_closure: Option<crate::domain::grid::LoopClosureConfig>,
+    loop_closure: Option<microslam::slam::GraphSlamConfig>,
     particles: usize,
     outputs: SimGridOutputs<'_>,
 ) -> Result<(serde_json::Value, serde_json::Value)> {
@@ -296,7 +296,10 @@ pub fn run_and_write(
             "seed": config.filter.seed,
             "localizer": run.localizer,
             "loop_closure": run.loop_closure.map(|summary| serde_json::json!({
-                "settings": options.loop_closure,
+                "settings": options.loop_closure.map(|g| microslam::slam::GraphSlamConfig {
+                grid: options.config,
+                ..g
+            }),
                 "summary": summary,
             })),
         });

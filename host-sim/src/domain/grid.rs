@@ -3,10 +3,10 @@
 //! geometry of CARMEN logs.
 
 use anyhow::{Context, Result, bail};
-use microslam::error::InvalidSetting;
 use microslam::geometry::Pose2;
 use microslam::pf::{GridPfConfig, MotionNoise};
 use microslam::sensors::lidar::LidarGeometry;
+use microslam::slam::GraphSlamConfig;
 use std::path::Path;
 
 /// Grid edge in cells on the host: 1024 × 1024 cells (51.2 m at 5 cm), 1 MB.
@@ -233,166 +233,81 @@ pub struct GridToml {
 }
 
 /// The `[loop_closure]` table of a grid settings file: `enabled` (default `true` when
-/// the table is there) and any [`LoopClosureConfig`] field by its name.
+/// the table is there) and any setting of [`GraphSlamConfig`] (the device's
+/// building-scale grid SLAM) by the name its refusals use.
 #[derive(Clone, Debug, Default, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LoopClosureToml {
     enabled: Option<bool>,
-    keyframe_distance_m: Option<f64>,
-    keyframe_turn_rad: Option<f64>,
-    min_age_keyframes: Option<usize>,
-    search_radius_m: Option<f64>,
-    submap_radius_m: Option<f64>,
-    window_m: Option<f64>,
-    heading_window_rad: Option<f64>,
-    heading_step_rad: Option<f64>,
-    min_score_fraction: Option<f64>,
-    score_temperature: Option<f64>,
-    sequential_std_m: Option<f64>,
-    sequential_std_per_m: Option<f64>,
-    sequential_heading_std: Option<f64>,
-    loop_std_m: Option<f64>,
-    loop_heading_std: Option<f64>,
-    beam_stride: Option<usize>,
-}
-
-/// Settings of grid SLAM's loop closure on the host (`host_sim::drivers::loop_closure`
-/// describes the method): keyframes, the correlative match of a keyframe against the map
-/// of the keyframes taken near it long before, and the pose graph's noise.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
-pub struct LoopClosureConfig {
-    /// Distance driven that makes a new keyframe, m.
-    pub keyframe_distance_m: f64,
-    /// Turn that makes a new keyframe, rad.
-    pub keyframe_turn_rad: f64,
-    /// A keyframe is matched only against keyframes at least this many keyframes older …
-    pub min_age_keyframes: usize,
-    /// … the nearest of them within this distance, m.
-    pub search_radius_m: f64,
-    /// The old map it is matched against: the scans of the keyframes this old or older
-    /// within this distance, m.
-    pub submap_radius_m: f64,
-    /// Half-width of the window of positions searched, m.
-    pub window_m: f64,
-    /// Half-width of the window of headings searched, rad.
-    pub heading_window_rad: f64,
-    /// Heading step of the search, rad.
-    pub heading_step_rad: f64,
-    /// A match counts when it scores at least this fraction of the most a scan can score.
-    pub min_score_fraction: f64,
-    /// Temperature of the match's spread (its covariance: every candidate weighted by
-    /// `exp((score − best) / τ)`), as a fraction of the most a scan can score.
-    pub score_temperature: f64,
-    /// Standard deviation of the position of a keyframe-to-keyframe edge, m, plus …
-    pub sequential_std_m: f64,
-    /// … this many metres per metre between the two keyframes.
-    pub sequential_std_per_m: f64,
-    /// Standard deviation of its heading, rad.
-    pub sequential_heading_std: f64,
-    /// Floor of a loop edge's position standard deviation (added to the match's spread), m.
-    pub loop_std_m: f64,
-    /// Floor of a loop edge's heading standard deviation, rad.
-    pub loop_heading_std: f64,
-    /// Every `beam_stride`-th beam is matched.
-    pub beam_stride: usize,
-}
-
-impl LoopClosureConfig {
-    /// Settings for a 2-D lidar indoors on a 5 cm map, chosen on the Intel log
-    /// (`docs/results-grid.md`, "Loop closure").
-    pub const DEFAULT: Self = Self {
-        keyframe_distance_m: 0.5,
-        keyframe_turn_rad: 0.3,
-        min_age_keyframes: 40,
-        search_radius_m: 2.0,
-        submap_radius_m: 6.0,
-        window_m: 1.0,
-        heading_window_rad: 0.2,
-        heading_step_rad: 0.01,
-        min_score_fraction: 0.7,
-        score_temperature: 0.02,
-        sequential_std_m: 0.005,
-        sequential_std_per_m: 0.005,
-        sequential_heading_std: 0.001,
-        loop_std_m: 0.05,
-        loop_heading_std: 0.01,
-        beam_stride: 2,
-    };
-
-    /// `true` when every value is in range (positive distances, steps and deviations,
-    /// fractions in (0, 1], a stride of at least 1).
-    pub fn is_valid(&self) -> bool {
-        self.invalid_setting().is_none()
-    }
-
-    /// The first value out of range (its key in `[loop_closure]` and its rule), `None`
-    /// when every one is valid.
-    pub fn invalid_setting(&self) -> Option<InvalidSetting> {
-        let (positive, non_negative) = (InvalidSetting::positive, InvalidSetting::non_negative);
-        InvalidSetting::first([
-            positive("keyframe_distance_m", self.keyframe_distance_m),
-            positive("keyframe_turn_rad", self.keyframe_turn_rad),
-            positive("search_radius_m", self.search_radius_m),
-            positive("submap_radius_m", self.submap_radius_m),
-            positive("window_m", self.window_m),
-            positive("heading_step_rad", self.heading_step_rad),
-            positive("score_temperature", self.score_temperature),
-            positive("sequential_std_m", self.sequential_std_m),
-            positive("sequential_heading_std", self.sequential_heading_std),
-            positive("loop_std_m", self.loop_std_m),
-            positive("loop_heading_std", self.loop_heading_std),
-            non_negative("sequential_std_per_m", self.sequential_std_per_m),
-            non_negative("heading_window_rad", self.heading_window_rad),
-            InvalidSetting::positive_fraction("min_score_fraction", self.min_score_fraction),
-            ("beam_stride", "1 or more", self.beam_stride >= 1),
-            (
-                "min_age_keyframes",
-                "1 or more",
-                self.min_age_keyframes >= 1,
-            ),
-            // The search's work: positions × headings, kept to what a replay can afford.
-            (
-                "window_m",
-                "at most 5 m (100 cells of 5 cm each way)",
-                (self.window_m / 0.05) <= 100.0,
-            ),
-            (
-                "heading_window_rad",
-                "at most 200 heading steps (heading_step_rad)",
-                (self.heading_window_rad / self.heading_step_rad) <= 200.0,
-            ),
-        ])
-    }
+    keyframe_distance_m: Option<f32>,
+    keyframe_turn_rad: Option<f32>,
+    chain_position_std_m: Option<f32>,
+    chain_position_std_per_m: Option<f32>,
+    chain_heading_std_rad: Option<f32>,
+    min_age_keyframes: Option<u16>,
+    candidate_radius_m: Option<f32>,
+    submap_radius_m: Option<f32>,
+    window_half_width_cells: Option<u16>,
+    window_half_angle_rad: Option<f32>,
+    window_angle_step_rad: Option<f32>,
+    min_hit_fraction: Option<f32>,
+    distinct_cells: Option<u16>,
+    max_runner_up: Option<f32>,
+    work_budget: Option<u32>,
+    position_std_floor_m: Option<f32>,
+    heading_std_floor_rad: Option<f32>,
+    estimate_radius_m: Option<f32>,
+    estimate_radius_rad: Option<f32>,
+    heading_span_rad: Option<f32>,
+    heading_span_per_radian: Option<f32>,
+    heading_max_span_rad: Option<f32>,
+    heading_step_rad: Option<f32>,
+    heading_min_gain: Option<f32>,
+    solver_max_iterations: Option<u16>,
+    solver_relative_tolerance: Option<f32>,
 }
 
 impl LoopClosureToml {
-    /// The settings this table gives over [`LoopClosureConfig::DEFAULT`], or `None` when
-    /// it says `enabled = false`.
-    pub fn apply(&self) -> Result<Option<LoopClosureConfig>> {
+    /// The settings this table gives over [`GraphSlamConfig::MICROCONTROLLER`] (its `grid`
+    /// part is the run's, set when the run starts), or `None` when it says
+    /// `enabled = false`.
+    pub fn apply(&self) -> Result<Option<GraphSlamConfig>> {
         if self.enabled == Some(false) {
             return Ok(None);
         }
-        let mut c = LoopClosureConfig::DEFAULT;
+        let mut c = GraphSlamConfig::MICROCONTROLLER;
         macro_rules! set {
-            ($($field:ident),* $(,)?) => {$(if let Some(v) = self.$field { c.$field = v; })*};
+            ($($key:ident => $($field:ident).+),* $(,)?) => {
+                $(if let Some(v) = self.$key { c.$($field).+ = v; })*
+            };
         }
         set!(
-            keyframe_distance_m,
-            keyframe_turn_rad,
-            min_age_keyframes,
-            search_radius_m,
-            submap_radius_m,
-            window_m,
-            heading_window_rad,
-            heading_step_rad,
-            min_score_fraction,
-            score_temperature,
-            sequential_std_m,
-            sequential_std_per_m,
-            sequential_heading_std,
-            loop_std_m,
-            loop_heading_std,
-            beam_stride
+            keyframe_distance_m => keyframes.distance_m,
+            keyframe_turn_rad => keyframes.turn_rad,
+            chain_position_std_m => chain.position_std_m,
+            chain_position_std_per_m => chain.position_std_per_m,
+            chain_heading_std_rad => chain.heading_std_rad,
+            min_age_keyframes => loop_closure.min_age_keyframes,
+            candidate_radius_m => loop_closure.candidate_radius_m,
+            submap_radius_m => loop_closure.submap_radius_m,
+            window_half_width_cells => loop_closure.window.half_width_cells,
+            window_half_angle_rad => loop_closure.window.half_angle,
+            window_angle_step_rad => loop_closure.window.angle_step,
+            min_hit_fraction => loop_closure.window.min_hit_fraction,
+            distinct_cells => loop_closure.window.distinct_cells,
+            max_runner_up => loop_closure.window.max_runner_up,
+            work_budget => loop_closure.window.work_budget,
+            position_std_floor_m => loop_closure.position_std_floor_m,
+            heading_std_floor_rad => loop_closure.heading_std_floor_rad,
+            estimate_radius_m => estimate_radius.position_m,
+            estimate_radius_rad => estimate_radius.heading_rad,
+            heading_span_rad => heading_search.span_rad,
+            heading_span_per_radian => heading_search.span_per_radian,
+            heading_max_span_rad => heading_search.max_span_rad,
+            heading_step_rad => heading_search.step_rad,
+            heading_min_gain => heading_search.min_gain,
+            solver_max_iterations => loop_closure.solver.max_iterations,
+            solver_relative_tolerance => loop_closure.solver.relative_tolerance,
         );
         if let Some(invalid) = c.invalid_setting() {
             bail!("[loop_closure]: {invalid}");
@@ -408,8 +323,9 @@ impl GridToml {
     }
 
     /// The loop closure the file asks for: its `[loop_closure]` table over
-    /// [`LoopClosureConfig::DEFAULT`], `None` without the table or with `enabled = false`.
-    pub fn loop_closure(&self) -> Result<Option<LoopClosureConfig>> {
+    /// [`GraphSlamConfig::MICROCONTROLLER`], `None` without the table or with
+    /// `enabled = false`.
+    pub fn loop_closure(&self) -> Result<Option<GraphSlamConfig>> {
         self.loop_closure
             .as_ref()
             .map_or(Ok(None), LoopClosureToml::apply)
@@ -497,8 +413,8 @@ pub struct GridOptions {
     pub preset: Option<Preset>,
     /// Reference trajectory for ATE (TUM or a corrected CARMEN log).
     pub reference: Option<std::path::PathBuf>,
-    /// Grid SLAM closes loops ([`LoopClosureConfig::DEFAULT`], or the settings file's
-    /// `[loop_closure]` table, which also turns it on by itself).
+    /// Grid SLAM closes loops ([`GraphSlamConfig::MICROCONTROLLER`], or the settings
+    /// file's `[loop_closure]` table, which also turns it on by itself).
     pub loop_closure: bool,
     /// Seconds added to the reference's stamps.
     pub reference_offset: f64,
@@ -583,21 +499,22 @@ impl Preset {
 }
 
 /// The loop closure of a grid run: the settings file's `[loop_closure]` table (which
-/// turns it on unless it says `enabled = false`), else [`LoopClosureConfig::DEFAULT`]
-/// when `requested` (`--loop-closure`), else none. A localizer has a fixed map and no
-/// loops to close: asking for one is an error.
+/// turns it on unless it says `enabled = false`), else
+/// [`GraphSlamConfig::MICROCONTROLLER`] when `requested` (`--loop-closure`), else none.
+/// With one, grid SLAM is the device's building-scale SLAM ([`microslam::slam`]). A
+/// localizer has a fixed map and no loops to close: asking for one is an error.
 pub fn loop_closure_settings(
     config: Option<&Path>,
     requested: bool,
     role: FilterRole,
-) -> Result<Option<LoopClosureConfig>> {
+) -> Result<Option<GraphSlamConfig>> {
     let from_file = match config {
         Some(path) => GridToml::read(path)?
             .loop_closure()
             .with_context(|| format!("in {}", path.display()))?,
         None => None,
     };
-    let chosen = from_file.or(requested.then_some(LoopClosureConfig::DEFAULT));
+    let chosen = from_file.or(requested.then_some(GraphSlamConfig::MICROCONTROLLER));
     if chosen.is_some() && role == FilterRole::Localizer {
         bail!("loop closure is for grid SLAM; a localizer's map is fixed");
     }
@@ -758,21 +675,22 @@ mod tests {
         assert_eq!(settings("seed = 1\n", false, slam).unwrap(), None);
         assert_eq!(
             settings("seed = 1\n", true, slam).unwrap(),
-            Some(LoopClosureConfig::DEFAULT)
+            Some(GraphSlamConfig::MICROCONTROLLER)
         );
         assert_eq!(
             loop_closure_settings(None, true, slam).unwrap(),
-            Some(LoopClosureConfig::DEFAULT)
+            Some(GraphSlamConfig::MICROCONTROLLER)
         );
         // The table turns it on by itself and sets values over the defaults.
-        let c = settings("[loop_closure]\nwindow_m = 0.5\n", false, slam)
-            .unwrap()
-            .expect("on");
-        assert_eq!(c.window_m, 0.5);
-        assert_eq!(
-            c.keyframe_distance_m,
-            LoopClosureConfig::DEFAULT.keyframe_distance_m
-        );
+        let c = settings(
+            "[loop_closure]\nwindow_half_width_cells = 10\n",
+            false,
+            slam,
+        )
+        .unwrap()
+        .expect("on");
+        assert_eq!(c.loop_closure.window.half_width_cells, 10);
+        assert_eq!(c.keyframes, GraphSlamConfig::MICROCONTROLLER.keyframes);
         assert_eq!(
             settings("[loop_closure]\nenabled = false\n", false, slam).unwrap(),
             None
@@ -783,10 +701,9 @@ mod tests {
             format!("{unknown:#}").contains("unknown field `window`"),
             "{unknown:#}"
         );
-        let range =
-            settings("[loop_closure]\nmin_score_fraction = 1.5\n", false, slam).unwrap_err();
+        let range = settings("[loop_closure]\nmin_hit_fraction = 1.5\n", false, slam).unwrap_err();
         assert!(
-            format!("{range:#}").contains("`min_score_fraction` must be within (0, 1]"),
+            format!("{range:#}").contains("`min_hit_fraction` must be within 0 ..= 1"),
             "{range:#}"
         );
         let localizer = loop_closure_settings(None, true, FilterRole::Localizer).unwrap_err();

@@ -8,142 +8,21 @@
 //! ([`GridRun::refused_odometry`]), and the next good one predicts the whole motion; a scan
 //! with no usable beam is counted ([`GridRun::skipped_scans`]) and the pose held.
 
-use super::loop_closure::{Correction, LoopCloser, LoopClosureSummary};
-use crate::domain::grid::{LoopClosureConfig, MAX_BEAMS, SUPPORTED_PARTICLES, ScanSpacing};
+use super::graph_slam::run_graph_slam;
+use super::grid_run::changes;
+pub use super::grid_run::{
+    GraphSummary, GridInput, GridRun, GridRunOptions, LocalizerSummary, MapChanges,
+};
+use crate::domain::grid::{MAX_BEAMS, SUPPORTED_PARTICLES, ScanSpacing};
 use crate::inputs::readers::carmen::LaserMessage;
 use crate::inputs::sim::lidar_world::LidarRecording;
 use anyhow::{Result, anyhow, bail};
 use microslam::geometry::Pose2;
-use microslam::grid::{GridGeometry, GridView, OccupancyGrid};
-use microslam::pf::{
-    GridEstimator, GridLocalizer, GridPfConfig, GridSlam, LocalizerState, StepReport,
-};
+use microslam::grid::{GridView, OccupancyGrid};
+use microslam::pf::{GridEstimator, GridLocalizer, GridSlam, LocalizerState, StepReport};
 use microslam::sensors::lidar::{LidarGeometry, LidarScan, robot_to_world};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
-
-/// One scan as the driver consumes it.
-#[derive(Clone, Copy, Debug)]
-pub struct GridInput<'a> {
-    /// Time stamp, seconds (reported with the estimate; never used for the motion).
-    pub stamp: f64,
-    /// Odometry pose at the scan (its increments drive the prediction).
-    pub odometry: Pose2<f32>,
-    /// Ranges, metres, in the order of the lidar geometry's beams.
-    pub ranges: &'a [f32],
-}
-
-/// Settings of a grid run besides the map.
-#[derive(Clone, Debug)]
-pub struct GridRunOptions {
-    /// Particles (one of [`SUPPORTED_PARTICLES`]).
-    pub particles: usize,
-    /// Filter settings.
-    pub config: GridPfConfig,
-    /// Lidar geometry of the scans.
-    pub lidar: LidarGeometry,
-    /// Grid SLAM closes loops with these settings ([`super::loop_closure`]); `None` for
-    /// none (and always for a localizer).
-    pub loop_closure: Option<LoopClosureConfig>,
-    /// Grid SLAM's map: the world position of its lower-left corner, metres
-    /// ([`crate::domain::grid::GridPlacement`]); `None`: centred on the start.
-    pub grid_origin: Option<[f32; 2]>,
-}
-
-/// Result of a run: the estimate at each processed scan, the map, and timing.
-#[derive(Clone, Debug)]
-pub struct GridRun {
-    /// `(stamp, pose)` per processed scan, in input order.
-    pub trajectory: Vec<(f64, Pose2<f32>)>,
-    /// Final map cells (row-major) and geometry (SLAM) or the map used (localization).
-    pub cells: Vec<i8>,
-    /// Geometry of `cells`.
-    pub geometry: GridGeometry,
-    /// Seconds spent in the filter (prediction, scoring, map writes), the observer's time
-    /// excluded.
-    pub filter_time_s: f64,
-    /// Seconds spent in the observer (e.g. writing an MCAP recording).
-    pub observer_time_s: f64,
-    /// Scans refused (no usable beam).
-    pub skipped_scans: usize,
-    /// Odometry poses refused (not finite): the prediction waits for the next good one.
-    pub refused_odometry: usize,
-    /// Ranges that were NaN or ±∞ in the processed scans (skipped beam by beam).
-    pub non_finite_beams: usize,
-    /// End points off the grid: for grid SLAM those that fell off it and were not written,
-    /// for a localizer those that lie outside its map seen from the estimate (either way
-    /// the robot, or what it saw, left the map's area).
-    pub off_grid_end_points: u64,
-    /// Scans with at least one end point off the grid.
-    pub scans_off_grid: usize,
-    /// How far apart the scans are, from their odometry poses (`None` with fewer than two).
-    pub scan_spacing: Option<ScanSpacing>,
-    /// The map as it grew ([`run_slam_observed`] with `snapshot_every` > 0; empty otherwise): the first entry holds
-    /// the known cells of the starting map, each later one the cells changed since.
-    pub snapshots: Vec<MapChanges>,
-    /// A localizer's lost detection at the end of the run (`None` for SLAM).
-    pub localizer: Option<LocalizerSummary>,
-    /// What the loop closure did (`None` without one). With one, [`GridRun::trajectory`]
-    /// is the graph's: every scan at its keyframe's final pose.
-    pub loop_closure: Option<LoopClosureSummary>,
-}
-
-/// What a localizer's lost detection saw over a run ([`microslam::pf::LocalizerStatus`]).
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
-pub struct LocalizerSummary {
-    /// Times it declared itself lost.
-    pub lost_events: u32,
-    /// Global relocalizations it made.
-    pub relocalizations: u32,
-    /// Its state after the last scan (`tracking`, `lost`, `relocalized`).
-    pub final_state: &'static str,
-    /// The last scan's hit fraction (best particle's correlation / the beams' weight).
-    pub final_hit_fraction: f32,
-    /// The running mean of the hit fraction while tracking.
-    pub expected_hit_fraction: f32,
-}
-
-/// Cells of the map that changed since the previous snapshot.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct MapChanges {
-    /// Scans processed when the snapshot was taken (0: the starting map).
-    pub scans: usize,
-    /// `(cell index, new value)` of every changed cell.
-    pub cells: Vec<(u32, i8)>,
-}
-
-/// The cells of `now` that differ from `before` (which is brought up to date).
-fn changes(before: &mut [i8], now: &[i8], scans: usize) -> MapChanges {
-    let mut cells = Vec::new();
-    for (i, (b, n)) in before.iter_mut().zip(now).enumerate() {
-        if b != n {
-            *b = *n;
-            cells.push((i as u32, *n));
-        }
-    }
-    MapChanges { scans, cells }
-}
-
-impl GridRun {
-    fn empty(cells: Vec<i8>, geometry: GridGeometry, scans: usize) -> Self {
-        Self {
-            trajectory: Vec::with_capacity(scans),
-            cells,
-            geometry,
-            filter_time_s: 0.0,
-            observer_time_s: 0.0,
-            skipped_scans: 0,
-            refused_odometry: 0,
-            non_finite_beams: 0,
-            off_grid_end_points: 0,
-            scans_off_grid: 0,
-            scan_spacing: None,
-            snapshots: Vec::new(),
-            localizer: None,
-            loop_closure: None,
-        }
-    }
-}
 
 /// What a run looks like after one scan: for recordings of the run (`--mcap`).
 #[derive(Clone, Copy, Debug)]
@@ -185,15 +64,6 @@ trait GridFilter: GridEstimator {
     fn off_grid(&self, report: &StepReport, _scan: &LidarScan<'_>, _decimation: usize) -> u32 {
         report.map.off_grid
     }
-    /// Re-places the map and the particles after a loop closure.
-    fn close_loop(
-        &mut self,
-        _correction: &Correction,
-        _inputs: &[GridInput<'_>],
-        _lidar: &LidarGeometry,
-    ) -> Result<()> {
-        bail!("loop closure needs grid SLAM")
-    }
     fn view(&self) -> GridView<'_>;
     fn cells(&self) -> &[i8] {
         self.view().cells()
@@ -208,21 +78,6 @@ impl<const W: usize, const H: usize, const P: usize, const B: usize, const BITMA
     }
     fn view(&self) -> GridView<'_> {
         self.map().view()
-    }
-    fn close_loop(
-        &mut self,
-        correction: &Correction,
-        inputs: &[GridInput<'_>],
-        lidar: &LidarGeometry,
-    ) -> Result<()> {
-        self.rebuild_map(correction.scans.iter().filter_map(|&(scan, pose)| {
-            inputs
-                .get(scan)
-                .map(|input| (pose, LidarScan::new(input.ranges, *lidar)))
-        }))
-        .map_err(|e| anyhow!("loop closure: {e}"))?;
-        self.correct(&correction.correction)
-            .map_err(|e| anyhow!("loop closure: {e}"))
     }
 }
 
@@ -260,12 +115,6 @@ fn drive(
 ) -> Result<()> {
     let lidar = &options.lidar;
     let mut previous: Option<Pose2<f32>> = None;
-    let mut closer = options.loop_closure.map(|c| LoopCloser::new(c, *lidar));
-    let ranges: Vec<&[f32]> = if closer.is_some() {
-        inputs.iter().map(|input| input.ranges).collect()
-    } else {
-        Vec::new()
-    };
     let mut shadow = Vec::new();
     if snapshot_every > 0 {
         shadow = vec![0; filter.cells().len()];
@@ -295,13 +144,6 @@ fn drive(
                 run.trajectory.push((input.stamp, filter.pose()));
             }
         }
-        if let Some(c) = closer.as_mut()
-            && let Some(correction) = c.add_scan(i, filter.pose(), &ranges)
-        {
-            filter
-                .close_loop(&correction, inputs, lidar)
-                .map_err(|e| e.context(format!("scan {i}")))?;
-        }
         if let Some(o) = observer.as_deref_mut() {
             let t0 = Instant::now();
             o.step(&GridStep {
@@ -322,12 +164,6 @@ fn drive(
                 .push(changes(&mut shadow, filter.cells(), i + 1));
         }
         progress(i);
-    }
-    if let Some(c) = closer {
-        for ((_, p), q) in run.trajectory.iter_mut().zip(c.trajectory()) {
-            *p = q;
-        }
-        run.loop_closure = Some(c.summary());
     }
     Ok(())
 }
@@ -376,6 +212,20 @@ pub fn run_slam_observed<const N: usize, const BITMAP: usize>(
     observer: Option<&mut dyn GridObserver>,
     snapshot_every: usize,
 ) -> Result<GridRun> {
+    if let Some(graph) = &options.loop_closure {
+        if observer.is_some() || snapshot_every > 0 {
+            bail!(
+                "grid SLAM with loop closure keeps only a local map: it cannot be recorded \
+                 (--mcap) or animated (--animate) yet"
+            );
+        }
+        return on_own_pool("grid SLAM", || {
+            let (mut run, summary) =
+                run_graph_slam::<N, BITMAP>(inputs, start, options, graph, progress)?;
+            run.loop_closure = Some(summary);
+            Ok(run)
+        });
+    }
     on_own_pool("grid SLAM", || {
         dispatch_particles!(
             options.particles,

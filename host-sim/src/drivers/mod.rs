@@ -2,10 +2,12 @@
 //! parse files and never write any.
 //!
 //! - [`ekf`]: a [`crate::domain::recording::Recording`]'s events → the landmark EKF-SLAM.
+//! - [`grid_run`]: what a grid run takes and gives (scans with odometry, options, the
+//!   estimates and the map).
 //! - [`grid`]: lidar scans with odometry → grid SLAM or the grid localizer (the one grid
 //!   drive loop of `replay`, `localize` and `sim`).
-//! - [`loop_closure`]: grid SLAM's loop closure on the host: keyframes, a correlative match
-//!   against the map built long before, a pose graph.
+//! - [`graph_slam`]: the device's building-scale grid SLAM (local map, keyframes, pose
+//!   graph, loop closure) over lidar scans.
 //! - [`detections`]: sign detections → range/bearing → EKF-SLAM with class hints.
 //! - [`hil`]: the host's side of hardware in the loop: the wire frames of a recording,
 //!   the QEMU and serial links, the bit-for-bit comparison of the replies.
@@ -14,8 +16,9 @@
 pub mod detections;
 pub mod ekf;
 pub mod global;
+pub mod graph_slam;
 pub mod grid;
+pub mod grid_run;
 pub mod hil;
 pub mod hil_localizer;
-pub mod loop_closure;
 pub mod texture;

@@ -1,0 +1,222 @@
+//! The device's building-scale grid SLAM ([`microslam::slam::GraphSlam`]) over a lidar
+//! log: the particle filter on the local map that follows the robot, keyframes in a
+//! store in memory, loop closure by the pose graph. The same code and sizes as the
+//! firmware's, so the host's figures are the device's.
+//!
+//! The trajectory written is the graph's at the end of the run: every scan at its
+//! keyframe's final pose composed with the filter's motion from that keyframe to it.
+//! The map is every keyframe's scan written at its final pose into a grid as large as
+//! the host's (the device keeps only its local map and the keyframes).
+
+use super::grid_run::{GraphSummary, GridInput, GridRun, GridRunOptions};
+use crate::domain::grid::ScanSpacing;
+use anyhow::{Result, anyhow, bail};
+use microslam::geometry::Pose2;
+use microslam::grid::{OccupancyGrid, occupancy_bytes};
+use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+use microslam::slam::graph::scratch_len;
+use microslam::slam::keyframes::{KeyframeStorage, KeyframeStore, StoreError};
+use microslam::slam::{GraphSlam, GraphSlamConfig};
+use std::time::Instant;
+
+/// Beams a scan the filter scores at most (the firmware's).
+pub const GRAPH_BEAMS: usize = 90;
+/// The local map's near log-odds window, cells.
+pub const NEAR: usize = 192;
+/// The local map's far bitmap, cells.
+pub const FAR: usize = 512;
+/// Keyframes the graph holds.
+pub const NODES: usize = 1024;
+/// Loop edges the graph holds.
+pub const LOOPS: usize = 256;
+const SCRATCH: usize = scratch_len(NODES, LOOPS);
+
+/// The estimator with the sizes above and `P` particles.
+pub type HostGraphSlam<const P: usize> = GraphSlam<
+    P,
+    GRAPH_BEAMS,
+    NEAR,
+    { occupancy_bytes(NEAR, NEAR) },
+    FAR,
+    { occupancy_bytes(FAR, FAR) },
+    NODES,
+    LOOPS,
+    SCRATCH,
+>;
+
+/// Bytes of keyframe store the host gives a run (the keyframes of the largest logs with
+/// room to spare; the firmware's is its flash region).
+const STORE_BYTES: usize = 4 << 20;
+
+/// A keyframe store's bytes in a `Vec` (the host's stand-in for a flash region: erased
+/// bytes are `0xFF`).
+pub struct VecStorage(Vec<u8>);
+
+impl VecStorage {
+    /// `bytes` bytes, erased.
+    pub fn new(bytes: usize) -> Self {
+        Self(vec![0xFF; bytes])
+    }
+}
+
+impl KeyframeStorage for VecStorage {
+    fn capacity(&self) -> usize {
+        self.0.len()
+    }
+    fn read(&self, offset: usize, bytes: &mut [u8]) -> Result<(), StoreError> {
+        let src = offset
+            .checked_add(bytes.len())
+            .and_then(|end| self.0.get(offset..end))
+            .ok_or(StoreError::OutOfBounds)?;
+        bytes.copy_from_slice(src);
+        Ok(())
+    }
+    fn write(&mut self, offset: usize, bytes: &[u8]) -> Result<(), StoreError> {
+        let dst = offset
+            .checked_add(bytes.len())
+            .and_then(|end| self.0.get_mut(offset..end))
+            .ok_or(StoreError::OutOfBounds)?;
+        dst.copy_from_slice(bytes);
+        Ok(())
+    }
+    fn erase_all(&mut self) -> Result<(), StoreError> {
+        self.0.fill(0xFF);
+        Ok(())
+    }
+}
+
+/// A run of [`GraphSlam`] over `inputs` from `start`, with the particle count and filter
+/// settings of `options` and the rest of `graph`; the map drawn on an `N × N` grid placed
+/// as `options.grid_origin` says (centred on the start without).
+pub fn run_graph_slam<const N: usize, const BITMAP: usize>(
+    inputs: &[GridInput<'_>],
+    start: Pose2<f32>,
+    options: &GridRunOptions,
+    graph: &GraphSlamConfig,
+    progress: &dyn Fn(usize),
+) -> Result<(GridRun, GraphSummary)> {
+    let config = GraphSlamConfig {
+        grid: options.config,
+        ..*graph
+    };
+    match options.particles {
+        8 => run_p::<N, BITMAP, 8>(inputs, start, options, &config, progress),
+        16 => run_p::<N, BITMAP, 16>(inputs, start, options, &config, progress),
+        32 => run_p::<N, BITMAP, 32>(inputs, start, options, &config, progress),
+        64 => run_p::<N, BITMAP, 64>(inputs, start, options, &config, progress),
+        100 => run_p::<N, BITMAP, 100>(inputs, start, options, &config, progress),
+        128 => run_p::<N, BITMAP, 128>(inputs, start, options, &config, progress),
+        200 => run_p::<N, BITMAP, 200>(inputs, start, options, &config, progress),
+        400 => run_p::<N, BITMAP, 400>(inputs, start, options, &config, progress),
+        other => bail!(
+            "--particles {other} is not compiled in; use one of {:?}",
+            crate::domain::grid::SUPPORTED_PARTICLES
+        ),
+    }
+}
+
+fn run_p<const N: usize, const BITMAP: usize, const P: usize>(
+    inputs: &[GridInput<'_>],
+    start: Pose2<f32>,
+    options: &GridRunOptions,
+    config: &GraphSlamConfig,
+    progress: &dyn Fn(usize),
+) -> Result<(GridRun, GraphSummary)> {
+    let lidar = options.lidar;
+    let scan_len = inputs.iter().map(|i| i.ranges.len()).max().unwrap_or(0);
+    // The filter thins a scan to at most GRAPH_BEAMS beams (`ScanPoints::load`): the store
+    // keeps the same beams.
+    let decimation = config
+        .grid
+        .beam_decimation
+        .max(1)
+        .max(scan_len.div_ceil(GRAPH_BEAMS));
+    let beams = scan_len.div_ceil(decimation);
+    let mut store = KeyframeStore::create(VecStorage::new(STORE_BYTES), &lidar, decimation, beams)
+        .map_err(|e| anyhow!("keyframe store: {e}"))?;
+    let mut slam: Box<HostGraphSlam<P>> = Box::new(GraphSlam::zeroed());
+    slam.init(*config, start)
+        .map_err(|e| anyhow!("graph SLAM: {e}"))?;
+    let mut run = GridRun::empty(Vec::new(), *slam.map().geometry(), inputs.len());
+    run.scan_spacing = ScanSpacing::of(inputs.iter().map(|input| input.odometry));
+    // Per scan: the newest keyframe then and the filter's motion since it.
+    let mut offsets: Vec<Option<(u16, Pose2<f32>)>> = Vec::with_capacity(inputs.len());
+    let t0 = Instant::now();
+    let mut previous: Option<Pose2<f32>> = None;
+    for (i, input) in inputs.iter().enumerate() {
+        let odom = input.odometry;
+        if !odom.is_finite() {
+            run.refused_odometry += 1;
+        } else if let Some(from) = previous.replace(odom) {
+            slam.predict_odometry(&from, &odom)
+                .map_err(|e| anyhow!("scan {i}: {e}"))?;
+        }
+        let scan = LidarScan::new(input.ranges, lidar);
+        run.non_finite_beams += scan.census().1;
+        match slam.observe(&scan, &mut store) {
+            Ok(step) => {
+                run.off_grid_end_points += u64::from(step.map.off_grid);
+                run.scans_off_grid += usize::from(step.map.off_grid > 0);
+            }
+            Err(microslam::slam::SlamError::Filter(
+                microslam::pf::PfError::EmptyScan | microslam::pf::PfError::InvalidScan,
+            )) => run.skipped_scans += 1,
+            Err(e) => bail!("scan {i}: {e}"),
+        }
+        offsets.push(
+            slam.newest_keyframe()
+                .map(|(node, estimate)| (node, estimate.between(&slam.filter_pose()))),
+        );
+        run.trajectory.push((input.stamp, slam.filter_pose()));
+        progress(i);
+    }
+    run.filter_time_s = t0.elapsed().as_secs_f64();
+    // The graph's trajectory: every scan at its keyframe's final pose ⊕ its offset.
+    for ((_, pose), offset) in run
+        .trajectory
+        .iter_mut()
+        .zip(&offsets)
+        .filter(|_| std::env::var("MS_ONLINE").is_err())
+    {
+        if let Some((node, motion)) = offset
+            && let Some(g) = slam.graph().pose(usize::from(*node))
+        {
+            *pose = g.compose(motion);
+        }
+    }
+    let (cells, geometry) = draw_map::<N, BITMAP, P>(&slam, &store, &lidar, options)?;
+    run.cells = cells;
+    run.geometry = geometry;
+    Ok((run, slam.counters().into()))
+}
+
+/// Every stored keyframe's scan written at its final graph pose into an `N × N` grid.
+fn draw_map<const N: usize, const BITMAP: usize, const P: usize>(
+    slam: &HostGraphSlam<P>,
+    store: &KeyframeStore<VecStorage>,
+    lidar: &LidarGeometry,
+    options: &GridRunOptions,
+) -> Result<(Vec<i8>, microslam::grid::GridGeometry)> {
+    let c = slam.config().grid;
+    let mut grid = Box::new(match options.grid_origin {
+        Some([x, y]) => OccupancyGrid::<N, N, BITMAP>::new(c.resolution, x, y, c.log_odds),
+        None => OccupancyGrid::<N, N, BITMAP>::centred(c.resolution, c.log_odds),
+    });
+    let decimation = store.decimation();
+    let geometry = LidarGeometry {
+        angle_increment: lidar.angle_increment * decimation as f32,
+        ..*lidar
+    };
+    let mut ranges = vec![0.0f32; store.beams()];
+    for k in 0..store.len() {
+        let Some(pose) = slam.graph().pose(k as usize) else {
+            break;
+        };
+        store
+            .read(k, &mut ranges)
+            .map_err(|e| anyhow!("keyframe {k}: {e}"))?;
+        grid.integrate_scan(&pose, &LidarScan::new(&ranges, geometry), 1)
+            .map_err(|e| anyhow!("keyframe {k}: {e}"))?;
+    }
+    Ok((grid.cells().to_vec(), *grid.geometry()))
+}
