@@ -22,7 +22,7 @@ pub struct GridInput<'a> {
 /// Settings of a grid run besides the map.
 #[derive(Clone, Debug)]
 pub struct GridRunOptions {
-    /// Particles (one of [`SUPPORTED_PARTICLES`]).
+    /// Particles (one of [`crate::domain::grid::SUPPORTED_PARTICLES`]).
     pub particles: usize,
     /// Filter settings.
     pub config: GridPfConfig,
@@ -65,7 +65,7 @@ pub struct GridRun {
     pub scans_off_grid: usize,
     /// How far apart the scans are, from their odometry poses (`None` with fewer than two).
     pub scan_spacing: Option<ScanSpacing>,
-    /// The map as it grew ([`run_slam_observed`] with `snapshot_every` > 0; empty otherwise): the first entry holds
+    /// The map as it grew ([`super::grid::run_slam_observed`] with `snapshot_every` > 0; empty otherwise): the first entry holds
     /// the known cells of the starting map, each later one the cells changed since.
     pub snapshots: Vec<MapChanges>,
     /// A localizer's lost detection at the end of the run (`None` for SLAM).
