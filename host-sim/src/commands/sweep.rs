@@ -27,7 +27,8 @@ pub struct SweepOptions {
     /// The grid: a settings file whose keys may hold lists of values; without it, the
     /// built-in settings alone.
     pub grid: Option<PathBuf>,
-    /// Recordings: `mrclam:<dir>/robot<k>` or `mrclam:<dir>/robot<a>-<b>` entries.
+    /// Recordings: `mrclam:<dir>/robot<k>` or `mrclam:<dir>/robot<a>-<b>` entries, each
+    /// optionally followed by stress variants (`+8hz+turn1.4`, [`crate::inputs::stress`]).
     pub runs: Vec<String>,
     /// Data association (default: from the settings, `known` if none).
     pub association: Option<AssociationMode>,
@@ -47,11 +48,17 @@ pub struct RunSpec {
 }
 
 /// Parses `--runs` entries: `mrclam:<dir>/robot<k>`, `mrclam:<dir>/robot<a>-<b>`, or
-/// `mrclam:<dir>` (robot 1).
+/// `mrclam:<dir>` (robot 1), each optionally followed by stress variants that apply to
+/// every robot of the entry (`mrclam:dataset6/robot1-5+8hz`).
 pub fn parse_runs(entries: &[String]) -> Result<Vec<RunSpec>> {
     let mut runs = Vec::new();
     for entry in entries {
         let entry = entry.trim();
+        // Stress variants after the robot (`…/robot1-5+8hz`) apply to each robot.
+        let (entry, variants) = match entry.split_once('+') {
+            Some((e, v)) => (e, format!("+{v}")),
+            None => (entry, String::new()),
+        };
         if let Some((head, range)) = entry.rsplit_once("/robot")
             && let Some((a, b)) = range.split_once('-')
         {
@@ -65,10 +72,10 @@ pub fn parse_runs(entries: &[String]) -> Result<Vec<RunSpec>> {
                 bail!("run `{entry}`: empty robot range {a}-{b}");
             }
             for k in a..=b {
-                runs.push(parse_run(&format!("{head}/robot{k}"))?);
+                runs.push(parse_run(&format!("{head}/robot{k}{variants}"))?);
             }
         } else {
-            runs.push(parse_run(entry)?);
+            runs.push(parse_run(&format!("{entry}{variants}"))?);
         }
     }
     if runs.is_empty() {
@@ -82,9 +89,11 @@ fn parse_run(entry: &str) -> Result<RunSpec> {
     let DatasetSpec::Mrclam(dir) = &spec else {
         bail!("run `{entry}`: sweeps replay landmark datasets (`mrclam:`) only");
     };
-    let (dir, robot) = crate::inputs::readers::mrclam_robot(dir, 1)?;
+    let (base, variants) = crate::inputs::stress::split(dir)?;
+    let (dir, robot) = crate::inputs::readers::mrclam_robot(base, 1)?;
+    let suffix: String = variants.iter().map(|v| format!("+{v}")).collect();
     Ok(RunSpec {
-        dataset: DatasetSpec::Mrclam(dir.to_owned()),
+        dataset: DatasetSpec::Mrclam(format!("{dir}{suffix}")),
         robot,
     })
 }
@@ -191,6 +200,8 @@ pub struct Row {
     pub dead_reckoning_se2_m: Option<f64>,
     /// Recoveries of the supervision.
     pub recoveries: usize,
+    /// Landmarks in the final map.
+    pub landmarks_created: usize,
 }
 
 impl Row {
@@ -207,6 +218,7 @@ impl Row {
             purity: m.association_purity,
             dead_reckoning_se2_m: m.dead_reckoning_ate_rmse_m.se2,
             recoveries: m.counts.recoveries,
+            landmarks_created: m.landmarks_created,
         }
     }
 }
@@ -411,14 +423,14 @@ pub fn write(out: &Path, table: &Table) -> Result<()> {
 /// The rows as CSV (a header line; text fields quoted, empty cells for missing figures).
 pub fn csv(table: &Table) -> String {
     let mut s = String::from(
-        "settings,label,recording,ate_se2_m,landmark_se2_m,nees_mean,nees_in_95,nis_mean,purity,dead_reckoning_se2_m,recoveries\n",
+        "settings,label,recording,ate_se2_m,landmark_se2_m,nees_mean,nees_in_95,nis_mean,purity,dead_reckoning_se2_m,recoveries,landmarks_created\n",
     );
     let f = |v: Option<f64>| v.map_or_else(String::new, |v| format!("{v:.6}"));
     let q = |t: &str| format!("\"{}\"", t.replace('"', "\"\""));
     for r in &table.rows {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{}",
             r.settings,
             q(&r.label),
             q(&r.recording),
@@ -429,7 +441,8 @@ pub fn csv(table: &Table) -> String {
             f(r.nis_mean),
             f(r.purity),
             f(r.dead_reckoning_se2_m),
-            r.recoveries
+            r.recoveries,
+            r.landmarks_created
         );
     }
     s
@@ -527,6 +540,13 @@ mod tests {
         assert!(err.to_string().contains("robot1 … robot5"), "{err}");
         assert!(parse_runs(&["mrclam:dataset6/robot4-2".into()]).is_err());
         assert!(parse_runs(&["carmen:x.clf".into()]).is_err());
+        // Stress variants follow each robot of a range.
+        let runs = parse_runs(&["mrclam:dataset6/robot2-3+8hz+turn1.4".into()]).unwrap();
+        let specs: Vec<&DatasetSpec> = runs.iter().map(|r| &r.dataset).collect();
+        let stressed = DatasetSpec::Mrclam("dataset6+8hz+turn1.4".into());
+        assert_eq!(specs, [&stressed, &stressed]);
+        assert_eq!(runs[1].robot, 3);
+        assert!(parse_runs(&["mrclam:dataset6/robot2+slow".into()]).is_err());
     }
 
     #[test]
@@ -543,6 +563,7 @@ mod tests {
             purity: Some(1.0),
             dead_reckoning_se2_m: None,
             recoveries: 0,
+            landmarks_created: 15,
         };
         let rows = [row(0, 0.4, 5.0), row(0, 0.2, 9.0), row(1, 0.1, 2.0)];
         let a = aggregate(&rows);

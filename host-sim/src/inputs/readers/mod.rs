@@ -62,13 +62,18 @@ impl DatasetSpec {
     }
 }
 
-/// Reads the dataset named by `spec` for `robot`.
+/// Reads the dataset named by `spec` for `robot`. An MRCLAM recording may name stress
+/// variants after it (`mrclam:dataset6/robot3+8hz+turn1.4`, [`crate::inputs::stress`]).
 pub fn read(spec: &DatasetSpec, robot: u8) -> Result<Recording> {
     match spec {
         DatasetSpec::Mrclam(dir) => {
+            let (dir, variants) = crate::inputs::stress::split(dir)?;
             let (dir, robot) = mrclam_robot(dir, robot)?;
             let path = crate::domain::datasets::resolve("mrclam", dir)?;
-            Ok(mrclam::read(&path, robot)?)
+            Ok(crate::inputs::stress::apply(
+                mrclam::read(&path, robot)?,
+                &variants,
+            ))
         }
         DatasetSpec::Carmen(_) | DatasetSpec::Thor(_) | DatasetSpec::Rosbag(_) => {
             bail!(
