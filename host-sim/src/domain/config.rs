@@ -64,6 +64,15 @@ pub struct OdometrySettings {
     /// state of the filter (0: not estimated; with `speed_scale_std`).
     #[serde(default)]
     pub turn_scale_std: f64,
+    /// The odometry's latency (s): a sample stamped `t` describes the motion from
+    /// `t + latency_s` on (a robot that reports its commanded velocities before it
+    /// drives them). 0: none.
+    #[serde(default)]
+    pub latency_s: f64,
+    /// Between two odometry samples the velocity goes linearly from one to the other
+    /// (`true`) or the first is held (`false`, the default).
+    #[serde(default)]
+    pub interpolate: bool,
 }
 
 impl OdometrySettings {
@@ -260,6 +269,7 @@ impl Settings {
             ("odometry.angular_std_per_mps", o.angular_std_per_mps),
             ("odometry.speed_scale_std", o.speed_scale_std),
             ("odometry.turn_scale_std", o.turn_scale_std),
+            ("odometry.latency_s", o.latency_s),
             ("sighting.range_std", s.range_std),
             ("sighting.bearing_std", s.bearing_std),
             ("sighting.range_bias_offset_std", s.range_bias_offset_std),

@@ -3,6 +3,7 @@
 use crate::domain::config::Settings;
 use crate::domain::recording::Recording;
 use crate::domain::{AssociationMode, Precision};
+use crate::drivers::odometry::{VelocityProfile, delay_odometry};
 use anyhow::{Result, bail};
 use indicatif::ProgressBar;
 use microslam::EkfError;
@@ -312,8 +313,19 @@ impl<T: Real> Replayer<T> {
         precision: Precision,
         on_samples: &mut dyn FnMut(&[PoseSample]),
     ) -> Result<ReplayRun> {
-        let events = &recording.events;
-        let max_gap = self.settings.odometry.max_gap_s;
+        let odometry = &self.settings.odometry;
+        let delayed = delay_odometry(&recording.events, odometry.latency_s);
+        let events = delayed.as_deref().unwrap_or(&recording.events);
+        let max_gap = odometry.max_gap_s;
+        let settings = &self.settings;
+        let mut profile = VelocityProfile::new(
+            events,
+            |v, omega| plausible(settings, v, omega),
+            odometry.interpolate,
+            max_gap,
+        );
+        // The stamp of the sample in force.
+        let mut held_stamp = f64::NEG_INFINITY;
         let window = self.settings.association.batch_window_s;
         let mut trajectory = Vec::with_capacity(events.len());
         let mut velocity = (0.0f64, 0.0f64);
@@ -343,9 +355,8 @@ impl<T: Real> Replayer<T> {
             if let Some(prev) = last {
                 let dt = (t - prev).min(max_gap);
                 if dt > 0.0 {
-                    let r = self
-                        .slam
-                        .predict_velocity(lit(velocity.0), lit(velocity.1), lit(dt));
+                    let (v, omega) = profile.over(velocity, held_stamp, prev, prev + dt);
+                    let r = self.slam.predict_velocity(lit(v), lit(omega), lit(dt));
                     if r.is_err() {
                         self.counts.predictions_refused += 1;
                     }
@@ -356,6 +367,7 @@ impl<T: Real> Replayer<T> {
                 EventKind::Velocity { v, omega } => {
                     if plausible(&self.settings, v, omega) {
                         velocity = (v, omega);
+                        held_stamp = t;
                     } else {
                         self.counts.odometry_refused += 1;
                     }

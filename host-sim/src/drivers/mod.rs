@@ -4,6 +4,8 @@
 //! - [`ekf`]: a [`crate::domain::recording::Recording`]'s events → the landmark EKF-SLAM.
 //! - [`grid_run`]: what a grid run takes and gives (scans with odometry, options, the
 //!   estimates and the map).
+//! - [`odometry`]: odometry samples → the velocity between them (held or interpolated,
+//!   delayed by the odometry's latency), for [`ekf`].
 //! - [`grid`]: lidar scans with odometry → grid SLAM or the grid localizer (the one grid
 //!   drive loop of `replay`, `localize` and `sim`).
 //! - [`graph_slam`]: the device's building-scale grid SLAM (local map, keyframes, pose
@@ -21,4 +23,5 @@ pub mod grid;
 pub mod grid_run;
 pub mod hil;
 pub mod hil_localizer;
+pub mod odometry;
 pub mod texture;

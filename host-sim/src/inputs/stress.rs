@@ -11,7 +11,8 @@
 //! | `speed<k>` | odometry speeds read `k` times the true ones (`speed1.4`: 40 % fast) | unchanged |
 //! | `turn<k>` | odometry turn rates read `k` times the true ones | unchanged |
 //! | `drop<p>` | each sighting lost with probability `p` (a fixed-seed generator: the same sightings every time) | unchanged |
-//! | `fast<k>` | the same path driven `k` times as fast: stamps divided by `k` (from the first event), speeds and turn rates times `k` | stamps divided by `k` |
+//! | `fast<k>` | the same path driven `k` times as fast: stamps divided by `k` (from the first event), speeds and turn rates times `k` (the robot's response to its odometry's readings, 0.2 s late on MRCLAM, then comes `k` times sooner too: add `lag<s>` to keep it) | stamps divided by `k` |
+//! | `lag<s>` | the odometry stamped `s` seconds early: a robot whose wheels follow its odometry's readings `s` seconds later than the recording's did | unchanged |
 //! | `twice` | a second pass: the run, then the same path driven back to the start (the events in reverse order, velocities negated; the camera sees what it saw at each pose) | the path, then the path in reverse |
 //!
 //! Variants change the events only as described; the true landmarks stay. The filter
@@ -39,6 +40,8 @@ pub enum Variant {
     DropSightings(f64),
     /// The same path driven this many times as fast.
     Faster(f64),
+    /// The odometry stamped this many seconds early.
+    OdometryLag(f64),
     /// The run, then back along the same path to the start.
     Twice,
 }
@@ -76,10 +79,12 @@ impl FromStr for Variant {
             Self::DropSightings(p)
         } else if let Some(k) = s.strip_prefix("fast") {
             Self::Faster(number(k)?)
+        } else if let Some(k) = s.strip_prefix("lag") {
+            Self::OdometryLag(number(k)?)
         } else {
             bail!(
                 "unknown stress variant `{s}`: expected <f>hz, speed<k>, turn<k>, drop<p>, \
-                 fast<k> or twice (e.g. mrclam:dataset6/robot3+8hz+turn1.4)"
+                 fast<k>, lag<s> or twice (e.g. mrclam:dataset6/robot3+8hz+turn1.4)"
             );
         };
         Ok(v)
@@ -94,6 +99,7 @@ impl fmt::Display for Variant {
             Self::TurnScale(k) => write!(f, "turn{k}"),
             Self::DropSightings(p) => write!(f, "drop{p}"),
             Self::Faster(k) => write!(f, "fast{k}"),
+            Self::OdometryLag(s) => write!(f, "lag{s}"),
             Self::Twice => write!(f, "twice"),
         }
     }
@@ -132,6 +138,14 @@ fn apply_one(mut r: Recording, variant: Variant) -> Recording {
             for p in &mut r.ground_truth {
                 p.stamp = start + (p.stamp - start) / k;
             }
+        }
+        Variant::OdometryLag(s) => {
+            for e in &mut r.events {
+                if matches!(e.kind, EventKind::Velocity { .. }) {
+                    e.stamp -= s;
+                }
+            }
+            r.events.sort_by(|a, b| a.stamp.total_cmp(&b.stamp));
         }
         Variant::Twice => {
             let end = r.events.last().map_or(0.0, |e| e.stamp);
@@ -303,7 +317,7 @@ mod tests {
 
     #[test]
     fn names_parse_and_print_back() {
-        let (base, v) = split("dataset6/robot3+8hz+turn1.4+drop0.5+fast3+twice").unwrap();
+        let (base, v) = split("dataset6/robot3+8hz+turn1.4+drop0.5+fast3+twice+lag0.15").unwrap();
         assert_eq!(base, "dataset6/robot3");
         assert_eq!(
             v,
@@ -312,11 +326,15 @@ mod tests {
                 Variant::TurnScale(1.4),
                 Variant::DropSightings(0.5),
                 Variant::Faster(3.0),
-                Variant::Twice
+                Variant::Twice,
+                Variant::OdometryLag(0.15)
             ]
         );
         let names: Vec<String> = v.iter().map(ToString::to_string).collect();
-        assert_eq!(names, ["8hz", "turn1.4", "drop0.5", "fast3", "twice"]);
+        assert_eq!(
+            names,
+            ["8hz", "turn1.4", "drop0.5", "fast3", "twice", "lag0.15"]
+        );
         for bad in ["x+slow", "x+drop1", "x+turn-1", "x+speednan", "x+0hz"] {
             assert!(split(bad).is_err(), "{bad}");
         }
@@ -342,6 +360,18 @@ mod tests {
         let end = twice.ground_truth.last().unwrap();
         assert_eq!(end.pose, Pose2::new(1.0, 2.0, 0.3));
         assert!((end.stamp - 2.0 * 109.98 + 100.0).abs() < 1e-9);
+        // The odometry early: the truth follows it 0.1 s late.
+        let lag = apply(drive(), &[Variant::OdometryLag(0.1)]);
+        let first_odometry = |r: &Recording| {
+            r.events
+                .iter()
+                .find(|e| matches!(e.kind, EventKind::Velocity { .. }))
+                .map(|e| e.stamp)
+                .unwrap()
+        };
+        let (early, late) = (first_odometry(&lag), first_odometry(&drive()));
+        assert!((late - early - 0.1).abs() < 1e-12, "{early} {late}");
+        assert!(dead_reckoning_error(&lag) > 0.01);
         // Wrong scales: the odometry leaves the truth.
         let turn = apply(drive(), &[Variant::TurnScale(1.4)]);
         assert!(dead_reckoning_error(&turn) > 0.2);
