@@ -16,9 +16,20 @@
 //!   `diag(σ_p², σ_p², σ_θ²)` ([`EkfSlam::inflate_pose_covariance`]), so that the next
 //!   sightings pass the gate and pull the robot back onto its map.
 //!
+//! - **Lost flag**: every sighting the map does not explain — refused by the gate,
+//!   down-weighted, or (reported by the association, [`Supervisor::note_new_landmark`])
+//!   made a new landmark — counts as a surprise. Their rate over the last `lost_memory`
+//!   sightings (an exponentially weighted mean) above `lost_rate` raises
+//!   [`flags::LOST`]: the filter's pose no longer matches its map. A filter that keeps
+//!   its map is surprised now and then (an outlier, a landmark seen for the first time);
+//!   one that has lost it meets surprise after surprise, with known ids (innovations
+//!   beyond the noise) and with hidden ids alike (sightings that pair with nothing and
+//!   become landmarks where the map already has them). The first `2 · lost_memory`
+//!   sightings after a reset never raise it: a map being started is all new landmarks.
+//!
 //! What happened is reported in [`HealthStatus`]: a bit field of the last sighting's fate
-//! plus counters, small enough for the wire protocol's estimates. Fixed memory, no
-//! allocation; per sighting the cost is one extra 2 × 2 innovation.
+//! and the lost flag, plus counters, small enough for the wire protocol's estimates. Fixed
+//! memory, no allocation; per sighting the cost is one extra 2 × 2 innovation.
 
 use super::{EkfSlam, UpdateOutcome};
 use crate::error::{EkfError, InvalidSetting};
@@ -40,6 +51,12 @@ pub struct HealthConfig<T> {
     pub recovery_position_std: T,
     /// Standard deviation added to the robot's heading at a recovery, rad.
     pub recovery_heading_std: T,
+    /// Sightings the surprise rate of the lost flag averages over (the memory of its
+    /// exponentially weighted mean); `0` disables the flag.
+    pub lost_memory: u16,
+    /// Surprise rate (share of the recent sightings the map did not explain) above which
+    /// [`flags::LOST`] is raised.
+    pub lost_rate: T,
 }
 
 impl HealthConfig<f32> {
@@ -49,15 +66,20 @@ impl HealthConfig<f32> {
         lost_after: 0,
         recovery_position_std: 0.0,
         recovery_heading_std: 0.0,
+        lost_memory: 0,
+        lost_rate: 1.0,
     };
-    /// The defaults chosen on UTIAS MRCLAM dataset 6 (robots 1–3 tuned, 4–5 checked; see
-    /// `host-sim/configs/mrclam.toml`, whose `[recovery]` holds the same figures): Huber
-    /// beyond 2 σ, recovery after 10 refusals in a row with 0.3 m and 0.2 rad added.
+    /// The defaults chosen on UTIAS MRCLAM (see `host-sim/configs/mrclam.toml`, whose
+    /// `[recovery]` holds the same figures): Huber beyond 2 σ, recovery after 10 refusals
+    /// in a row with 0.3 m and 0.2 rad added, the lost flag above a surprise rate of
+    /// 0.1 over the last 20 sightings.
     pub const DEFAULT_F32: Self = Self {
         huber_sigma: 2.0,
         lost_after: 10,
         recovery_position_std: 0.3,
         recovery_heading_std: 0.2,
+        lost_memory: 20,
+        lost_rate: 0.1,
     };
 }
 
@@ -75,6 +97,7 @@ impl<T: Real> HealthConfig<T> {
             ("huber_sigma", "finite", self.huber_sigma.finite()),
             InvalidSetting::non_negative("recovery_position_std", self.recovery_position_std),
             InvalidSetting::non_negative("recovery_heading_std", self.recovery_heading_std),
+            InvalidSetting::non_negative("lost_rate", self.lost_rate),
         ])
     }
 
@@ -85,6 +108,8 @@ impl<T: Real> HealthConfig<T> {
             lost_after: self.lost_after,
             recovery_position_std: U::lit(self.recovery_position_std.to_f64()),
             recovery_heading_std: U::lit(self.recovery_heading_std.to_f64()),
+            lost_memory: self.lost_memory,
+            lost_rate: U::lit(self.lost_rate.to_f64()),
         }
     }
 }
@@ -101,6 +126,10 @@ pub mod flags {
     pub const RECOVERED: u8 = 1 << 3;
     /// The last recovery was refused by the filter (numerical limits).
     pub const RECOVERY_FAILED: u8 = 1 << 4;
+    /// The filter is lost: most recent sightings were not explained by its map (see the
+    /// [module](super) docs). Unlike the bits above it describes the filter, not the last
+    /// sighting.
+    pub const LOST: u8 = 1 << 5;
 }
 
 /// What the supervision saw: the last sighting's fate as bit [`flags`], and counters since
@@ -133,6 +162,10 @@ impl HealthStatus {
 pub struct Supervisor<T> {
     config: HealthConfig<T>,
     status: HealthStatus,
+    /// The surprise rate: the weighted mean of 1 (not explained) and 0 (explained).
+    surprise: T,
+    /// Sightings since the last reset (saturating), for the lost flag's warm-up.
+    sightings: u16,
 }
 
 impl<T: Real> Supervisor<T> {
@@ -147,6 +180,8 @@ impl<T: Real> Supervisor<T> {
                 downweighted: 0,
                 gated: 0,
             },
+            surprise: T::ZERO,
+            sightings: 0,
         }
     }
 
@@ -173,6 +208,45 @@ impl<T: Real> Supervisor<T> {
     /// Clears the status (with the filter's re-initialisation).
     pub fn reset(&mut self) {
         self.status = HealthStatus::default();
+        self.surprise = T::ZERO;
+        self.sightings = 0;
+    }
+
+    /// `true` while [`flags::LOST`] is raised.
+    pub fn is_lost(&self) -> bool {
+        self.status.has(flags::LOST)
+    }
+
+    /// The share of the recent sightings the map did not explain (the lost flag's
+    /// surprise rate, over the last `lost_memory` sightings).
+    pub fn surprise_rate(&self) -> T {
+        self.surprise
+    }
+
+    /// Tells the lost flag that a sighting paired with no landmark and became a new one
+    /// (the association's decision, which [`Supervisor::update`] does not see): a
+    /// surprise, as a refusal is.
+    pub fn note_new_landmark(&mut self) {
+        self.count_sighting(true);
+    }
+
+    /// Counts one sighting, `surprising` or not, in the surprise rate, and sets
+    /// [`flags::LOST`] from it.
+    fn count_sighting(&mut self, surprising: bool) {
+        let memory = self.config.lost_memory;
+        if memory == 0 {
+            self.status.flags &= !flags::LOST;
+            return;
+        }
+        let x = if surprising { T::ONE } else { T::ZERO };
+        self.surprise += (x - self.surprise) / T::lit(f64::from(memory));
+        self.sightings = self.sightings.saturating_add(1);
+        let warm = self.sightings > memory.saturating_mul(2);
+        if warm && self.surprise > self.config.lost_rate {
+            self.status.flags |= flags::LOST;
+        } else {
+            self.status.flags &= !flags::LOST;
+        }
     }
 
     /// Corrects `slam` with sighting `z` of landmark `index` (configured measurement
@@ -202,8 +276,8 @@ impl<T: Real> Supervisor<T> {
             slam.update(index, z)?
         };
         let s = &mut self.status;
-        s.flags = 0;
-        match outcome {
+        s.flags &= flags::LOST;
+        let result = match outcome {
             UpdateOutcome::Accepted { .. } => {
                 s.refused_in_row = 0;
                 if scale > T::ONE {
@@ -235,7 +309,9 @@ impl<T: Real> Supervisor<T> {
                 }
                 Ok(UpdateOutcome::Gated { nis })
             }
-        }
+        };
+        self.count_sighting(scale > T::ONE || matches!(outcome, UpdateOutcome::Gated { .. }));
+        result
     }
 }
 
@@ -395,12 +471,68 @@ mod tests {
     }
 
     #[test]
+    fn the_lost_flag_follows_the_share_of_unexplained_sightings() {
+        let mut slam = confident();
+        let mut sup = Supervisor::new(config());
+        let memory = config().lost_memory;
+        let (true_z, kidnapped) = (RangeBearing::new(2.0, 0.0), RangeBearing::new(3.0, 0.0));
+        // Explained sightings keep it down; past the warm-up, a few refusals in a row
+        // raise it, before the recovery that comes after ten.
+        for _ in 0..3 * memory {
+            sup.update(&mut slam, 0, &true_z).unwrap();
+        }
+        assert!(!sup.is_lost() && sup.surprise_rate() == 0.0);
+        for _ in 0..3 {
+            sup.update(&mut slam, 0, &kidnapped).unwrap();
+        }
+        assert!(sup.is_lost() && sup.status().has(flags::GATED));
+        assert_eq!(sup.status().recoveries, 0);
+        // Explained again: it falls back below the rate and clears.
+        let mut cleared = 0;
+        for i in 0..3 * memory {
+            sup.update(&mut slam, 0, &true_z).unwrap();
+            if !sup.is_lost() {
+                cleared = i;
+                break;
+            }
+        }
+        assert!(cleared > 0 && !sup.is_lost(), "{cleared}");
+        // New landmarks count as refusals do; off with lost_memory = 0.
+        for _ in 0..3 {
+            sup.note_new_landmark();
+        }
+        assert!(sup.is_lost() && sup.status().has(flags::LOST));
+        sup.set_config(HealthConfig {
+            lost_memory: 0,
+            ..config()
+        })
+        .unwrap();
+        sup.note_new_landmark();
+        assert!(!sup.is_lost());
+        // Nothing before the warm-up: a map being started is all new landmarks.
+        let mut fresh = Supervisor::new(config());
+        for _ in 0..2 * memory {
+            fresh.note_new_landmark();
+        }
+        assert!(!fresh.is_lost() && fresh.surprise_rate() > 0.5);
+        fresh.note_new_landmark();
+        assert!(fresh.is_lost());
+        fresh.reset();
+        assert!(!fresh.is_lost() && fresh.surprise_rate() == 0.0);
+    }
+
+    #[test]
     fn an_invalid_setting_is_named_with_its_rule() {
         use crate::testing::{BrokenSetting, each_broken_setting_is_named};
         assert_eq!(HealthConfig::DEFAULT_F32.invalid_setting(), None);
         assert_eq!(HealthConfig::OFF_F32.invalid_setting(), None);
-        let cases: [BrokenSetting<HealthConfig<f64>>; 3] = [
+        let cases: [BrokenSetting<HealthConfig<f64>>; 4] = [
             (|c| c.huber_sigma = f64::NAN, "huber_sigma", "finite"),
+            (
+                |c| c.lost_rate = -0.1,
+                "lost_rate",
+                "finite and non-negative",
+            ),
             (
                 |c| c.recovery_position_std = -0.3,
                 "recovery_position_std",

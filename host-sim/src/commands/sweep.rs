@@ -202,6 +202,11 @@ pub struct Row {
     pub recoveries: usize,
     /// Landmarks in the final map.
     pub landmarks_created: usize,
+    /// Share of the pose estimates with the lost flag up.
+    pub lost_share: f64,
+    /// With ground truth: share of the estimates whose lost flag agrees with their error
+    /// being above 1 m.
+    pub lost_flag_agreement: Option<f64>,
 }
 
 impl Row {
@@ -219,6 +224,8 @@ impl Row {
             dead_reckoning_se2_m: m.dead_reckoning_ate_rmse_m.se2,
             recoveries: m.counts.recoveries,
             landmarks_created: m.landmarks_created,
+            lost_share: m.lost_share,
+            lost_flag_agreement: m.lost_flag_agreement,
         }
     }
 }
@@ -423,14 +430,14 @@ pub fn write(out: &Path, table: &Table) -> Result<()> {
 /// The rows as CSV (a header line; text fields quoted, empty cells for missing figures).
 pub fn csv(table: &Table) -> String {
     let mut s = String::from(
-        "settings,label,recording,ate_se2_m,landmark_se2_m,nees_mean,nees_in_95,nis_mean,purity,dead_reckoning_se2_m,recoveries,landmarks_created\n",
+        "settings,label,recording,ate_se2_m,landmark_se2_m,nees_mean,nees_in_95,nis_mean,purity,dead_reckoning_se2_m,recoveries,landmarks_created,lost_share,lost_flag_agreement\n",
     );
     let f = |v: Option<f64>| v.map_or_else(String::new, |v| format!("{v:.6}"));
     let q = |t: &str| format!("\"{}\"", t.replace('"', "\"\""));
     for r in &table.rows {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{:.6},{}",
             r.settings,
             q(&r.label),
             q(&r.recording),
@@ -442,7 +449,9 @@ pub fn csv(table: &Table) -> String {
             f(r.purity),
             f(r.dead_reckoning_se2_m),
             r.recoveries,
-            r.landmarks_created
+            r.landmarks_created,
+            r.lost_share,
+            f(r.lost_flag_agreement)
         );
     }
     s
@@ -564,6 +573,8 @@ mod tests {
             dead_reckoning_se2_m: None,
             recoveries: 0,
             landmarks_created: 15,
+            lost_share: 0.0,
+            lost_flag_agreement: None,
         };
         let rows = [row(0, 0.4, 5.0), row(0, 0.2, 9.0), row(1, 0.1, 2.0)];
         let a = aggregate(&rows);

@@ -153,6 +153,16 @@ pub struct RecoverySettings {
     pub position_std: f64,
     /// Standard deviation added to the heading at a recovery, rad.
     pub heading_std: f64,
+    /// Sightings the lost flag's surprise rate averages over; 0: no lost flag.
+    #[serde(default)]
+    pub lost_memory: u16,
+    /// Surprise rate above which the lost flag is raised.
+    #[serde(default = "one")]
+    pub lost_rate: f64,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 impl Default for RecoverySettings {
@@ -163,6 +173,8 @@ impl Default for RecoverySettings {
             lost_after: 0,
             position_std: 0.0,
             heading_std: 0.0,
+            lost_memory: 0,
+            lost_rate: 1.0,
         }
     }
 }
@@ -322,6 +334,7 @@ impl Settings {
             ("recovery.huber_sigma", r.huber_sigma),
             ("recovery.position_std", r.position_std),
             ("recovery.heading_std", r.heading_std),
+            ("recovery.lost_rate", r.lost_rate),
         ];
         if let Some((name, v)) = recovery.iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
             bail!("{name} = {v}: must be finite and non-negative");
@@ -351,6 +364,7 @@ impl Settings {
             "huber_sigma" => "recovery.huber_sigma".to_owned(),
             "recovery_position_std" => "recovery.position_std".to_owned(),
             "recovery_heading_std" => "recovery.heading_std".to_owned(),
+            "lost_rate" => "recovery.lost_rate".to_owned(),
             // The velocity noise's fields, as [odometry] spells them.
             other => format!("odometry.{other}"),
         }
@@ -412,6 +426,8 @@ impl Settings {
             lost_after: r.lost_after,
             recovery_position_std: T::lit(r.position_std),
             recovery_heading_std: T::lit(r.heading_std),
+            lost_memory: r.lost_memory,
+            lost_rate: T::lit(r.lost_rate),
         }
     }
 
@@ -575,6 +591,14 @@ mod tests {
         let icnn = Settings::load_for("mrclam", Some(&p), None).unwrap();
         assert_eq!(icnn.association.mode, AssociationMode::Icnn);
         assert_eq!(icnn.sighting, builtin_jcbb.sighting);
+    }
+
+    #[test]
+    fn the_files_supervision_is_the_firmwares() {
+        // The firmware's session runs HealthConfig::DEFAULT_F32: the file's [recovery]
+        // must be the same, so that `hil --dataset-settings` runs what `replay` runs.
+        let s = Settings::load("mrclam", None).unwrap();
+        assert_eq!(s.health_config::<f32>(), HealthConfig::DEFAULT_F32);
     }
 
     #[test]

@@ -499,5 +499,6 @@ fn sample(slam: &Slam, stamp: f64) -> PoseSample {
         stamp,
         pose: slam.pose(),
         covariance,
+        lost: false,
     }
 }

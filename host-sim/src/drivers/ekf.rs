@@ -36,6 +36,8 @@ pub struct PoseSample {
     pub pose: Pose2<f64>,
     /// Its covariance (x, y, θ).
     pub covariance: [[f64; 3]; 3],
+    /// The supervision's lost flag was up ([`microslam::ekf::health::flags::LOST`]).
+    pub lost: bool,
 }
 
 /// A landmark of the final map.
@@ -473,6 +475,7 @@ impl<T: Real> Replayer<T> {
             stamp,
             pose: Pose2::new(p.x.to_f64(), p.y.to_f64(), p.theta.to_f64()),
             covariance,
+            lost: self.supervisor.is_lost(),
         }
     }
 
@@ -582,6 +585,7 @@ impl<T: Real> Replayer<T> {
                 self.updated(j, r, truth);
             }
             Pairing::New => {
+                self.supervisor.note_new_landmark();
                 let r = self.slam.add_landmark(z);
                 self.added(r, truth);
             }

@@ -42,6 +42,14 @@ use serde::Serialize;
 /// noise count as a NEES of 10⁹.
 pub const NEES_MIN_POSITION_STD: f64 = 0.01;
 
+/// A run reports itself lost when the supervision's lost flag was up for at least this
+/// share of its pose estimates ([`Metrics::lost_share`]).
+pub const LOST_RUN_SHARE: f64 = 0.1;
+
+/// Position error (m) beyond which a pose estimate counts as lost when the lost flag is
+/// scored against the ground truth.
+pub const LOST_ERROR_M: f64 = 1.0;
+
 /// The smallest eigenvalue of the position block `[[a, b], [b, d]]` of a pose covariance.
 fn smallest_position_variance(p: &[[f64; 3]; 3]) -> f64 {
     let (a, b, d) = (p[0][0], p[0][1], p[1][1]);
@@ -129,6 +137,17 @@ pub struct Metrics {
     /// Each landmark's error under the alignment of `landmark_rmse_m.se2`, by true id:
     /// which landmarks make up the RMSE.
     pub landmark_errors_m: Vec<LandmarkError>,
+    /// Share of the pose estimates with the supervision's lost flag up.
+    pub lost_share: f64,
+    /// The run reports itself lost: `lost_share` ≥ [`LOST_RUN_SHARE`].
+    pub lost_reported: bool,
+    /// With ground truth: whether the report agrees with the ATE(se2), lost being an ATE
+    /// above [`LOST_ERROR_M`].
+    pub lost_report_agrees: Option<bool>,
+    /// With ground truth: share of the evaluated estimates whose lost flag agrees with
+    /// their own position error (after the `se2` alignment) being above
+    /// [`LOST_ERROR_M`].
+    pub lost_flag_agreement: Option<f64>,
 }
 
 /// Scores a replay against the recording's ground truth.
@@ -181,6 +200,8 @@ pub struct PosePairs<'a> {
     est: Vec<Pose2<f64>>,
     gt: Vec<Pose2<f64>>,
     nees: Vec<f64>,
+    /// The lost flag of each paired estimate.
+    lost: Vec<bool>,
 }
 
 impl<'a> PosePairs<'a> {
@@ -193,6 +214,7 @@ impl<'a> PosePairs<'a> {
             est: Vec::with_capacity(capacity),
             gt: Vec::with_capacity(capacity),
             nees: Vec::with_capacity(capacity),
+            lost: Vec::with_capacity(capacity),
         }
     }
 
@@ -204,6 +226,7 @@ impl<'a> PosePairs<'a> {
             };
             self.est.push(s.pose);
             self.gt.push(g);
+            self.lost.push(s.lost);
             // The filter starts at the true pose with zero covariance; while it claims
             // less than NEES_MIN_POSITION_STD of position uncertainty in some direction,
             // the ground truth's own noise dominates the error there and the NEES says
@@ -220,7 +243,13 @@ impl<'a> PosePairs<'a> {
 
 /// [`evaluate_paired`] but the dead reckoning's figures.
 fn evaluate_filter(recording: &Recording, run: &ReplayRun, pairs: PosePairs<'_>) -> Metrics {
-    let PosePairs { est, gt, nees, .. } = pairs;
+    let PosePairs {
+        est,
+        gt,
+        nees,
+        lost,
+        ..
+    } = pairs;
     let transforms = transforms(&est, &gt);
     let se2_alignment = transforms.1.map(|t| [t.x, t.y, t.theta]);
     let mut m = Metrics {
@@ -263,6 +292,21 @@ fn evaluate_filter(recording: &Recording, run: &ReplayRun, pairs: PosePairs<'_>)
     m.nees_pose_within_95 = (!nees.is_empty())
         .then(|| nees.iter().filter(|v| **v <= bound).count() as f64 / nees.len() as f64);
     m.nis_mean = mean(&run.nis);
+    let raised = run.trajectory.iter().filter(|s| s.lost).count();
+    m.lost_share = raised as f64 / run.trajectory.len().max(1) as f64;
+    m.lost_reported = m.lost_share >= LOST_RUN_SHARE;
+    m.lost_report_agrees = m
+        .ate_rmse_m
+        .se2
+        .map(|ate| (ate > LOST_ERROR_M) == m.lost_reported);
+    m.lost_flag_agreement = transforms.1.as_ref().and_then(|t| {
+        let r = Rigid::new(t);
+        let agree = est.iter().zip(&gt).zip(&lost).filter(|((e, g), l)| {
+            let [x, y] = r.point(e.x, e.y);
+            ((x - g.x).hypot(y - g.y) > LOST_ERROR_M) == **l
+        });
+        (!est.is_empty()).then(|| agree.count() as f64 / est.len() as f64)
+    });
     (m.association_one_to_one_purity, m.association_purity) = purity(recording, run);
     m
 }
