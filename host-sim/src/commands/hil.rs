@@ -117,7 +117,7 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
         };
         return run_cli(&options, quiet);
     }
-    let recording = crate::inputs::readers::read(&args.dataset, args.robot)?;
+    let mut recording = crate::inputs::readers::read(&args.dataset, args.robot)?;
     let settings = if args.dataset_settings {
         let family = args.dataset.family();
         let tuned =
@@ -128,6 +128,14 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
                  deviations, not a range bias mean: set range_bias_offset_mean and \
                  range_bias_curvature_mean to 0 for --dataset-settings"
             );
+        }
+        // The host is the device's front end: it sends the odometry when the robot
+        // moves, the settings' latency after the readings (velocities are held between
+        // samples on the device; `replay` interpolates them when the settings say so).
+        if let Some(events) =
+            crate::drivers::odometry::delay_odometry(&recording.events, tuned.odometry.latency_s)
+        {
+            recording.events = events;
         }
         Some(
             EkfSettings::from_config(&tuned.ekf_config::<f32>())
