@@ -255,9 +255,15 @@ fn dataset_ekf_settings_travel_over_the_wire() {
     let dir = host_sim::domain::datasets::resolve("mrclam", "dataset6").expect("MRCLAM dataset 6");
     let recording = host_sim::inputs::readers::mrclam::read(&dir, 1).expect("robot 1 reads");
     let tuned = Settings::load_for("mrclam", None, None).expect("mrclam settings");
+    // As `hil --dataset-settings` sends it: the odometry with the settings' latency.
+    let latency = tuned.odometry.latency_s;
+    assert!(latency > 0.0);
+    let mut delayed = recording.clone();
+    delayed.events =
+        host_sim::drivers::odometry::delay_odometry(&recording.events, latency).expect("delayed");
     let settings = EkfSettings::from_config(&tuned.ekf_config::<f32>())
         .with_calibration(tuned.calibration_priors());
-    let with = host_sim::drivers::hil::messages_for(&recording, Some(settings));
+    let with = host_sim::drivers::hil::messages_for(&delayed, Some(settings));
     let without = host_sim::drivers::hil::messages_for(&recording, None);
     assert_eq!(with.len(), without.len() + 1);
     let a = host_replies(&host_sim::drivers::hil::encode_all(&with));
@@ -279,16 +285,18 @@ fn dataset_ekf_settings_travel_over_the_wire() {
         last_pose(&b),
         "the tuned settings changed nothing"
     );
-    // What the device's trajectory scores (`hil.json`): with the tuned settings and
-    // self-calibration priors as good as `host-sim replay` (0.1473 m); measured 0.1471 m
-    // over 52 303 estimates, against 0.2903 m with the firmware's own settings (both with
-    // the session's supervision, `HealthConfig::DEFAULT_F32`).
+    // What the device's trajectory scores (`hil.json`): with the tuned settings,
+    // self-calibration priors and latency about as good as `host-sim replay` (0.1888 m,
+    // which also interpolates the odometry between samples; the device holds each
+    // sample); measured 0.1979 m over 52 281 estimates, against 0.2903 m with the
+    // firmware's own settings (both with the session's supervision,
+    // `HealthConfig::DEFAULT_F32`, the file's `[recovery]`).
     let (tuned_ate, poses) = host_sim::commands::hil::device_ate(&a, &recording.ground_truth);
     let (own_ate, _) = host_sim::commands::hil::device_ate(&b, &recording.ground_truth);
     let (tuned_ate, own_ate) = (tuned_ate.expect("ATE"), own_ate.expect("ATE"));
     println!("device ATE(se2): tuned {tuned_ate:.4} m over {poses} estimates, own {own_ate:.4} m");
     assert!(poses > 50_000, "{poses}");
-    assert!(tuned_ate < 0.1545, "{tuned_ate}");
+    assert!(tuned_ate < 0.1979 * 1.05, "{tuned_ate}");
     assert!(tuned_ate < own_ate, "{tuned_ate} {own_ate}");
 }
 
