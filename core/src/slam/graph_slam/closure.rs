@@ -1,6 +1,7 @@
 //! Loop closure: a new keyframe matched against the old ones near it, a loop edge, and
 //! the graph solved.
 
+use super::stored::load_stored;
 use super::{ClosureOutcome, GraphSlam, SlamError};
 use crate::geometry::{Pose2, sin_cos_f32};
 use crate::slam::graph::LoopEdge;
@@ -62,7 +63,8 @@ impl<
         // The old map around this keyframe: every old keyframe near it at its graph pose.
         let res = self.config.grid.resolution;
         let half = 0.5 * super::MATCH_CELLS as f32 * res;
-        self.match_map.init(
+        let buffers = self.workspace.matching();
+        buffers.map.init(
             res,
             here.x - half,
             here.y - half,
@@ -75,14 +77,15 @@ impl<
             if !near(&pose, lc.submap_radius_m) {
                 continue;
             }
-            self.load_stored(j, store)?;
+            load_stored(&mut self.stored, &mut self.ranges, j, store)?;
             let (s, c) = sin_cos_f32(pose.theta);
             for (px, py) in self.stored.robot_points() {
-                self.match_map
+                buffers
+                    .map
                     .set_world(pose.x + c * px - s * py, pose.y + s * px + c * py);
             }
         }
-        self.match_levels.build(&self.match_map);
+        buffers.levels.build(&buffers.map);
         let mut points = [(0.0f32, 0.0f32); MAX_MATCH_POINTS];
         let mut n = 0;
         let stride = self
@@ -97,8 +100,8 @@ impl<
                 n += 1;
             }
         }
-        let m = match self.match_levels.search(
-            &self.match_map,
+        let m = match buffers.levels.search(
+            &buffers.map,
             points.get(..n).unwrap_or(&[]),
             &here,
             &lc.window,
@@ -136,7 +139,7 @@ impl<
             // A full table of loop edges: the match is not kept.
             return Ok(Some(outcome));
         }
-        self.graph.optimise(&mut self.scratch, &lc.solver)?;
+        self.graph.optimise(self.workspace.solving(), &lc.solver)?;
         outcome.accepted = true;
         self.counters.closures = self.counters.closures.saturating_add(1);
         Ok(Some(outcome))

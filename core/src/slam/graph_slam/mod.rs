@@ -5,17 +5,19 @@ mod closure;
 mod stored;
 #[cfg(test)]
 mod tests;
+mod workspace;
 
 use super::config::GraphSlamConfig;
 use super::graph::{ChainEdge, GraphError, PoseGraph};
 use super::keyframes::{Keyframe, KeyframeStorage, KeyframeStore, StoreError};
 use super::local_map::LocalMap;
-use super::matcher::MatcherLevels;
 use crate::geometry::Pose2;
-use crate::grid::{GridError, OccupancyBitmap, ScanIntegration, occupancy_bytes};
+use crate::grid::{GridError, ScanIntegration, occupancy_bytes};
 use crate::pf::{ParticleFilter, PfError, ScanPoints};
 use crate::sensors::lidar::LidarScan;
 use core::fmt;
+use workspace::Workspace;
+pub use workspace::workspace_bytes;
 
 /// Cells along each edge of the map a loop closure matches against (12.8 m at 5 cm).
 pub const MATCH_CELLS: usize = 256;
@@ -140,7 +142,9 @@ struct Newest {
 /// - the [`LocalMap`]: a `NEAR × NEAR` log-odds window (`NEAR_BITS` bytes of bitmap) and a
 ///   `FAR × FAR` bitmap (`FAR_BITS` bytes);
 /// - a [`PoseGraph`] of at most `NODES` keyframes and `LOOPS` loop edges, solved in
-///   `SCRATCH` floats of scratch (at least [`super::graph::scratch_len`]`(NODES, LOOPS)`);
+///   `SCRATCH` floats of scratch (at least [`super::graph::scratch_len`]`(NODES, LOOPS)`),
+///   which the loop closure's matcher buffers share ([`workspace_bytes`]: the larger of
+///   the two, never both);
 /// - the keyframes' scans in a [`KeyframeStore`] the caller owns and lends to each step
 ///   (flash on a microcontroller).
 ///
@@ -165,9 +169,8 @@ pub struct GraphSlam<
     stored: ScanPoints<B>,
     ranges: [f32; B],
     graph: PoseGraph<NODES, LOOPS>,
-    scratch: [f32; SCRATCH],
-    match_map: OccupancyBitmap<MATCH_CELLS, MATCH_CELLS, MATCH_BYTES>,
-    match_levels: MatcherLevels<MATCH_CELLS, MATCH_BYTES, MATCH_LEVELS>,
+    /// The loop closure's matcher buffers, then the graph solver's scratch, in one block.
+    workspace: Workspace<SCRATCH>,
     config: GraphSlamConfig,
     scans: u32,
     pose: Pose2<f32>,
@@ -206,9 +209,7 @@ impl<
             stored: ScanPoints::new(),
             ranges: [0.0; B],
             graph: PoseGraph::new(),
-            scratch: [0.0; SCRATCH],
-            match_map: OccupancyBitmap::zeroed(),
-            match_levels: MatcherLevels::zeroed(),
+            workspace: Workspace::zeroed(),
             config: GraphSlamConfig::MICROCONTROLLER,
             scans: 0,
             pose: Pose2::new(0.0, 0.0, 0.0),
