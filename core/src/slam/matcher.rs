@@ -17,6 +17,10 @@
 //! translations, the others are split into 16 blocks of the level below, best bound
 //! first, down to exact scores. The answer is the best candidate of the whole window, the
 //! first found among equals (the same as trying every candidate: a test checks it).
+//! Scores below what a match needs to be accepted (`min_hit_fraction` of the end points)
+//! are pruned from the start, and the runner-up pass looks only for a candidate above
+//! `max_runner_up` of the best and stops at the first: both decide the same as a full
+//! search, for far less work where nothing fits.
 //!
 //! **Uncertainty.** Around the best candidate the exact scores of its neighbours (± a few
 //! cells and heading steps) weighted by `exp((score − best) / τ)` give a covariance:
@@ -91,18 +95,22 @@ impl core::error::Error for MatchError {}
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ScanMatch {
-    /// The scan's pose at the best candidate.
+    /// The scan's pose at the best candidate (the guess when no candidate has
+    /// `min_hit_fraction` of the end points on occupied cells).
     pub pose: Pose2<f32>,
     /// The mean of the candidates around the best one weighted as for
     /// [`ScanMatch::covariance`]: the best candidate refined below a cell and a heading
     /// step.
     pub centroid: Pose2<f32>,
-    /// End points on occupied cells at the best candidate.
+    /// End points on occupied cells at the best candidate; 0 when no candidate reaches
+    /// `min_hit_fraction` of them (the search prunes every candidate below it).
     pub hits: u32,
     /// End points used.
     pub points: u32,
-    /// The best score of the candidates distinct from the best (see
-    /// [`MatchWindow::distinct_cells`]); 0 when the runner-up test is off.
+    /// The score of a candidate distinct from the best (see
+    /// [`MatchWindow::distinct_cells`]) above `max_runner_up` of the best, the first one
+    /// found (the search stops there: it decides); 0 when there is none or the test is
+    /// off.
     pub runner_up: u32,
     /// `true` when `hits ≥ min_hit_fraction · points` and the search covered the whole
     /// window within its work budget.
@@ -192,6 +200,9 @@ impl<const N: usize, const BYTES: usize, const LEVELS: usize> MatcherLevels<N, B
             return Err(MatchError::NoPoints);
         }
         let used = used.get(..n).unwrap_or(&[]);
+        // Only a candidate with at least `need` hits can be accepted: scores below it
+        // are pruned like those below the best so far.
+        let need = ceil_u32(window.min_hit_fraction * n as f32);
         let mut search = Search {
             levels: &self.levels,
             base: map.bits(),
@@ -199,18 +210,25 @@ impl<const N: usize, const BYTES: usize, const LEVELS: usize> MatcherLevels<N, B
             work: 0,
             budget: window.work_budget,
             best: Candidate::default(),
+            floor: need.saturating_sub(1),
+            stop_when_found: false,
+            found: false,
             exclude: None,
             cells: [(0, 0); MAX_MATCH_POINTS],
             n,
         };
         let mut complete = search.pass(used, guess, window);
         let best = search.best;
-        // The runner-up: the same search with the best candidate's neighbourhood left out.
+        // The runner-up: the same search with the best candidate's neighbourhood left out,
+        // looking only for a candidate above `max_runner_up` of the best (the first one
+        // found decides: no match).
         let mut runner_up = 0;
         if window.max_runner_up < 1.0 && best.score > 0 {
             let first = search.work;
             search.work = 0;
             search.best = Candidate::default();
+            search.floor = (window.max_runner_up * best.score as f32) as u32;
+            search.stop_when_found = true;
             search.exclude = Some((best, i32::from(window.distinct_cells)));
             complete &= search.pass(used, guess, window);
             runner_up = search.best.score;
@@ -224,7 +242,11 @@ impl<const N: usize, const BYTES: usize, const LEVELS: usize> MatcherLevels<N, B
             theta,
         );
         let work = search.work;
-        let (mean, covariance) = search.spread(used, guess, window, &best);
+        let (mean, covariance) = if best.score > 0 {
+            search.spread(used, guess, window, &best)
+        } else {
+            ([0.0; 3], [0.0; 4])
+        };
         let centroid = Pose2::new(
             pose.x + mean[0],
             pose.y + mean[1],
@@ -245,6 +267,12 @@ impl<const N: usize, const BYTES: usize, const LEVELS: usize> MatcherLevels<N, B
             covariance,
         })
     }
+}
+
+/// `⌈x⌉` for `x ≥ 0` (0 for NaN or below 0).
+fn ceil_u32(x: f32) -> u32 {
+    let t = x as u32;
+    t + u32::from((t as f32) < x)
 }
 
 /// Thins `points` evenly to at most [`MAX_MATCH_POINTS`] finite ones into `out`; the
@@ -315,7 +343,14 @@ struct Search<'a, const BYTES: usize, const LEVELS: usize> {
     geometry: &'a GridGeometry,
     work: u32,
     budget: u32,
+    /// The best candidate above `floor` (score 0: none yet).
     best: Candidate,
+    /// Scores at or below this are no candidates (pruned like those below the best).
+    floor: u32,
+    /// Stop at the first candidate above `floor` (the runner-up pass: one decides).
+    stop_when_found: bool,
+    /// Set when a stop at the first candidate happened.
+    found: bool,
     /// Candidates within this many cells or heading steps of this one are not scored (the
     /// runner-up pass).
     exclude: Option<(Candidate, i32)>,
@@ -335,10 +370,16 @@ impl<const BYTES: usize, const LEVELS: usize> Search<'_, BYTES, LEVELS> {
             let theta = guess.theta + j as f32 * window.angle_step;
             self.end_cells(points, guess, theta);
             if !self.window(j, half) {
-                return false;
+                // Out of budget, or stopped at the first candidate (a complete answer).
+                return self.found;
             }
         }
         true
+    }
+
+    /// What a bound or score must beat: the best so far, or the floor.
+    fn threshold(&self) -> u32 {
+        self.best.score.max(self.floor)
     }
 
     /// `true` when the runner-up pass leaves this candidate out.
@@ -392,7 +433,7 @@ impl<const BYTES: usize, const LEVELS: usize> Search<'_, BYTES, LEVELS> {
             for bx in 0..blocks {
                 let (x0, y0) = (-half + bx * block, -half + by * block);
                 let bound = self.score(bits, x0, y0);
-                if bound > self.best.score && !self.expand(j, top, x0, y0, half) {
+                if bound > self.threshold() && !self.expand(j, top, x0, y0, half) {
                     return false;
                 }
                 if self.work >= self.budget {
@@ -435,13 +476,17 @@ impl<const BYTES: usize, const LEVELS: usize> Search<'_, BYTES, LEVELS> {
                 }
                 let score = self.score(bits, x, y);
                 if below == 0 {
-                    if score > self.best.score {
+                    if score > self.threshold() {
                         self.best = Candidate {
                             heading: j,
                             dx: x,
                             dy: y,
                             score,
                         };
+                        if self.stop_when_found {
+                            self.found = true;
+                            return false;
+                        }
                     }
                 } else if let Some(slot) = children.get_mut(count) {
                     *slot = (score, x, y);
@@ -459,7 +504,7 @@ impl<const BYTES: usize, const LEVELS: usize> Search<'_, BYTES, LEVELS> {
             }
         }
         for &(bound, x, y) in children.iter() {
-            if bound <= self.best.score {
+            if bound <= self.threshold() {
                 break;
             }
             if !self.expand(j, below, x, y, half) {

@@ -127,8 +127,10 @@ fn branch_and_bound_finds_the_best_score_of_the_whole_window() {
         let mut levels = Box::new(MatcherLevels::<N, B, 2>::zeroed());
         levels.build(&map);
         let guess = Pose2::new(0.013, -0.021, 0.3);
+        // Every candidate counts (no minimum), so the answer is the best of the window.
         let w = MatchWindow {
             half_angle: 0.03,
+            min_hit_fraction: 0.0,
             ..window(9 + round as u16, 0.0)
         };
         let m = levels.search(&map, &points, &guess, &w).unwrap();
@@ -152,6 +154,19 @@ fn branch_and_bound_finds_the_best_score_of_the_whole_window() {
             m.hits,
             "round {round}: the pose scores its hits"
         );
+        // With a minimum, candidates below it are pruned: the same best when it reaches
+        // the minimum, none (0 hits, no match) when it does not.
+        for need in [best, best + 1] {
+            let w_min = MatchWindow {
+                min_hit_fraction: need as f32 / points.len() as f32,
+                ..w
+            };
+            let m_min = levels.search(&map, &points, &guess, &w_min).unwrap();
+            let expected = if need <= best { best } else { 0 };
+            assert_eq!(m_min.hits, expected, "round {round}, need {need}: {m_min:?}");
+            assert!(m_min.work <= m.work, "round {round}: pruning never adds work");
+            assert!(m_min.complete);
+        }
     }
 }
 
