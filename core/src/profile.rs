@@ -21,6 +21,8 @@ use crate::grid::{OccupancyGrid, occupancy_bytes};
 use crate::motion::{IncrementNoise, VelocityNoise};
 use crate::pf::{GridLocalizer, GridPfConfig, GridSlam, RelocalizationConfig};
 use crate::sensors::range_bearing::RangeBearingSensor;
+use crate::slam::graph::scratch_len;
+use crate::slam::{GraphSlam, GraphSlamConfig};
 
 /// Landmarks the EKF holds.
 pub const EKF_LANDMARKS: usize = 64;
@@ -99,3 +101,59 @@ pub const RELOCALIZATION: RelocalizationConfig = RelocalizationConfig::DEFAULT;
 
 /// The localizer on a map image (`&'m` bytes in flash on the board).
 pub type Localizer<'m> = GridLocalizer<'m, LOCALIZER_PARTICLES, GRID_BEAMS>;
+
+/// Edge of the building-scale SLAM's near log-odds window, cells (128 × 128 `i8` = 16 KB,
+/// 6.4 m square at 5 cm): the window the filter scores and writes scans in.
+pub const SLAM_NEAR: usize = 128;
+/// Edge of its far occupancy bitmap, cells (512 × 512 bits = 32 KB, 25.6 m square): what
+/// the robot saw around it beyond the near window, and what the filter scores on.
+pub const SLAM_FAR: usize = 512;
+/// Keyframes its pose graph holds (one each 0.5 m or 0.3 rad of travel: 320 m of a
+/// robot's path; the Intel lab's raw log makes 600).
+pub const SLAM_NODES: usize = 640;
+/// Loop edges its pose graph holds.
+pub const SLAM_LOOPS: usize = 192;
+
+/// Grid SLAM at the scale of a building ([`GraphSlam`]) as the profile sizes it: the
+/// grid estimator's particles and beams on a [`SLAM_NEAR`]/[`SLAM_FAR`] local map, a
+/// graph of [`SLAM_NODES`] keyframes and [`SLAM_LOOPS`] loop edges (111 KB on a 32-bit
+/// target, see `docs/firmware.md`). The keyframes' scans live in a
+/// [`KeyframeStore`](crate::slam::keyframes::KeyframeStore) of the caller's (flash).
+pub type Slam = GraphSlam<
+    GRID_PARTICLES,
+    GRID_BEAMS,
+    SLAM_NEAR,
+    { occupancy_bytes(SLAM_NEAR, SLAM_NEAR) },
+    SLAM_FAR,
+    { occupancy_bytes(SLAM_FAR, SLAM_FAR) },
+    SLAM_NODES,
+    SLAM_LOOPS,
+    { scratch_len(SLAM_NODES, SLAM_LOOPS) },
+>;
+
+/// Settings of [`Slam`]: [`GraphSlamConfig::MICROCONTROLLER`].
+pub const SLAM_CONFIG: GraphSlamConfig = GraphSlamConfig::MICROCONTROLLER;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_building_scale_slam_fits_beside_a_firmware_in_128_kb() {
+        // On a 32-bit target the sizes are a little smaller (no 8-byte words); the
+        // firmware's budget.txt holds those. Measured here (64-bit host): 110 840 bytes.
+        let bytes = core::mem::size_of::<Slam>();
+        let parts = SLAM_NEAR * SLAM_NEAR
+            + occupancy_bytes(SLAM_NEAR, SLAM_NEAR)
+            + occupancy_bytes(SLAM_FAR, SLAM_FAR)
+            + crate::slam::graph::graph_bytes(SLAM_NODES, SLAM_LOOPS)
+            + crate::slam::workspace_bytes(scratch_len(SLAM_NODES, SLAM_LOOPS));
+        assert!(bytes >= parts, "{bytes} < {parts}");
+        // What is not the maps, the graph and the workspace (particles, scan points, the
+        // settings) stays small: measured 6 128 bytes on a 64-bit host.
+        assert!(bytes - parts <= 6400, "{bytes} - {parts}");
+        // With the stack its drive peaks at on the board (11 072 bytes, `cost_slam` in
+        // budget.txt), at least 8 KB of a 128 KB board stay for a firmware's buffers.
+        assert!(bytes + 11_072 + 8 * 1024 <= 128 * 1024, "{bytes}");
+    }
+}

@@ -1,7 +1,8 @@
 //! The device's building-scale grid SLAM ([`microslam::slam::GraphSlam`]) over a lidar
 //! log: the particle filter on the local map that follows the robot, keyframes in a
 //! store in memory, loop closure by the pose graph. The same code and sizes as the
-//! firmware's, so the host's figures are the device's.
+//! board profile's ([`microslam::profile::Slam`]: local map, graph, beams; the particles
+//! are the run's), so the host's figures are what the board computes.
 //!
 //! The trajectory written is the graph's at the end of the run: every scan at its
 //! keyframe's final pose composed with the filter's motion from that keyframe to it.
@@ -13,22 +14,23 @@ use crate::domain::grid::ScanSpacing;
 use anyhow::{Result, anyhow, bail};
 use microslam::geometry::Pose2;
 use microslam::grid::{OccupancyGrid, occupancy_bytes};
+use microslam::profile;
 use microslam::sensors::lidar::{LidarGeometry, LidarScan};
 use microslam::slam::graph::scratch_len;
 use microslam::slam::keyframes::{KeyframeStorage, KeyframeStore, StoreError};
 use microslam::slam::{GraphSlam, GraphSlamConfig};
 use std::time::Instant;
 
-/// Beams a scan the filter scores at most (the firmware's).
-pub const GRAPH_BEAMS: usize = 90;
-/// The local map's near log-odds window, cells.
-pub const NEAR: usize = 192;
-/// The local map's far bitmap, cells.
-pub const FAR: usize = 512;
-/// Keyframes the graph holds.
-pub const NODES: usize = 1024;
-/// Loop edges the graph holds.
-pub const LOOPS: usize = 256;
+/// Beams a scan the filter scores at most (the board profile's).
+pub const GRAPH_BEAMS: usize = profile::GRID_BEAMS;
+/// The local map's near log-odds window, cells (the board profile's).
+pub const NEAR: usize = profile::SLAM_NEAR;
+/// The local map's far bitmap, cells (the board profile's).
+pub const FAR: usize = profile::SLAM_FAR;
+/// Keyframes the graph holds (the board profile's).
+pub const NODES: usize = profile::SLAM_NODES;
+/// Loop edges the graph holds (the board profile's).
+pub const LOOPS: usize = profile::SLAM_LOOPS;
 const SCRATCH: usize = scratch_len(NODES, LOOPS);
 
 /// The estimator with the sizes above and `P` particles.
@@ -172,12 +174,7 @@ fn run_p<const N: usize, const BITMAP: usize, const P: usize>(
     }
     run.filter_time_s = t0.elapsed().as_secs_f64();
     // The graph's trajectory: every scan at its keyframe's final pose ⊕ its offset.
-    for ((_, pose), offset) in run
-        .trajectory
-        .iter_mut()
-        .zip(&offsets)
-        .filter(|_| std::env::var("MS_ONLINE").is_err())
-    {
+    for ((_, pose), offset) in run.trajectory.iter_mut().zip(&offsets) {
         if let Some((node, motion)) = offset
             && let Some(g) = slam.graph().pose(usize::from(*node))
         {
@@ -187,7 +184,18 @@ fn run_p<const N: usize, const BITMAP: usize, const P: usize>(
     let (cells, geometry) = draw_map::<N, BITMAP, P>(&slam, &store, &lidar, options)?;
     run.cells = cells;
     run.geometry = geometry;
-    Ok((run, slam.counters().into()))
+    let counters = slam.counters();
+    if counters.keyframes_refused > 0 {
+        // Every scan was still tracked; only the keyframes beyond the graph's size were
+        // not kept, so the path after them closes no loops and is not in the map.
+        eprintln!(
+            "warning: the pose graph is full: {} keyframes kept (the board profile's \
+             SLAM_NODES = {NODES}), {} more not kept; the map and the loop closure stop \
+             at the {}th keyframe",
+            counters.keyframes, counters.keyframes_refused, counters.keyframes
+        );
+    }
+    Ok((run, counters.into()))
 }
 
 /// Every stored keyframe's scan written at its final graph pose into an `N × N` grid.
