@@ -57,6 +57,7 @@ cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/qemu.elf"
 cp "$TARGET_DIR/$TARGET/$PROFILE/cost" "$OUT/cost.elf"
 cp "$TARGET_DIR/$TARGET/$PROFILE/cost_grid" "$OUT/cost_grid.elf"
 cp "$TARGET_DIR/$TARGET/$PROFILE/cost_relocalize" "$OUT/cost_relocalize.elf"
+cp "$TARGET_DIR/$TARGET/$PROFILE/cost_slam" "$OUT/cost_slam.elf"
 
 # ---- Localizer firmware (map in flash) ----
 # The map of a host grid-SLAM run on the Intel log (made here, never committed) is
@@ -117,7 +118,7 @@ done
 step "QEMU: instructions per call (-icount shift=6)"
 cost_log="$OUT/cost.log"
 : >"$cost_log"
-for elf in cost cost_grid cost_grid_map cost_relocalize; do
+for elf in cost cost_grid cost_grid_map cost_relocalize cost_slam; do
     timeout 600 qemu-system-arm -machine mps2-an386 -cpu cortex-m4 -display none -monitor none \
         -serial stdio -icount shift=6 -semihosting-config enable=on,target=native \
         -kernel "$OUT/$elf.elf" </dev/null | tee "$OUT/$elf.run.log"
@@ -141,10 +142,28 @@ awk '/^ekf /{
         split($2, c, "="); split($6, n, "=");
         printf "%-40s %s\n", "relocalize_" c[2] "x" c[2] "_instructions", n[2];
     }
+    /^slam /{
+        for (i = 2; i <= NF; i++) { split($i, kv, "="); g[kv[1]] = kv[2] }
+        pre = "slam_p" g["p"] "_b" g["beams"] "_n" g["nodes"];
+        printf "%-40s %s\n", pre "_mean_step_instructions", g["mean"];
+        printf "%-40s %s\n", pre "_max_step_instructions", g["max"];
+        printf "%-40s %s\n", pre "_max_closure_instructions", g["max_closure"];
+        printf "%-40s %s\n", pre "_steps_over_10m", g["over_10m"];
+    }
+    /^slam_bytes=/{ split($0, kv, "="); printf "%-40s %s\n", "slam_estimator_bytes", kv[2] }
     /^relocalize_budget(_b45)? /{
         for (i = 2; i <= NF; i++) { split($i, kv, "="); f[kv[1]] = kv[2] }
         printf "%-40s %s\n", $1 "_" f["cells"] "x" f["cells"] "_instructions", f["instructions"];
     }' "$cost_log" >>"$measured"
+
+# The building-scale SLAM probe's memory: the profile's estimator (`microslam::profile::Slam`,
+# static) and the stack's peak over a drive that fills its graph; together, what a SLAM
+# firmware needs besides its serial buffers (the keyframes are in flash).
+slam_stack=$(sed -n 's/^stack_peak_bytes=\([0-9]*\)$/\1/p' "$OUT/cost_slam.run.log")
+slam_bytes=$(sed -n 's/^slam_bytes=\([0-9]*\)$/\1/p' "$OUT/cost_slam.run.log")
+[[ -n "$slam_stack" && -n "$slam_bytes" ]] || fail "no memory figures in the cost_slam output"
+record "slam_stack_peak_bytes" "$slam_stack"
+record "slam_estimator_with_stack_bytes" "$((slam_bytes + slam_stack))"
 
 step "report"
 # EKF updates per (3+2n)² covariance entry at 64 landmarks, and the exponent of a log-log

@@ -5,8 +5,10 @@
 
 use core::fmt::Write;
 
-use cortex_m::peripheral::SYST;
+use core::sync::atomic::{AtomicU32, Ordering};
+
 use cortex_m::peripheral::syst::SystClkSource;
+use cortex_m::peripheral::{SCB, SYST};
 
 use crate::board::{self, Serial};
 
@@ -84,6 +86,49 @@ impl Ticks {
         let t = self.raw(f).saturating_sub(self.empty);
         (u64::from(t) * 40 / 64) as u32
     }
+
+    /// Instructions executed by `f`, however many: SysTick's interrupt counts the
+    /// counter's wraps ([`SYSTICK_WRAPS`]), so the binary must define the handler with
+    /// [`systick_counts_wraps!`](crate::systick_counts_wraps). The handler's own
+    /// instructions (a few per 10 M) are counted too.
+    pub fn instructions_long(&mut self, f: impl FnOnce()) -> u64 {
+        self.syst.clear_current();
+        SYSTICK_WRAPS.store(0, Ordering::Relaxed);
+        self.syst.enable_interrupt();
+        let start = SYST::get_current();
+        f();
+        let (end, wraps) = cortex_m::interrupt::free(|_| {
+            let end = SYST::get_current();
+            let mut wraps = SYSTICK_WRAPS.load(Ordering::Relaxed);
+            // A wrap not yet handled: counted when it came before `end` was read (the
+            // counter then reads high, just reloaded), not when it came after (low).
+            if SCB::is_pendst_pending() && end > Self::RELOAD / 2 {
+                wraps += 1;
+            }
+            (end, wraps)
+        });
+        self.syst.disable_interrupt();
+        SCB::clear_pendst();
+        let ticks = u64::from(wraps) * (u64::from(Self::RELOAD) + 1)
+            + u64::from(start.wrapping_sub(end) & Self::RELOAD);
+        ticks.saturating_sub(u64::from(self.empty)) * 40 / 64
+    }
+}
+
+/// SysTick wraps, counted by the handler [`systick_counts_wraps!`](crate::systick_counts_wraps)
+/// defines (for [`Ticks::instructions_long`]).
+pub static SYSTICK_WRAPS: AtomicU32 = AtomicU32::new(0);
+
+/// Defines the binary's `SysTick` handler: it counts the counter's wraps in
+/// [`SYSTICK_WRAPS`], for [`Ticks::instructions_long`].
+#[macro_export]
+macro_rules! systick_counts_wraps {
+    () => {
+        #[cortex_m_rt::exception]
+        fn SysTick() {
+            $crate::cost::SYSTICK_WRAPS.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
+        }
+    };
 }
 
 /// A 1000-instruction block to check the tick/instruction ratio.
@@ -125,4 +170,205 @@ pub const ROOM: [[f32; 4]; 8] = [
 pub fn room_range(x: f32, y: f32, angle: f32) -> f32 {
     let direction = (libm::cosf(angle), libm::sinf(angle));
     microslam::geometry::ray_to_segments((x, y), direction, ROOM).unwrap_or(f32::INFINITY)
+}
+
+/// Boxes against the outer walls of [`RING`] (`[x, y, width, height]`, metres), at uneven
+/// spacing so that no stretch of the corridor looks like the next.
+const RING_BOXES: [[f32; 4]; 10] = [
+    [-6.5, -6.6, 0.6, 0.4],
+    [-1.2, -6.5, 0.9, 0.5],
+    [4.3, -6.7, 0.5, 0.3],
+    [9.5, -3.2, 0.5, 0.8],
+    [9.6, 1.9, 0.4, 0.5],
+    [5.1, 6.6, 0.7, 0.4],
+    [-0.4, 6.5, 0.5, 0.5],
+    [-7.3, 6.7, 1.0, 0.3],
+    [-9.6, 2.5, 0.4, 0.9],
+    [-9.5, -2.8, 0.5, 0.4],
+];
+
+/// Where the pillars along the inner block's long walls stand (`t` from −7 m, spaced
+/// 1.3–2.1 m by where they are) and, with `short`, along its short walls (from −4 m,
+/// 1.4–2.0 m): the spacing of the core's test world, so that no stretch looks like the
+/// next. `out` gets the positions; the count is returned.
+const fn pillar_positions(short: bool, out: &mut [f32; 16]) -> usize {
+    let (mut t, end) = if short {
+        (-4.0f32, 4.5)
+    } else {
+        (-7.0f32, 7.5)
+    };
+    let mut n = 0;
+    while t < end && n < out.len() {
+        out[n] = t;
+        n += 1;
+        t += if short {
+            let k = (t * 3.0) as i32 % 4;
+            1.4 + 0.2 * (if k < 0 { -k } else { k }) as f32
+        } else {
+            1.3 + 0.2 * ((t * 7.0) as i32 % 5) as f32
+        };
+    }
+    n
+}
+
+const RING_PILLARS_LONG: usize = pillar_positions(false, &mut [0.0; 16]);
+const RING_PILLARS_SHORT: usize = pillar_positions(true, &mut [0.0; 16]);
+const RING_RECTS: usize = 2 + RING_BOXES.len() + 2 * RING_PILLARS_LONG + 2 * RING_PILLARS_SHORT;
+
+/// The walls of the building-scale cost world (`[x1, y1, x2, y2]`, metres): a ring
+/// corridor 2 m wide around a 16 m × 10 m block (outer walls 20 m × 14 m, centred on the
+/// origin), larger than the SLAM's local map, with the boxes of [`RING_BOXES`] along its
+/// outer walls and pillars of four sizes at uneven spacing along its inner ones (the
+/// world of the core's graph SLAM tests, in a fixed array).
+pub const RING: [[f32; 4]; 4 * RING_RECTS] = ring_walls();
+
+/// The rectangles of [`RING`] (`[x0, y0, x1, y1]`).
+const fn ring_rects() -> [[f32; 4]; RING_RECTS] {
+    let mut r = [[0.0; 4]; RING_RECTS];
+    r[0] = [-10.0, -7.0, 10.0, 7.0];
+    r[1] = [-8.0, -5.0, 8.0, 5.0];
+    let mut k = 0;
+    while k < RING_BOXES.len() {
+        let [x, y, sx, sy] = RING_BOXES[k];
+        r[2 + k] = [x - sx / 2.0, y - sy / 2.0, x + sx / 2.0, y + sy / 2.0];
+        k += 1;
+    }
+    let mut n = 2 + RING_BOXES.len();
+    let mut at = [0.0f32; 16];
+    let _ = pillar_positions(false, &mut at);
+    let mut i = 0;
+    while i < RING_PILLARS_LONG {
+        let t = at[i];
+        r[n] = pillar(t, -4.85, n);
+        r[n + 1] = pillar(-t + 0.4, 4.85, n + 1);
+        n += 2;
+        i += 1;
+    }
+    let _ = pillar_positions(true, &mut at);
+    let mut i = 0;
+    while i < RING_PILLARS_SHORT {
+        let t = at[i];
+        r[n] = pillar(7.85, t, n);
+        r[n + 1] = pillar(-7.85, -t + 0.3, n + 1);
+        n += 2;
+        i += 1;
+    }
+    r
+}
+
+/// A square pillar centred on `(x, y)`, half-width 0.1–0.25 m by `k`.
+const fn pillar(x: f32, y: f32, k: usize) -> [f32; 4] {
+    let h = 0.1 + 0.05 * (k % 4) as f32;
+    [x - h, y - h, x + h, y + h]
+}
+
+const fn ring_walls() -> [[f32; 4]; 4 * RING_RECTS] {
+    let rects = ring_rects();
+    let mut w = [[0.0; 4]; 4 * RING_RECTS];
+    let mut k = 0;
+    while k < RING_RECTS {
+        let [x0, y0, x1, y1] = rects[k];
+        w[4 * k] = [x0, y0, x1, y0];
+        w[4 * k + 1] = [x1, y0, x1, y1];
+        w[4 * k + 2] = [x1, y1, x0, y1];
+        w[4 * k + 3] = [x0, y1, x0, y0];
+        k += 1;
+    }
+    w
+}
+
+/// The middle of [`RING`]'s corridor, corner by corner, anticlockwise from the south-west.
+pub const RING_WAYPOINTS: [(f32, f32); 4] = [(-9.0, -6.0), (9.0, -6.0), (9.0, 6.0), (-9.0, 6.0)];
+
+/// Range from `(x, y)` along `angle` to the nearest wall of [`RING`] (∞ when none).
+pub fn ring_range(x: f32, y: f32, angle: f32) -> f32 {
+    let direction = (libm::cosf(angle), libm::sinf(angle));
+    microslam::geometry::ray_to_segments((x, y), direction, RING).unwrap_or(f32::INFINITY)
+}
+
+/// A NOR flash stand-in in QEMU's SRAM: mps2-an386 has 4 MB of SRAM at `0x2000_0000`, of
+/// which the linker uses the first 128 KB (`memory-qemu.x`, the board's RAM); the bytes
+/// from [`SramFlash::BASE`] stand in for the board's flash sectors. It keeps NOR flash's
+/// rules (erase sets whole sectors to `0xFF`, a write only clears bits, word-aligned
+/// writes), so code that runs on it runs on a board's flash.
+pub struct SramFlash {
+    bytes: &'static mut [u8],
+}
+
+impl SramFlash {
+    /// Where the stand-in starts: 1 MB into QEMU's SRAM, far above the 128 KB the
+    /// firmware's RAM (and its stack) use.
+    pub const BASE: usize = 0x2010_0000;
+    /// Erase sector, bytes.
+    pub const SECTOR: usize = 4096;
+
+    /// The stand-in, `len` bytes (at most 2 MB), handed out once; `None` after.
+    pub fn take(len: u32) -> Option<Self> {
+        static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+        let len = len as usize;
+        if len > 2 << 20 || TAKEN.swap(true, core::sync::atomic::Ordering::AcqRel) {
+            return None;
+        }
+        // SAFETY: QEMU's mps2-an386 maps SRAM at 0x2000_0000..0x2040_0000; nothing the
+        // linker places reaches BASE (RAM ends at 0x2002_0000), `len` ≤ 2 MB keeps the
+        // slice inside the SRAM, and TAKEN hands it out once, so this is the only reference.
+        let bytes = unsafe { core::slice::from_raw_parts_mut(Self::BASE as *mut u8, len) };
+        Some(Self { bytes })
+    }
+}
+
+impl embedded_storage::nor_flash::ErrorType for SramFlash {
+    type Error = embedded_storage::nor_flash::NorFlashErrorKind;
+}
+
+impl embedded_storage::nor_flash::ReadNorFlash for SramFlash {
+    const READ_SIZE: usize = 1;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        let start = offset as usize;
+        let src = self
+            .bytes
+            .get(start..start.saturating_add(bytes.len()))
+            .ok_or(Self::Error::OutOfBounds)?;
+        bytes.copy_from_slice(src);
+        Ok(())
+    }
+
+    fn capacity(&self) -> usize {
+        self.bytes.len()
+    }
+}
+
+impl embedded_storage::nor_flash::NorFlash for SramFlash {
+    const WRITE_SIZE: usize = 4;
+    const ERASE_SIZE: usize = Self::SECTOR;
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        let (from, to) = (from as usize, to as usize);
+        if !from.is_multiple_of(Self::SECTOR) || !to.is_multiple_of(Self::SECTOR) {
+            return Err(Self::Error::NotAligned);
+        }
+        self.bytes
+            .get_mut(from..to)
+            .ok_or(Self::Error::OutOfBounds)?
+            .fill(0xFF);
+        Ok(())
+    }
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        let start = offset as usize;
+        if !start.is_multiple_of(Self::WRITE_SIZE) || !bytes.len().is_multiple_of(Self::WRITE_SIZE)
+        {
+            return Err(Self::Error::NotAligned);
+        }
+        let dst = self
+            .bytes
+            .get_mut(start..start.saturating_add(bytes.len()))
+            .ok_or(Self::Error::OutOfBounds)?;
+        // NOR flash programs by clearing bits.
+        for (d, s) in dst.iter_mut().zip(bytes) {
+            *d &= s;
+        }
+        Ok(())
+    }
 }
