@@ -173,7 +173,8 @@ impl<const N: usize, const BYTES: usize, const LEVELS: usize> MatcherLevels<N, B
         }
     }
 
-    /// Matches `points` (robot frame, metres) on `map` around `guess` over `window`.
+    /// Matches `points` (robot frame, metres) on `map` around `guess` over `window`, all
+    /// at once ([`MatcherLevels::start`], then [`MatcherLevels::resume`] with no limit).
     /// `map` must be the one the levels were built from.
     pub fn search(
         &self,
@@ -182,6 +183,23 @@ impl<const N: usize, const BYTES: usize, const LEVELS: usize> MatcherLevels<N, B
         guess: &Pose2<f32>,
         window: &MatchWindow,
     ) -> Result<ScanMatch, MatchError> {
+        let mut progress = self.start(map, points, guess, window)?;
+        loop {
+            if let Some(m) = self.resume(map, &mut progress, window, u32::MAX)? {
+                return Ok(m);
+            }
+        }
+    }
+
+    /// Starts a match of `points` (robot frame, metres) on `map` around `guess` over
+    /// `window`, to be run by [`MatcherLevels::resume`] (in slices, e.g. one a scan).
+    pub fn start(
+        &self,
+        map: &OccupancyBitmap<N, N, BYTES>,
+        points: &[(f32, f32)],
+        guess: &Pose2<f32>,
+        window: &MatchWindow,
+    ) -> Result<MatchProgress, MatchError> {
         let valid = guess.is_finite()
             && window.half_angle.is_finite()
             && window.half_angle >= 0.0
@@ -199,41 +217,107 @@ impl<const N: usize, const BYTES: usize, const LEVELS: usize> MatcherLevels<N, B
         if n == 0 {
             return Err(MatchError::NoPoints);
         }
-        let used = used.get(..n).unwrap_or(&[]);
         // Only a candidate with at least `need` hits can be accepted: scores below it
         // are pruned like those below the best so far.
         let need = ceil_u32(window.min_hit_fraction * n as f32);
+        Ok(MatchProgress {
+            points: used,
+            n,
+            guess: *guess,
+            next: 0,
+            runner_up_pass: false,
+            best: Candidate::default(),
+            first: Candidate::default(),
+            floor: need.saturating_sub(1),
+            pass_work: 0,
+            work: 0,
+            complete: true,
+        })
+    }
+
+    /// Runs the match `progress` holds for about `quantum` end-point look-ups (it stops at
+    /// the first boundary of a top-level block of translations past `quantum`), on the `map`
+    /// and `window` it was started with. `Some` with the match when it is done; `None`
+    /// when it paused (call again). The answer does not depend on how it was sliced.
+    pub fn resume(
+        &self,
+        map: &OccupancyBitmap<N, N, BYTES>,
+        progress: &mut MatchProgress,
+        window: &MatchWindow,
+        quantum: u32,
+    ) -> Result<Option<ScanMatch>, MatchError> {
+        if *map.geometry() != self.geometry || self.geometry.width != N {
+            return Err(MatchError::StaleLevels);
+        }
+        let n = progress.n;
+        let used = progress.points.get(..n).unwrap_or(&[]);
+        let guess = progress.guess;
         let mut search = Search {
             levels: &self.levels,
             base: map.bits(),
             geometry: &self.geometry,
-            work: 0,
+            work: progress.pass_work,
             budget: window.work_budget,
-            best: Candidate::default(),
-            floor: need.saturating_sub(1),
-            stop_when_found: false,
+            best: progress.best,
+            floor: progress.floor,
+            stop_when_found: progress.runner_up_pass,
             found: false,
-            exclude: None,
+            exclude: progress
+                .runner_up_pass
+                .then_some((progress.first, i32::from(window.distinct_cells))),
             cells: [(0, 0); MAX_MATCH_POINTS],
             n,
         };
-        let mut complete = search.pass(used, guess, window);
-        let best = search.best;
-        // The runner-up: the same search with the best candidate's neighbourhood left out,
-        // looking only for a candidate above `max_runner_up` of the best (the first one
-        // found decides: no match).
-        let mut runner_up = 0;
-        if window.max_runner_up < 1.0 && best.score > 0 {
-            let first = search.work;
+        let mut spent = 0u32;
+        loop {
+            let before = search.work;
+            let end = search.pass_from(
+                &mut progress.next,
+                used,
+                &guess,
+                window,
+                quantum - spent.min(quantum),
+            );
+            spent = spent.saturating_add(search.work.saturating_sub(before));
+            let Some(complete) = end else {
+                // Paused at a block boundary.
+                progress.pass_work = search.work;
+                progress.best = search.best;
+                return Ok(None);
+            };
+            progress.complete &= complete;
+            progress.work = progress.work.saturating_add(search.work);
+            if progress.runner_up_pass {
+                break;
+            }
+            // The first pass is done. The runner-up: the same search with the best
+            // candidate's neighbourhood left out, looking only for a candidate above
+            // `max_runner_up` of the best (the first one found decides: no match).
+            progress.first = search.best;
+            if !(window.max_runner_up < 1.0 && search.best.score > 0) {
+                break;
+            }
+            progress.runner_up_pass = true;
+            progress.next = 0;
+            progress.floor = (window.max_runner_up * search.best.score as f32) as u32;
             search.work = 0;
             search.best = Candidate::default();
-            search.floor = (window.max_runner_up * best.score as f32) as u32;
+            search.floor = progress.floor;
             search.stop_when_found = true;
-            search.exclude = Some((best, i32::from(window.distinct_cells)));
-            complete &= search.pass(used, guess, window);
-            runner_up = search.best.score;
-            search.work = search.work.saturating_add(first);
+            search.found = false;
+            search.exclude = Some((progress.first, i32::from(window.distinct_cells)));
+            if spent >= quantum {
+                progress.pass_work = 0;
+                progress.best = search.best;
+                return Ok(None);
+            }
         }
+        let best = progress.first;
+        let runner_up = if progress.runner_up_pass {
+            search.best.score
+        } else {
+            0
+        };
         let theta = wrap_angle(guess.theta + best.heading as f32 * window.angle_step);
         let res = self.geometry.resolution;
         let pose = Pose2::new(
@@ -241,9 +325,9 @@ impl<const N: usize, const BYTES: usize, const LEVELS: usize> MatcherLevels<N, B
             guess.y + best.dy as f32 * res,
             theta,
         );
-        let work = search.work;
+        let work = progress.work;
         let (mean, covariance) = if best.score > 0 {
-            search.spread(used, guess, window, &best)
+            search.spread(used, &guess, window, &best)
         } else {
             ([0.0; 3], [0.0; 4])
         };
@@ -253,7 +337,8 @@ impl<const N: usize, const BYTES: usize, const LEVELS: usize> MatcherLevels<N, B
             wrap_angle(pose.theta + mean[2]),
         );
         let points = n as u32;
-        Ok(ScanMatch {
+        let complete = progress.complete;
+        Ok(Some(ScanMatch {
             pose,
             centroid,
             hits: best.score,
@@ -265,8 +350,34 @@ impl<const N: usize, const BYTES: usize, const LEVELS: usize> MatcherLevels<N, B
             complete,
             work,
             covariance,
-        })
+        }))
     }
+}
+
+/// A match in progress ([`MatcherLevels::start`], [`MatcherLevels::resume`]): its end
+/// points and guess and where the search stands, as plain data kept between calls (the
+/// map and its levels must not change in between).
+#[derive(Clone, Debug)]
+pub struct MatchProgress {
+    points: [(f32, f32); MAX_MATCH_POINTS],
+    n: usize,
+    guess: Pose2<f32>,
+    /// The next heading (in the order 0, −1, +1, …) of the current pass.
+    next: i32,
+    /// The current pass is the runner-up's.
+    runner_up_pass: bool,
+    /// The current pass's best so far.
+    best: Candidate,
+    /// The first pass's answer.
+    first: Candidate,
+    /// The current pass's floor.
+    floor: u32,
+    /// Work of the current pass (against the budget).
+    pass_work: u32,
+    /// Work of the passes done.
+    work: u32,
+    /// No pass ran out of its budget.
+    complete: bool,
 }
 
 /// `⌈x⌉` for `x ≥ 0` (0 for NaN or below 0).
@@ -360,21 +471,45 @@ struct Search<'a, const BYTES: usize, const LEVELS: usize> {
 }
 
 impl<const BYTES: usize, const LEVELS: usize> Search<'_, BYTES, LEVELS> {
-    /// Every heading of the window, 0, −1, +1, −2, … steps; `false` when the work budget
-    /// ran out.
-    fn pass(&mut self, points: &[(f32, f32)], guess: &Pose2<f32>, window: &MatchWindow) -> bool {
+    /// The window's headings in the order 0, −1, +1, −2, … steps, and at each the
+    /// top-level blocks of its translations, from block `*next` (counted over the whole
+    /// pass) on, until `quantum` look-ups were spent (then it stops at the next block
+    /// boundary and returns `None`, `*next` the block to go on with). At the end of the
+    /// pass `Some(complete)`: `false` when the work budget ran out.
+    fn pass_from(
+        &mut self,
+        next: &mut i32,
+        points: &[(f32, f32)],
+        guess: &Pose2<f32>,
+        window: &MatchWindow,
+        quantum: u32,
+    ) -> Option<bool> {
         let steps = (window.half_angle / window.angle_step) as i32;
         let half = i32::from(window.half_width_cells);
-        for k in 0..=2 * steps {
+        let block = 1i32 << (2 * LEVELS);
+        let blocks = (2 * half + 1 + block - 1) / block;
+        let per_heading = blocks * blocks;
+        let start = self.work;
+        let mut cells_of = None;
+        while *next < (2 * steps + 1) * per_heading {
+            if self.work.saturating_sub(start) >= quantum {
+                return None;
+            }
+            let (k, b) = (*next / per_heading, *next % per_heading);
             let j = if k % 2 == 0 { -(k / 2) } else { (k + 1) / 2 };
-            let theta = guess.theta + j as f32 * window.angle_step;
-            self.end_cells(points, guess, theta);
-            if !self.window(j, half) {
+            if cells_of != Some(j) {
+                let theta = guess.theta + j as f32 * window.angle_step;
+                self.end_cells(points, guess, theta);
+                cells_of = Some(j);
+            }
+            *next += 1;
+            let (x0, y0) = (-half + (b % blocks) * block, -half + (b / blocks) * block);
+            if !self.top_block(j, x0, y0, half) {
                 // Out of budget, or stopped at the first candidate (a complete answer).
-                return self.found;
+                return Some(self.found);
             }
         }
-        true
+        Some(true)
     }
 
     /// What a bound or score must beat: the best so far, or the floor.
@@ -419,29 +554,20 @@ impl<const BYTES: usize, const LEVELS: usize> Search<'_, BYTES, LEVELS> {
         hits
     }
 
-    /// Every translation of the window at heading index `j`, by branch and bound; `false`
-    /// when the work budget ran out.
-    fn window(&mut self, j: i32, half: i32) -> bool {
+    /// The translations of the top-level block starting at `(x0, y0)` at heading index
+    /// `j`, by branch and bound; `false` when the work budget ran out (or the search
+    /// stopped at its first candidate).
+    fn top_block(&mut self, j: i32, x0: i32, y0: i32, half: i32) -> bool {
         let top = LEVELS;
-        let block = 1i32 << (2 * top);
-        let blocks = (2 * half + 1 + block - 1) / block;
         let levels = self.levels;
         let Some(bits) = levels.get(top - 1) else {
             return true;
         };
-        for by in 0..blocks {
-            for bx in 0..blocks {
-                let (x0, y0) = (-half + bx * block, -half + by * block);
-                let bound = self.score(bits, x0, y0);
-                if bound > self.threshold() && !self.expand(j, top, x0, y0, half) {
-                    return false;
-                }
-                if self.work >= self.budget {
-                    return false;
-                }
-            }
+        let bound = self.score(bits, x0, y0);
+        if bound > self.threshold() && !self.expand(j, top, x0, y0, half) {
+            return false;
         }
-        true
+        self.work < self.budget
     }
 
     /// The 16 blocks of the level below the block of level `level` starting at `(x0, y0)`

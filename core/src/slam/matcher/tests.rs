@@ -163,8 +163,14 @@ fn branch_and_bound_finds_the_best_score_of_the_whole_window() {
             };
             let m_min = levels.search(&map, &points, &guess, &w_min).unwrap();
             let expected = if need <= best { best } else { 0 };
-            assert_eq!(m_min.hits, expected, "round {round}, need {need}: {m_min:?}");
-            assert!(m_min.work <= m.work, "round {round}: pruning never adds work");
+            assert_eq!(
+                m_min.hits, expected,
+                "round {round}, need {need}: {m_min:?}"
+            );
+            assert!(
+                m_min.work <= m.work,
+                "round {round}: pruning never adds work"
+            );
             assert!(m_min.complete);
         }
     }
@@ -296,4 +302,44 @@ fn two_places_that_fit_alike_are_no_match() {
         )
         .unwrap();
     assert!(narrow.accepted, "{narrow:?}");
+}
+
+#[test]
+fn a_match_run_in_slices_gives_the_same_answer() {
+    // The room's scan, and the pillars' (whose runner-up pass decides): resumed a few
+    // hundred look-ups at a time, the answer is the one of the search all at once.
+    let map = room();
+    let mut levels = Box::new(Levels2::zeroed());
+    levels.build(&map);
+    let truth = Pose2::new(0.31, -0.12, 0.05);
+    let points = cast(&map, &truth);
+    let guess = Pose2::new(0.0, 0.0, 0.0);
+    for w in [
+        window(12, 0.1),
+        MatchWindow {
+            max_runner_up: 0.85,
+            ..window(12, 0.1)
+        },
+        MatchWindow {
+            work_budget: 3000,
+            ..window(12, 0.1)
+        },
+    ] {
+        let whole = levels.search(&map, &points, &guess, &w).unwrap();
+        for quantum in [1, 300, 5000] {
+            let mut progress = levels.start(&map, &points, &guess, &w).unwrap();
+            let mut calls = 0;
+            let sliced = loop {
+                calls += 1;
+                if let Some(m) = levels.resume(&map, &mut progress, &w, quantum).unwrap() {
+                    break m;
+                }
+                assert!(calls < 100_000, "never ends");
+            };
+            assert_eq!(sliced, whole, "quantum {quantum}");
+            if quantum == 1 && w.work_budget == u32::MAX {
+                assert!(calls > 10, "one block a call: {calls} calls");
+            }
+        }
+    }
 }
