@@ -116,7 +116,7 @@ pub const SLAM_LOOPS: usize = 192;
 
 /// Grid SLAM at the scale of a building ([`GraphSlam`]) as the profile sizes it: the
 /// grid estimator's particles and beams on a [`SLAM_NEAR`]/[`SLAM_FAR`] local map, a
-/// graph of [`SLAM_NODES`] keyframes and [`SLAM_LOOPS`] loop edges (111 KB on a 32-bit
+/// graph of [`SLAM_NODES`] keyframes and [`SLAM_LOOPS`] loop edges (112 KB on a 32-bit
 /// target, see `docs/firmware.md`). The keyframes' scans live in a
 /// [`KeyframeStore`](crate::slam::keyframes::KeyframeStore) of the caller's (flash).
 pub type Slam = GraphSlam<
@@ -141,7 +141,7 @@ mod tests {
     #[test]
     fn the_building_scale_slam_fits_beside_a_firmware_in_128_kb() {
         // On a 32-bit target the sizes are a little smaller (no 8-byte words); the
-        // firmware's budget.txt holds those. Measured here (64-bit host): 110 840 bytes.
+        // firmware's budget.txt holds those. Measured here (64-bit host): 111 952 bytes.
         let bytes = core::mem::size_of::<Slam>();
         let parts = SLAM_NEAR * SLAM_NEAR
             + occupancy_bytes(SLAM_NEAR, SLAM_NEAR)
@@ -150,10 +150,11 @@ mod tests {
             + crate::slam::workspace_bytes(scratch_len(SLAM_NODES, SLAM_LOOPS));
         assert!(bytes >= parts, "{bytes} < {parts}");
         // What is not the maps, the graph and the workspace (particles, scan points, the
-        // settings) stays small: measured 6 128 bytes on a 64-bit host.
-        assert!(bytes - parts <= 6400, "{bytes} - {parts}");
-        // With the stack its drive peaks at on the board (11 072 bytes, `cost_slam` in
+        // settings, the loop closure under way) stays small: measured 7 240 bytes on a
+        // 64-bit host.
+        assert!(bytes - parts <= 7400, "{bytes} - {parts}");
+        // With the stack its drive peaks at on the board (10 088 bytes, `cost_slam` in
         // budget.txt), at least 8 KB of a 128 KB board stay for a firmware's buffers.
-        assert!(bytes + 11_072 + 8 * 1024 <= 128 * 1024, "{bytes}");
+        assert!(bytes + 10_088 + 8 * 1024 <= 128 * 1024, "{bytes}");
     }
 }

@@ -49,6 +49,10 @@ pub struct LoopClosureConfig {
     pub submap_radius_m: f32,
     /// The window searched around the new keyframe's graph pose.
     pub window: MatchWindow,
+    /// End-point look-ups of the match a scan does at most (it stops at the first block
+    /// of 16 × 16 translations past this), > 0; the rest waits for the next scans, so that no
+    /// scan pays for a whole match. `u32::MAX`: the whole match at the keyframe's scan.
+    pub work_per_scan: u32,
     /// The loop edge's covariance is the match's plus this standard deviation of the
     /// position, metres (> 0) …
     pub position_std_floor_m: f32,
@@ -139,6 +143,7 @@ impl GraphSlamConfig {
                 distinct_cells: 10,
                 max_runner_up: 0.85,
             },
+            work_per_scan: 1_000_000,
             position_std_floor_m: 0.05,
             heading_std_floor_rad: 0.01,
             solver: SolverSettings::DEFAULT,
@@ -179,6 +184,7 @@ impl GraphSlamConfig {
                 InvalidSetting::non_negative("submap_radius_m", l.submap_radius_m),
                 InvalidSetting::non_negative("window_half_angle_rad", w.half_angle),
                 InvalidSetting::positive("window_angle_step_rad", w.angle_step),
+                InvalidSetting::positive("work_per_scan", l.work_per_scan as f32),
                 InvalidSetting::fraction("min_hit_fraction", w.min_hit_fraction),
                 InvalidSetting::fraction("max_runner_up", w.max_runner_up),
                 InvalidSetting::positive("position_std_floor_m", l.position_std_floor_m),

@@ -141,6 +141,8 @@ pub struct GraphSummary {
     pub keyframes_refused: u32,
     /// Loop closures tried.
     pub attempts: u32,
+    /// Loop closures not tried because another was under way.
+    pub closures_skipped: u32,
     /// Loop edges added.
     pub closures: u32,
 }
@@ -151,6 +153,7 @@ impl From<microslam::slam::GraphCounters> for GraphSummary {
             keyframes: c.keyframes,
             keyframes_refused: c.keyframes_refused,
             attempts: c.attempts,
+            closures_skipped: c.closures_skipped,
             closures: c.closures,
         }
     }

@@ -1,12 +1,31 @@
 //! Loop closure: a new keyframe matched against the old ones near it, a loop edge, and
-//! the graph solved.
+//! the graph solved, spread over the scans after the keyframe so that no scan pays for
+//! all of it: the keyframe's scan builds the old map, the next ones search it
+//! (`work_per_scan` look-ups each), the one after the match solves the graph.
 
 use super::stored::load_stored;
 use super::{ClosureOutcome, GraphSlam, SlamError};
 use crate::geometry::{Pose2, sin_cos_f32};
 use crate::slam::graph::LoopEdge;
 use crate::slam::keyframes::{KeyframeStorage, KeyframeStore};
-use crate::slam::matcher::MAX_MATCH_POINTS;
+use crate::slam::matcher::{MAX_MATCH_POINTS, MatchProgress};
+
+/// A loop closure under way.
+#[derive(Clone, Debug)]
+// Fixed memory, no heap: the match's state lives in the estimator (one of these).
+#[allow(clippy::large_enum_variant)]
+pub(super) enum Pending {
+    /// None.
+    Idle,
+    /// The match of keyframe `node` against the old map around keyframe `old`.
+    Matching {
+        node: u16,
+        old: u16,
+        progress: MatchProgress,
+    },
+    /// A loop edge was added: the graph is solved at the next scan.
+    Solving,
+}
 
 impl<
     const P: usize,
@@ -21,23 +40,25 @@ impl<
 > GraphSlam<P, B, NEAR, NEAR_BITS, FAR, FAR_BITS, NODES, LOOPS, SCRATCH>
 {
     /// At keyframe `node`: when an old enough keyframe lies within the candidate radius,
-    /// matches this scan against the end points of the old keyframes near it (at their
-    /// graph poses); an accepted match becomes a loop edge and the graph is solved. The
-    /// filter is left as it is: its local map holds only what it saw lately, and the
-    /// graph's frame follows from the newest keyframe ([`GraphSlam::pose`]). `None` when
-    /// no match was tried.
-    pub(super) fn close_loop<S: KeyframeStorage>(
+    /// builds the map of the old keyframes near it (at their graph poses) and starts the
+    /// match of this scan against it, which [`GraphSlam::advance_closure`] runs over the
+    /// next scans. The filter is left as it is: its local map holds only what it saw
+    /// lately, and the graph's frame follows from the newest keyframe
+    /// ([`GraphSlam::pose`]). Nothing is started while another closure is under way
+    /// (counted in `closures_skipped`). `true` when the old map was built (the scan's
+    /// loop closure work is done).
+    pub(super) fn start_closure<S: KeyframeStorage>(
         &mut self,
         node: u16,
         store: &KeyframeStore<S>,
-    ) -> Result<Option<ClosureOutcome>, SlamError> {
+    ) -> Result<bool, SlamError> {
         let lc = self.config.loop_closure;
         let k = usize::from(node);
         let Some(newest_old) = k.checked_sub(usize::from(lc.min_age_keyframes)) else {
-            return Ok(None);
+            return Ok(false);
         };
         let Some(here) = self.graph.pose(k) else {
-            return Ok(None);
+            return Ok(false);
         };
         let near = |p: &Pose2<f32>, r: f32| {
             let (dx, dy) = (p.x - here.x, p.y - here.y);
@@ -57,8 +78,12 @@ impl<
             })
             .map(|(j, _)| j)
         else {
-            return Ok(None);
+            return Ok(false);
         };
+        if !matches!(self.pending, Pending::Idle) {
+            self.counters.closures_skipped = self.counters.closures_skipped.saturating_add(1);
+            return Ok(false);
+        }
         self.counters.attempts = self.counters.attempts.saturating_add(1);
         // The old map around this keyframe: every old keyframe near it at its graph pose.
         let res = self.config.grid.resolution;
@@ -100,49 +125,91 @@ impl<
                 n += 1;
             }
         }
-        let m = match buffers.levels.search(
+        // A scan with nothing to match is no closure, not an error of the run.
+        if let Ok(progress) = buffers.levels.start(
             &buffers.map,
             points.get(..n).unwrap_or(&[]),
             &here,
             &lc.window,
         ) {
-            Ok(m) => m,
-            // A scan with nothing to match is no closure, not an error of the run.
-            Err(_) => return Ok(None),
-        };
-        let old16 = u16::try_from(old).unwrap_or(u16::MAX);
-        let mut outcome = ClosureOutcome {
-            old: old16,
-            hits: m.hits,
-            points: m.points,
-            accepted: false,
-        };
-        if !m.accepted {
-            return Ok(Some(outcome));
+            self.pending = Pending::Matching {
+                node,
+                old: u16::try_from(old).unwrap_or(u16::MAX),
+                progress,
+            };
         }
-        let Some(from) = self.graph.pose(old) else {
-            return Ok(Some(outcome));
-        };
-        let edge = LoopEdge {
-            from: old16,
-            to: node,
-            relative: from.between(&m.centroid),
-            position_information: information_in_frame(
-                m.covariance,
-                lc.position_std_floor_m,
-                from.theta,
-            ),
-            heading_information: 1.0
-                / (m.covariance[3] + lc.heading_std_floor_rad * lc.heading_std_floor_rad),
-        };
-        if self.graph.add_loop(edge).is_err() {
-            // A full table of loop edges: the match is not kept.
-            return Ok(Some(outcome));
+        Ok(true)
+    }
+
+    /// Runs the closure under way for one scan: a slice of the match (and, when it ends
+    /// accepted, the loop edge), or the graph's solve after a loop edge. `Some` when a
+    /// match ended at this scan.
+    pub(super) fn advance_closure(&mut self) -> Result<Option<ClosureOutcome>, SlamError> {
+        let lc = self.config.loop_closure;
+        match &mut self.pending {
+            Pending::Idle => Ok(None),
+            Pending::Solving => {
+                self.pending = Pending::Idle;
+                self.graph.optimise(self.workspace.solving(), &lc.solver)?;
+                Ok(None)
+            }
+            Pending::Matching {
+                node,
+                old,
+                progress,
+            } => {
+                let (node, old) = (*node, *old);
+                let buffers = self.workspace.matching();
+                let m = match buffers.levels.resume(
+                    &buffers.map,
+                    progress,
+                    &lc.window,
+                    lc.work_per_scan,
+                ) {
+                    Ok(None) => return Ok(None),
+                    Ok(Some(m)) => m,
+                    Err(_) => {
+                        // The buffers changed under the match: no closure.
+                        self.pending = Pending::Idle;
+                        return Ok(None);
+                    }
+                };
+                self.pending = Pending::Idle;
+                let mut outcome = ClosureOutcome {
+                    keyframe: node,
+                    old,
+                    hits: m.hits,
+                    points: m.points,
+                    accepted: false,
+                };
+                let Some(from) = self.graph.pose(usize::from(old)) else {
+                    return Ok(Some(outcome));
+                };
+                if !m.accepted {
+                    return Ok(Some(outcome));
+                }
+                let edge = LoopEdge {
+                    from: old,
+                    to: node,
+                    relative: from.between(&m.centroid),
+                    position_information: information_in_frame(
+                        m.covariance,
+                        lc.position_std_floor_m,
+                        from.theta,
+                    ),
+                    heading_information: 1.0
+                        / (m.covariance[3] + lc.heading_std_floor_rad * lc.heading_std_floor_rad),
+                };
+                if self.graph.add_loop(edge).is_err() {
+                    // A full table of loop edges: the match is not kept.
+                    return Ok(Some(outcome));
+                }
+                self.pending = Pending::Solving;
+                outcome.accepted = true;
+                self.counters.closures = self.counters.closures.saturating_add(1);
+                Ok(Some(outcome))
+            }
         }
-        self.graph.optimise(self.workspace.solving(), &lc.solver)?;
-        outcome.accepted = true;
-        self.counters.closures = self.counters.closures.saturating_add(1);
-        Ok(Some(outcome))
     }
 }
 

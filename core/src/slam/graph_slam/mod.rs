@@ -97,7 +97,8 @@ pub struct GraphStep {
     pub map: ScanIntegration,
     /// The keyframe this scan became, if it did.
     pub keyframe: Option<u16>,
-    /// A loop closure tried at this keyframe, and what came of it.
+    /// A loop closure match that ended at this scan (started at an earlier keyframe),
+    /// and what came of it.
     pub closure: Option<ClosureOutcome>,
 }
 
@@ -105,6 +106,8 @@ pub struct GraphStep {
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ClosureOutcome {
+    /// The new keyframe that was matched.
+    pub keyframe: u16,
     /// The old keyframe the match was made against (the nearest).
     pub old: u16,
     /// End points of the new keyframe that hit the old map at the best candidate.
@@ -125,6 +128,8 @@ pub struct GraphCounters {
     pub keyframes_refused: u32,
     /// Loop closures tried.
     pub attempts: u32,
+    /// Loop closures not tried because another was under way.
+    pub closures_skipped: u32,
     /// Loop edges added.
     pub closures: u32,
 }
@@ -171,6 +176,8 @@ pub struct GraphSlam<
     graph: PoseGraph<NODES, LOOPS>,
     /// The loop closure's matcher buffers, then the graph solver's scratch, in one block.
     workspace: Workspace<SCRATCH>,
+    /// The loop closure under way.
+    pending: closure::Pending,
     config: GraphSlamConfig,
     scans: u32,
     pose: Pose2<f32>,
@@ -210,6 +217,7 @@ impl<
             ranges: [0.0; B],
             graph: PoseGraph::new(),
             workspace: Workspace::zeroed(),
+            pending: closure::Pending::Idle,
             config: GraphSlamConfig::MICROCONTROLLER,
             scans: 0,
             pose: Pose2::new(0.0, 0.0, 0.0),
@@ -219,6 +227,7 @@ impl<
                 keyframes: 0,
                 keyframes_refused: 0,
                 attempts: 0,
+                closures_skipped: 0,
                 closures: 0,
             },
         }
@@ -247,6 +256,7 @@ impl<
         self.scans = 0;
         self.pose = start;
         self.newest = None;
+        self.pending = closure::Pending::Idle;
         self.turned = 0.0;
         self.counters = GraphCounters::default();
         Ok(())
@@ -386,11 +396,17 @@ impl<
             keyframe: None,
             closure: None,
         };
+        // A scan that starts a loop closure (builds the old map) does no more of it; any
+        // other scan runs a slice of the one under way: no scan pays for both.
+        let mut started = false;
         if let Some(node) = self.keyframe(scan, store)? {
             step.keyframe = Some(node);
             if self.config.loop_closure.enabled {
-                step.closure = self.close_loop(node, store)?;
+                started = self.start_closure(node, store)?;
             }
+        }
+        if !started {
+            step.closure = self.advance_closure()?;
         }
         step.pose = self.pose();
         step.filter_pose = self.pose;
