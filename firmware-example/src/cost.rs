@@ -89,29 +89,31 @@ impl Ticks {
 
     /// Instructions executed by `f`, however many: SysTick's interrupt counts the
     /// counter's wraps ([`SYSTICK_WRAPS`]), so the binary must define the handler with
-    /// [`systick_counts_wraps!`](crate::systick_counts_wraps). The handler's own
-    /// instructions (a few per 10 M) are counted too.
+    /// [`systick_counts_wraps!`](crate::systick_counts_wraps). The counter is not reset
+    /// (under QEMU, writing it signals a wrap of its own): the ticks are the difference of
+    /// two readings of wraps and counter. The handler's own instructions (a few per 10 M)
+    /// are counted too.
     pub fn instructions_long(&mut self, f: impl FnOnce()) -> u64 {
-        self.syst.clear_current();
-        SYSTICK_WRAPS.store(0, Ordering::Relaxed);
         self.syst.enable_interrupt();
-        let start = SYST::get_current();
+        let t0 = Self::ticks_since_start();
         f();
-        let (end, wraps) = cortex_m::interrupt::free(|_| {
-            let end = SYST::get_current();
+        let t1 = Self::ticks_since_start();
+        t1.saturating_sub(t0).saturating_sub(u64::from(self.empty)) * 40 / 64
+    }
+
+    /// Ticks counted by the wraps and the counter, read together with interrupts masked.
+    fn ticks_since_start() -> u64 {
+        cortex_m::interrupt::free(|_| {
+            let current = SYST::get_current();
             let mut wraps = SYSTICK_WRAPS.load(Ordering::Relaxed);
-            // A wrap not yet handled: counted when it came before `end` was read (the
+            // A wrap not yet handled: counted when it came before `current` was read (the
             // counter then reads high, just reloaded), not when it came after (low).
-            if SCB::is_pendst_pending() && end > Self::RELOAD / 2 {
+            if SCB::is_pendst_pending() && current > Self::RELOAD / 2 {
                 wraps += 1;
             }
-            (end, wraps)
-        });
-        self.syst.disable_interrupt();
-        SCB::clear_pendst();
-        let ticks = u64::from(wraps) * (u64::from(Self::RELOAD) + 1)
-            + u64::from(start.wrapping_sub(end) & Self::RELOAD);
-        ticks.saturating_sub(u64::from(self.empty)) * 40 / 64
+            u64::from(wraps) * (u64::from(Self::RELOAD) + 1)
+                + u64::from(Self::RELOAD - (current & Self::RELOAD))
+        })
     }
 }
 

@@ -54,6 +54,10 @@ struct Costs {
     /// loop edge (and so solved the graph) cost.
     max_attempt: u64,
     max_closure: u64,
+    /// The most a keyframe's scan cost (it builds the old map a closure matches against).
+    max_keyframe: u64,
+    /// The most any other scan cost.
+    max_other: u64,
     /// Scans over 10 M instructions (100 ms at 100 MHz).
     over_10m: u32,
 }
@@ -112,6 +116,11 @@ fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
         costs.total += n;
         costs.over_10m += u32::from(n > 10_000_000);
         costs.max = costs.max.max(n);
+        if step.keyframe.is_some() {
+            costs.max_keyframe = costs.max_keyframe.max(n);
+        } else {
+            costs.max_other = costs.max_other.max(n);
+        }
         if let Some(closure) = step.closure {
             costs.max_attempt = costs.max_attempt.max(n);
             if closure.accepted {
@@ -124,7 +133,7 @@ fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
     let est = slam.pose();
     writeln!(
         out,
-        "slam p={} beams={} nodes={} loops={} scans={} keyframes={} attempts={} closures={} mean={} max={} max_attempt={} max_closure={} over_10m={} error_mm={}",
+        "slam p={} beams={} nodes={} loops={} scans={} keyframes={} attempts={} closures={} mean={} max={} max_attempt={} max_closure={} max_keyframe={} max_other={} over_10m={} error_mm={}",
         GRID_PARTICLES,
         BEAMS,
         SLAM_NODES,
@@ -137,6 +146,8 @@ fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
         costs.max,
         costs.max_attempt,
         costs.max_closure,
+        costs.max_keyframe,
+        costs.max_other,
         costs.over_10m,
         (libm::hypotf(est.x - truth.x, est.y - truth.y) * 1000.0) as u32
     )?;
