@@ -193,7 +193,7 @@ pub struct LocalizeArgs {
     /// `--scan-topic`, `--odom-topic`).
     #[arg(long, short)]
     pub dataset: DatasetSpec,
-    /// Grid filter settings (TOML): `base = "default" | "seed" | "microcontroller"` and any
+    /// Grid filter settings (TOML): `base = "default" | "untuned" | "microcontroller"` and any
     /// field to override, e.g. `shift_window_cells = 3` (see docs/guide.md).
     #[arg(long, short)]
     pub config: Option<PathBuf>,

@@ -236,13 +236,13 @@ pub fn grid_steps(data: &[u8]) {
         config.resolution,
         -1.6,
         -1.6,
-        LogOdds::SEED,
+        LogOdds::SYMMETRIC,
     ));
     let mut map_with_bits = Box::new(OccupancyGrid::<64, 64, BITMAP>::new(
         config.resolution,
         -1.6,
         -1.6,
-        LogOdds::SEED,
+        LogOdds::SYMMETRIC,
     ));
     let start = Pose2::new(0.0, 0.0, 0.0);
     let (Ok(mut slam), Ok(mut twin)) = (
@@ -421,7 +421,7 @@ pub fn map_reader(data: &[u8]) {
     std::fs::write(dir.path().join("map.yaml"), text).expect("write fuzz file");
     std::fs::write(dir.path().join("map.pgm"), pgm.get(1..).unwrap_or(&[]))
         .expect("write fuzz file");
-    let log_odds = microslam::grid::LogOdds::SEED;
+    let log_odds = microslam::grid::LogOdds::SYMMETRIC;
     match microslam::grid::ros_map::RosMap::read(&dir.path().join("map.yaml"), &log_odds) {
         Ok(microslam::grid::ros_map::RosMap { cells, geometry }) => {
             assert_eq!(cells.len(), geometry.width * geometry.height);

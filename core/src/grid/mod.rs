@@ -163,10 +163,12 @@ pub struct LogOdds {
 }
 
 impl LogOdds {
-    /// The seed's model: ±log 4 per observation, thresholds ±2 log 4, in units of
-    /// log 4 / 10; saturation at ±100 (≈ ±13.9 nats, about the seed reference's ±20 clamp
-    /// in hits needed to flip a cell).
-    pub const SEED: Self = Self {
+    /// The symmetric model: ±log 4 per observation (a hit adds as much as a free ray
+    /// takes away), thresholds ±2 log 4, in units of log 4 / 10; saturation at ±100
+    /// (≈ ±13.9 nats; in hits needed to flip a cell, about the ±20 clamp of the numpy
+    /// re-implementation of Du (n.d.), `../shared/reference/seed_pf.py`). It reproduces
+    /// the log-odds settings of Du (n.d.).
+    pub const SYMMETRIC: Self = Self {
         hit: 10,
         miss: 10,
         occupied_above: 20,
@@ -278,7 +280,7 @@ mod tests {
 
     #[test]
     fn log_odds_saturate() {
-        let l = LogOdds::SEED;
+        let l = LogOdds::SYMMETRIC;
         let mut v = 0i8;
         for _ in 0..50 {
             v = l.after_hit(v);

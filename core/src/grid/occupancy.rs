@@ -35,7 +35,7 @@ use crate::sensors::lidar::LidarScan;
 /// let mut grid = Box::new(Grid::zeroed());
 /// assert_eq!(grid.cell(0, 0), None, "no geometry yet: every cell is off the grid");
 ///
-/// grid.init_centred(0.05, LogOdds::SEED)?; // 6.4 m × 6.4 m around the origin
+/// grid.init_centred(0.05, LogOdds::SYMMETRIC)?; // 6.4 m × 6.4 m around the origin
 /// assert_eq!(grid.geometry().origin_x, -3.2);
 /// assert!(grid.set_cell(10, 20, 60));
 /// assert_eq!(grid.cell(10, 20), Some(60));
@@ -234,7 +234,7 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
     /// ```
     /// use microslam::grid::{LogOdds, OccupancyGrid};
     ///
-    /// let mut grid = OccupancyGrid::<16, 16>::new(0.5, 0.0, 0.0, LogOdds::SEED);
+    /// let mut grid = OccupancyGrid::<16, 16>::new(0.5, 0.0, 0.0, LogOdds::SYMMETRIC);
     /// grid.set_cell(10, 3, 60);
     /// grid.scroll(8, -2); // 4 m right, 1 m down
     /// assert_eq!(grid.geometry().origin_x, 4.0);
@@ -563,7 +563,7 @@ mod tests {
         // 8: every cell holds what the cell at the same world position held, the bitmap
         // matches the cells, and the origin moves by whole cells.
         const BITMAP: usize = crate::grid::occupancy_bytes(61, 37);
-        let model = LogOdds::SEED;
+        let model = LogOdds::SYMMETRIC;
         let mut before = OccupancyGrid::<61, 37, BITMAP>::new(0.05, -1.5, 2.0, model);
         let mut state = 7u32;
         for y in 0..37 {
@@ -611,7 +611,7 @@ mod tests {
         // Rays from inside, from outside (crossing the grid or not), along the borders,
         // degenerate and long, against the cell-by-cell writes they stand for.
         const BITMAP: usize = crate::grid::occupancy_bytes(37, 23);
-        let model = LogOdds::SEED;
+        let model = LogOdds::SYMMETRIC;
         let mut fast = OccupancyGrid::<37, 23, BITMAP>::new(0.1, 0.0, 0.0, model);
         let mut slow = OccupancyGrid::<37, 23, BITMAP>::new(0.1, 0.0, 0.0, model);
         for x in 0..37 {
@@ -663,7 +663,7 @@ mod tests {
         // Every end cell of a 41 × 33 grid from a centre, a corner and an edge start: the
         // major-axis walk over flat indices writes once each the cells `walk_to_end`
         // visits (a cell written twice or missed would differ by one miss).
-        let model = LogOdds::SEED;
+        let model = LogOdds::SYMMETRIC;
         let misses = model.miss_table();
         for (x0, y0) in [(20, 16), (0, 0), (40, 7)] {
             for x1 in 0..41 {
@@ -690,7 +690,7 @@ mod tests {
             min: -128,
             max: 127,
         };
-        for model in [LogOdds::SEED, wide] {
+        for model in [LogOdds::SYMMETRIC, wide] {
             let table = model.miss_table();
             for v in i8::MIN..=i8::MAX {
                 assert_eq!(table[usize::from(v as u8)], model.after_miss(v), "{v}");
@@ -701,8 +701,8 @@ mod tests {
     #[test]
     fn occupancy_bitmap_follows_every_write() {
         const BITMAP: usize = crate::grid::occupancy_bytes(40, 20);
-        let mut grid = OccupancyGrid::<40, 20, BITMAP>::new(0.1, 0.0, 0.0, LogOdds::SEED);
-        let mut plain = OccupancyGrid::<40, 20>::new(0.1, 0.0, 0.0, LogOdds::SEED);
+        let mut grid = OccupancyGrid::<40, 20, BITMAP>::new(0.1, 0.0, 0.0, LogOdds::SYMMETRIC);
+        let mut plain = OccupancyGrid::<40, 20>::new(0.1, 0.0, 0.0, LogOdds::SYMMETRIC);
         assert_bitmap_matches(&grid);
         let g = LidarGeometry {
             first_angle: -3.0,
@@ -731,7 +731,7 @@ mod tests {
         // A threshold below zero makes unknown cells occupied: the bitmap says so too.
         let low = LogOdds {
             occupied_above: -1,
-            ..LogOdds::SEED
+            ..LogOdds::SYMMETRIC
         };
         let mut unknown_occupied = OccupancyGrid::<40, 20, BITMAP>::new(0.1, 0.0, 0.0, low);
         assert_bitmap_matches(&unknown_occupied);
@@ -756,8 +756,8 @@ mod tests {
         let ranges: Vec<f32> = (0..30).map(|i| 0.4 + (i % 7) as f32 * 0.3).collect();
         let scan = LidarScan::new(&ranges, g);
         let pose = Pose2::new(2.0, 1.0, 0.7);
-        let mut a = OccupancyGrid::<40, 20>::new(0.1, 0.0, 0.0, LogOdds::SEED);
-        let mut b = OccupancyGrid::<40, 20>::new(0.1, 0.0, 0.0, LogOdds::SEED);
+        let mut a = OccupancyGrid::<40, 20>::new(0.1, 0.0, 0.0, LogOdds::SYMMETRIC);
+        let mut b = OccupancyGrid::<40, 20>::new(0.1, 0.0, 0.0, LogOdds::SYMMETRIC);
         let ra = a.integrate_scan(&pose, &scan, 2).unwrap();
         let points: Vec<(f32, f32)> = scan.beams(2).map(|b| b.robot_point).collect();
         let rb = b
@@ -770,7 +770,7 @@ mod tests {
 
     #[test]
     fn one_beam_marks_free_ray_and_hit() {
-        let mut grid = OccupancyGrid::<40, 20>::new(0.1, 0.0, 0.0, LogOdds::SEED);
+        let mut grid = OccupancyGrid::<40, 20>::new(0.1, 0.0, 0.0, LogOdds::SYMMETRIC);
         let ranges = [1.0f32];
         let pose = Pose2::new(0.05, 0.55, 0.0); // centre of cell (0, 5)
         let r = grid
@@ -796,7 +796,7 @@ mod tests {
 
     #[test]
     fn off_grid_points_are_counted_not_written() {
-        let mut grid = OccupancyGrid::<10, 10>::new(0.1, 0.0, 0.0, LogOdds::SEED);
+        let mut grid = OccupancyGrid::<10, 10>::new(0.1, 0.0, 0.0, LogOdds::SYMMETRIC);
         let ranges = [5.0f32, 0.5];
         let mut g = lidar_ahead();
         g.angle_increment = core::f32::consts::FRAC_PI_2;
@@ -827,7 +827,7 @@ mod tests {
 
     #[test]
     fn const_construction_for_statics() {
-        static GRID: OccupancyGrid<8, 4> = OccupancyGrid::centred(0.05, LogOdds::SEED);
+        static GRID: OccupancyGrid<8, 4> = OccupancyGrid::centred(0.05, LogOdds::SYMMETRIC);
         assert_eq!(GRID.cells().len(), 32);
         assert_eq!(GRID.geometry().origin_x, -0.2);
         // Documented: W · H + BITMAP + 48 bytes on a 32-bit target, 64 on a 64-bit host.
@@ -853,12 +853,12 @@ mod tests {
         assert_eq!(grid.cell(0, 0), None, "nothing is on a zeroed grid");
         assert!(!grid.set_cell(0, 0, 5));
         assert_eq!(
-            grid.init(f32::NAN, 0.0, 0.0, LogOdds::SEED),
+            grid.init(f32::NAN, 0.0, 0.0, LogOdds::SYMMETRIC),
             Err(GridError::NonFinite)
         );
         assert_eq!(grid.geometry().width, 0, "a refused init changes nothing");
-        grid.init_centred(0.05, LogOdds::SEED).unwrap();
-        let made = OccupancyGrid::<8, 4>::centred(0.05, LogOdds::SEED);
+        grid.init_centred(0.05, LogOdds::SYMMETRIC).unwrap();
+        let made = OccupancyGrid::<8, 4>::centred(0.05, LogOdds::SYMMETRIC);
         assert_eq!(grid.geometry(), made.geometry());
         assert_eq!(grid.log_odds_model(), made.log_odds_model());
         assert!(grid.set_cell(7, 3, 5));

@@ -253,7 +253,7 @@ mod tests {
         let mut pgm = b"P5\n# comment\n3 2\n255\n".to_vec();
         pgm.extend_from_slice(&[0, 255, 205, 255, 255, 0]);
         let yaml = "image: m.pgm\nresolution: 0.1\norigin: [-1.0, 2.0, 0.0]\nnegate: 0\n";
-        let map = RosMap::read(&write(&dir, yaml, &pgm), &LogOdds::SEED).unwrap();
+        let map = RosMap::read(&write(&dir, yaml, &pgm), &LogOdds::SYMMETRIC).unwrap();
         assert_eq!(map.geometry.width, 3);
         assert_eq!(map.geometry.origin_y, 2.0);
         // Row 0 is the PGM's last row: white, white, black.
@@ -276,7 +276,9 @@ mod tests {
             "image: m.pgm\nresolution: x\norigin: [0, 0, 0]\n",
             &pgm,
         );
-        let e = RosMap::read(&p, &LogOdds::SEED).unwrap_err().to_string();
+        let e = RosMap::read(&p, &LogOdds::SYMMETRIC)
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("m.yaml") && e.contains("line 2") && e.contains("resolution"),
             "{e}"
@@ -286,10 +288,14 @@ mod tests {
             "image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n",
             &pgm,
         );
-        let e = RosMap::read(&p, &LogOdds::SEED).unwrap_err().to_string();
+        let e = RosMap::read(&p, &LogOdds::SYMMETRIC)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("m.pgm") && e.contains("truncated"), "{e}");
         let p = write(&dir, "image: m.pgm\norigin: [0, 0, 0]\n", &pgm);
-        let e = RosMap::read(&p, &LogOdds::SEED).unwrap_err().to_string();
+        let e = RosMap::read(&p, &LogOdds::SYMMETRIC)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("`resolution` is missing"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
@@ -308,14 +314,20 @@ mod tests {
         // maxval 100: grey 100 is white (free), 0 black (occupied), 50 unknown.
         let mut pgm = b"P5\n3 1\n100\n".to_vec();
         pgm.extend_from_slice(&[100, 0, 50]);
-        let map = RosMap::read(&files("maxval", YAML, &pgm), &LogOdds::SEED).unwrap();
+        let map = RosMap::read(&files("maxval", YAML, &pgm), &LogOdds::SYMMETRIC).unwrap();
         assert_eq!((map.geometry.width, map.geometry.height), (3, 1));
         assert_eq!((map.geometry.origin_x, map.geometry.origin_y), (-1.0, -2.0));
-        assert_eq!(map.cells, [LogOdds::SEED.min, LogOdds::SEED.max, 0]);
+        assert_eq!(
+            map.cells,
+            [LogOdds::SYMMETRIC.min, LogOdds::SYMMETRIC.max, 0]
+        );
         // Negated: 100 is black.
         let yaml = format!("{YAML}negate: 1\n");
-        let map = RosMap::read(&files("negate", &yaml, &pgm), &LogOdds::SEED).unwrap();
-        assert_eq!(map.cells, [LogOdds::SEED.max, LogOdds::SEED.min, 0]);
+        let map = RosMap::read(&files("negate", &yaml, &pgm), &LogOdds::SYMMETRIC).unwrap();
+        assert_eq!(
+            map.cells,
+            [LogOdds::SYMMETRIC.max, LogOdds::SYMMETRIC.min, 0]
+        );
     }
 
     #[test]
@@ -332,7 +344,9 @@ mod tests {
         ];
         for (n, (bytes, why)) in cases.into_iter().enumerate() {
             let yaml = files(&format!("header{n}"), YAML, bytes);
-            let error = RosMap::read(&yaml, &LogOdds::SEED).unwrap_err().to_string();
+            let error = RosMap::read(&yaml, &LogOdds::SYMMETRIC)
+                .unwrap_err()
+                .to_string();
             assert!(error.contains("m.pgm"), "{why}: {error}");
             assert!(error.contains(why), "{why}: {error}");
         }

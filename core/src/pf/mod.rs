@@ -15,7 +15,7 @@
 //!   itself again anywhere in the map with [`global`], the exact correlative search.
 //! - [`GridEstimator`]: the interface a drive loop uses for either of them.
 //!
-//! All settings are in [`GridPfConfig`]; [`GridPfConfig::SEED`] is the seed exactly.
+//! All settings are in [`GridPfConfig`]; [`GridPfConfig::UNTUNED`] is the seed exactly.
 
 pub mod correlation;
 mod estimator;
@@ -124,16 +124,19 @@ pub struct GridPfConfig {
 }
 
 impl GridPfConfig {
-    /// The seed's settings exactly: 0.05 m cells, ±log 4, 9 × 9 shifts, γ = 2,
-    /// `weight ∝ exp(corr)`, stratified resampling at N_eff ≤ 0.75 P, input noise
-    /// 0.5 × |input| (use with P = 200). Diverges on the Intel log (see `DESIGN.md`).
-    pub const SEED: Self = Self {
+    /// The grid filter as published, before any tuning: it reproduces the settings of
+    /// Du (n.d.) exactly. 0.05 m cells, ±log 4 ([`LogOdds::SYMMETRIC`]), 9 × 9 shifts,
+    /// range weighting γ = 2, the untempered likelihood `weight ∝ exp(corr)`, stratified
+    /// resampling at N_eff ≤ 0.75 P, input noise 0.5 × |input|
+    /// ([`MotionNoise::PROPORTIONAL`]); use with P = 200. Diverges on the Intel log (see
+    /// `DESIGN.md`); [`GridPfConfig::DEFAULT`] is the same structure tuned to work there.
+    pub const UNTUNED: Self = Self {
         resolution: 0.05,
-        log_odds: LogOdds::SEED,
+        log_odds: LogOdds::SYMMETRIC,
         beam_decimation: 1,
         range_weight_exponent: 2.0,
         filter: FilterConfig {
-            motion_noise: MotionNoise::SEED,
+            motion_noise: MotionNoise::PROPORTIONAL,
             shift_window_cells: 4,
             log_likelihood_per_unit: 1.0,
             resample_neff_fraction: 0.75,
@@ -157,7 +160,7 @@ impl GridPfConfig {
         resolution: 0.05,
         log_odds: LogOdds {
             miss: 3,
-            ..LogOdds::SEED
+            ..LogOdds::SYMMETRIC
         },
         beam_decimation: 1,
         range_weight_exponent: 1.0,

@@ -40,8 +40,10 @@ pub struct MotionNoise {
 }
 
 impl MotionNoise {
-    /// The seed: σ = 0.5·|input|, nothing else (diverges on the Intel log; see `DESIGN.md`).
-    pub const SEED: Self = Self {
+    /// Noise proportional to the input and nothing else: σ = 0.5·|input|, no floors, no
+    /// heading noise per metre, no slip. It reproduces the setting of Du (n.d.); diverges on
+    /// the Intel log (see `DESIGN.md`).
+    pub const PROPORTIONAL: Self = Self {
         distance_std: 0.0,
         distance_std_per_metre: 0.5,
         distance_std_per_radian: 0.0,
@@ -178,7 +180,7 @@ mod tests {
 
     #[test]
     fn noise_model() {
-        let (sd, st, ss) = MotionNoise::SEED.std_devs(0.2, 0.0);
+        let (sd, st, ss) = MotionNoise::PROPORTIONAL.std_devs(0.2, 0.0);
         assert!((sd - 0.1).abs() < 1e-7 && st == 0.0 && ss == 0.0);
         let (sd, st, ss) = MotionNoise::INDOOR.std_devs(-1.0, 0.5);
         assert!((sd - 0.102).abs() < 1e-6);
@@ -187,7 +189,7 @@ mod tests {
         assert!(
             !MotionNoise {
                 heading_std: f32::NAN,
-                ..MotionNoise::SEED
+                ..MotionNoise::PROPORTIONAL
             }
             .is_valid()
         );

@@ -315,25 +315,25 @@ fn bad_inputs_never_panic_and_leave_the_filter_usable() {
 fn invalid_settings_are_refused() {
     let mut grid = Box::new(OccupancyGrid::<16, 16>::centred(
         0.05,
-        crate::grid::LogOdds::SEED,
+        crate::grid::LogOdds::SYMMETRIC,
     ));
-    let mut c = GridPfConfig::SEED;
+    let mut c = GridPfConfig::UNTUNED;
     c.filter.shift_window_cells = 8;
     assert!(GridSlam::<16, 16, 4, 8>::new(&mut grid, c, Pose2::IDENTITY).is_err());
-    let mut c = GridPfConfig::SEED;
+    let mut c = GridPfConfig::UNTUNED;
     c.resolution = 0.1;
     assert_eq!(
         GridSlam::<16, 16, 4, 8>::new(&mut grid, c, Pose2::IDENTITY).err(),
         Some(PfError::MapMismatch)
     );
     assert_eq!(
-        ParticleFilter::<0>::new(GridPfConfig::SEED.filter, Pose2::IDENTITY).err(),
+        ParticleFilter::<0>::new(GridPfConfig::UNTUNED.filter, Pose2::IDENTITY).err(),
         Some(PfError::NoParticles)
     );
     let g = GridGeometry::centred(4, 4, 0.05);
     let cells = [0i8; 16];
     let view = GridView::new(&cells, g, 20).unwrap();
-    let mut l = GridLocalizer::<4, 8>::new(view, GridPfConfig::SEED, Pose2::IDENTITY).unwrap();
+    let mut l = GridLocalizer::<4, 8>::new(view, GridPfConfig::UNTUNED, Pose2::IDENTITY).unwrap();
     assert_eq!(
         l.predict_velocity(1.0, 0.0, -0.1),
         Err(PfError::NegativeTimeStep)
@@ -444,7 +444,7 @@ fn a_correction_moves_every_particle_and_a_rebuild_redraws_the_map() {
 #[test]
 fn an_invalid_setting_is_named_with_its_rule() {
     for valid in [
-        GridPfConfig::SEED,
+        GridPfConfig::UNTUNED,
         GridPfConfig::DEFAULT,
         GridPfConfig::MICROCONTROLLER,
         GridPfConfig::DEFAULT.for_localizer(),

@@ -225,7 +225,8 @@ pub struct GridToml {
     heading_std_per_radian: Option<f32>,
     heading_std_per_metre: Option<f32>,
     sideways_std_per_metre: Option<f32>,
-    /// `"seed"` starts from [`GridPfConfig::SEED`], `"microcontroller"` from
+    /// `"untuned"` (or its deprecated old name `"seed"`) starts from
+    /// [`GridPfConfig::UNTUNED`], `"microcontroller"` from
     /// [`GridPfConfig::MICROCONTROLLER`], otherwise [`GridPfConfig::DEFAULT`].
     base: Option<String>,
     /// `[loop_closure]`: grid SLAM's loop closure ([`LoopClosureToml`]).
@@ -352,9 +353,11 @@ impl GridToml {
         let mut c = match self.base.as_deref() {
             None => fallback,
             Some("default") => GridPfConfig::DEFAULT,
-            Some("seed") => GridPfConfig::SEED,
+            Some("untuned" | "seed") => GridPfConfig::UNTUNED,
             Some("microcontroller") => GridPfConfig::MICROCONTROLLER,
-            Some(other) => bail!("unknown base config `{other}` (default, seed, microcontroller)"),
+            Some(other) => {
+                bail!("unknown base config `{other}` (default, untuned, microcontroller)")
+            }
         };
         let n: &mut MotionNoise = &mut c.filter.motion_noise;
         macro_rules! set {
@@ -442,8 +445,10 @@ pub enum Preset {
     /// `GridPfConfig::MICROCONTROLLER`: the firmware's, tuned with 32 particles and 90
     /// beams.
     Microcontroller,
-    /// `GridPfConfig::SEED`: the paper's algorithm exactly.
-    Seed,
+    /// `GridPfConfig::UNTUNED`: the settings of Du (n.d.) exactly, before any tuning
+    /// (`seed`, its old name, is still accepted).
+    #[value(alias = "seed")]
+    Untuned,
 }
 
 impl Preset {
@@ -452,7 +457,7 @@ impl Preset {
         match self {
             Self::Default => GridPfConfig::DEFAULT,
             Self::Microcontroller => GridPfConfig::MICROCONTROLLER,
-            Self::Seed => GridPfConfig::SEED,
+            Self::Untuned => GridPfConfig::UNTUNED,
         }
     }
 
@@ -611,6 +616,19 @@ mod tests {
         // A file that sets something else leaves the localizer's window.
         std::fs::write(&file, "seed = 7\n").unwrap();
         assert_eq!(window(Some(&file), FilterRole::Localizer), 1);
+    }
+
+    #[test]
+    fn the_untuned_preset_is_named_untuned_and_still_seed() {
+        use clap::ValueEnum;
+        for name in ["untuned", "seed"] {
+            assert_eq!(Preset::from_str(name, false), Ok(Preset::Untuned), "{name}");
+            let file: GridToml = toml::from_str(&format!("base = \"{name}\"\n")).unwrap();
+            assert_eq!(file.apply().unwrap(), GridPfConfig::UNTUNED, "{name}");
+        }
+        let unknown: GridToml = toml::from_str("base = \"paper\"\n").unwrap();
+        let e = unknown.apply().unwrap_err().to_string();
+        assert!(e.contains("default, untuned, microcontroller"), "{e}");
     }
 
     #[test]

@@ -136,7 +136,7 @@ mod tests {
             origin_x: 0.0,
             origin_y: 0.0,
         };
-        let l = LogOdds::SEED;
+        let l = LogOdds::SYMMETRIC;
         let mut cells = vec![0i8; 12];
         cells[0] = l.max; // bottom-left
         cells[11] = l.min; // top-right

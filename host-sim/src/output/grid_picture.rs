@@ -247,7 +247,7 @@ mod tests {
             origin_x: -4.0,
             origin_y: -3.0,
         };
-        let lo = LogOdds::SEED;
+        let lo = LogOdds::SYMMETRIC;
         let mut cells = vec![0i8; g.width * g.height];
         for y in 20..100 {
             for x in 20..140 {
@@ -276,7 +276,7 @@ mod tests {
             &GridPicture {
                 cells: &cells,
                 geometry: &g,
-                log_odds: &LogOdds::SEED,
+                log_odds: &LogOdds::SYMMETRIC,
                 estimate: &lap,
                 truth: Some(&lap),
                 title: "Test room",
@@ -332,12 +332,12 @@ mod tests {
             origin_x: 0.0,
             origin_y: 0.0,
         };
-        let mut cells = vec![LogOdds::SEED.min; g.width * g.height];
-        cells[5 * g.width + 1501] = LogOdds::SEED.max;
+        let mut cells = vec![LogOdds::SYMMETRIC.min; g.width * g.height];
+        cells[5 * g.width + 1501] = LogOdds::SYMMETRIC.max;
         let b = CellBox::known(&cells, &g, 0);
         let (w, h) = plot_size(3000, 10, 900);
         assert_eq!((w, h), (900, 3));
-        let img = map_rgb(&cells, &g, b, w, h, &LogOdds::SEED);
+        let img = map_rgb(&cells, &g, b, w, h, &LogOdds::SYMMETRIC);
         let dark = img.chunks_exact(3).filter(|p| p[0] < 50).count();
         assert_eq!(dark, 1, "the one wall cell stays a dark pixel");
     }

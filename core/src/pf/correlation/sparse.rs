@@ -2,7 +2,7 @@
 //! the bitmap and only its set bits, the occupied cells, add the beam's weight; the public
 //! entry points for each build's choice of window and row length.
 
-use super::sums::{PackedSums, RowSums, SeedWindow, WindowSums};
+use super::sums::{NineByNineSums, PackedSums, RowSums, WindowSums};
 use super::{MAX_SHIFT_WINDOW, MAX_SHIFTS, ScanPoint, ShiftScore, best_shift, end_grid};
 use crate::geometry::{Pose2, sin_cos_f32};
 use crate::grid::{GridView, floor_i32};
@@ -22,7 +22,7 @@ pub fn search_window_sparse(
     // The seed's 9 × 9 window (every preset's) gets its own constant-size copy; the
     // other sizes share one.
     if half_width.min(MAX_SHIFT_WINDOW) == 4 {
-        search_sparse::<SeedWindow, 0>(map, map.occupancy_bits(), pose, points, 9, scores)
+        search_sparse::<NineByNineSums, 0>(map, map.occupancy_bits(), pose, points, 9, scores)
     } else {
         search_window_sparse_rows::<0>(map, pose, points, half_width, scores)
     }
@@ -50,7 +50,7 @@ pub fn search_window_sparse_rows<const S: usize>(
     if let Some(best) = super::avx512::search_rows::<S>(map, pose, points, half_width, scores) {
         return best;
     }
-    search_rows::<SeedWindow, S>(map, pose, points, half_width, scores)
+    search_rows::<NineByNineSums, S>(map, pose, points, half_width, scores)
 }
 
 /// [`search_window_sparse_rows`] for a window of `N × N` cells with `N² ≤ 32` (`N` = 3 or

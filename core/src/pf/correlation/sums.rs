@@ -1,6 +1,6 @@
 //! The score accumulators of the sparse search ([`WindowSums`]): one loop over the set bits
 //! of each window row ([`RowSums`]), the window packed into one word ([`PackedSums`]) or
-//! two ([`WideSums`]), and the choice for the seed's 9 × 9 window ([`SeedWindow`]).
+//! two ([`WideSums`]), and the choice for the seed's 9 × 9 window ([`NineByNineSums`]).
 
 use super::MAX_SHIFTS;
 use super::checked::add_checked;
@@ -138,10 +138,10 @@ impl<const N: usize> WindowSums for PackedSums<N> {
 ///
 /// [`avx512`]: super::avx512
 #[cfg(target_os = "none")]
-pub(super) type SeedWindow = RowSums<9>;
+pub(super) type NineByNineSums = RowSums<9>;
 /// The accumulator of the seed's 9 × 9 window on a host CPU (see the microcontroller's).
 #[cfg(not(target_os = "none"))]
-pub(super) type SeedWindow = WideSums;
+pub(super) type NineByNineSums = WideSums;
 
 /// The sums of a 9 × 9 window, row-major as the scores are, for host CPUs: the window's
 /// 81 bits are packed into a 128-bit mask held as two 64-bit words (row `r` at bits

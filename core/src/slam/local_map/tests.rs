@@ -8,7 +8,7 @@ type Map = LocalMap<NEAR, { occupancy_bytes(NEAR, NEAR) }, FAR, { occupancy_byte
 fn model() -> LogOdds {
     LogOdds {
         miss: 3,
-        ..LogOdds::SEED
+        ..LogOdds::SYMMETRIC
     }
 }
 
