@@ -3,10 +3,15 @@
 //! A robot drives laps of a circle among eight numbered markers. Its wheel odometry
 //! reports velocities at 10 Hz, 4 % too fast; a camera reports the range, bearing and id
 //! of every marker within 4 m at 2 Hz. The events go through `EventFeed` (prediction up to
-//! each event's stamp) and `observe_known_sighting` (seed 1's id dictionary), exactly as a
-//! firmware loop would hand them over.
+//! each event's stamp) and `observe_known_sighting` (the id dictionary of El Masri El
+//! Chaarani et al. n.d.), exactly as a firmware loop would hand them over.
 //!
 //! Run: `cargo run -p microslam --example ekf_events`
+//!
+//! # References
+//!
+//! - El Masri El Chaarani, A., Ashraf, J., and Abu Hara, R. (n.d.). *EKF-SLAM with
+//!   Traffic sign images*. Undated report. The id dictionary, §II-A.
 
 use microslam::EkfError;
 use microslam::association::KnownIds;

@@ -50,6 +50,11 @@
 //! assert_eq!(slam.landmark_count(), 1);
 //! # Ok::<(), microslam::feed::FeedError<microslam::EkfError>>(())
 //! ```
+//!
+//! # References
+//!
+//! - El Masri El Chaarani, A., Ashraf, J., and Abu Hara, R. (n.d.). *EKF-SLAM with
+//!   Traffic sign images*. Undated report. The known-id step, §II-A.
 
 use core::fmt;
 
@@ -241,9 +246,10 @@ impl<T: Real> EventFeed<T> {
     }
 }
 
-/// Seed 1's known-id step for a sighting from an event: [`observe_known`] (with the
-/// sighting's own covariance when it carries one) for [`Identity::Unique`] ids;
-/// `Ok(None)` for a class or an unknown identity, which need ICNN or JCBB.
+/// The known-id step of El Masri El Chaarani et al. (n.d., §II-A) for a sighting from an
+/// event: [`observe_known`] (with the sighting's own covariance when it carries one) for
+/// [`Identity::Unique`] ids; `Ok(None)` for a class or an unknown identity, which need
+/// ICNN or JCBB.
 pub fn observe_known_sighting<T: Real, const N: usize, const P: usize, const L: usize>(
     slam: &mut EkfSlam<T, N, P>,
     ids: &mut KnownIds<L>,

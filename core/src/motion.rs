@@ -2,9 +2,10 @@
 //!
 //! Two forms of odometry:
 //! - an **increment** `u = (dx, dy, dθ)` measured in the previous robot frame (wheel
-//!   odometry that reports poses; seed 1, eqs. 4–7): `x_k = x_{k−1} ⊕ u`;
+//!   odometry that reports poses; El Masri El Chaarani et al. n.d., eqs. 4–7):
+//!   `x_k = x_{k−1} ⊕ u`;
 //! - **velocities** `(v, ω)` held over `dt` (odometry that reports speeds, e.g. MRCLAM;
-//!   seed 2, eq. 6): the exact arc, written with `sinc` so that it stays exact for ω → 0:
+//!   Du n.d., eq. 6): the exact arc, written with `sinc` so that it stays exact for ω → 0:
 //!
 //! ```text
 //! x' = x + v·dt·sinc(ω·dt/2)·cos(θ + ω·dt/2)
@@ -14,6 +15,14 @@
 //!
 //! The noise of each form is configuration ([`IncrementNoise`], [`VelocityNoise`]); nothing
 //! here hard-codes a covariance.
+//!
+//! # References
+//!
+//! - El Masri El Chaarani, A., Ashraf, J., and Abu Hara, R. (n.d.). *EKF-SLAM with
+//!   Traffic sign images*. Undated report. The increment form and its Jacobians `A` and
+//!   `W`, eqs. 4–7.
+//! - Du, C. (n.d.). *ECE 276 Project: Particle Filter SLAM*. Undated report, University of
+//!   California, San Diego. The velocity form, eq. 6.
 
 use crate::error::InvalidSetting;
 use crate::geometry::{Pose2, wrap_near};
@@ -28,9 +37,9 @@ pub type OdometryIncrement<T> = Pose2<T>;
 pub struct MotionStep<T: Real, const U: usize> {
     /// The predicted pose (heading wrapped).
     pub pose: Pose2<T>,
-    /// ∂pose'/∂pose (the seed's `A`).
+    /// ∂pose'/∂pose (`A` of El Masri El Chaarani et al. n.d., eq. 6).
     pub wrt_pose: Matrix3<T>,
-    /// ∂pose'/∂input (the seed's `W`), 3 × U.
+    /// ∂pose'/∂input (`W` of El Masri El Chaarani et al. n.d., eq. 7), 3 × U.
     pub wrt_input: nalgebra::SMatrix<T, 3, U>,
 }
 
@@ -74,7 +83,7 @@ fn sinc_and_derivative<T: Real>(h: T) -> (T, T) {
     }
 }
 
-/// Moves `pose` along the arc of constant `(v, ω)` for `dt` seconds (seed 2, eq. 6) and
+/// Moves `pose` along the arc of constant `(v, ω)` for `dt` seconds (Du n.d., eq. 6) and
 /// returns the Jacobians with respect to the pose and to the inputs `(v, ω)`.
 pub fn integrate_velocity<T: Real>(pose: &Pose2<T>, v: T, omega: T, dt: T) -> MotionStep<T, 2> {
     let half = omega * dt / T::lit(2.0);
@@ -136,7 +145,8 @@ pub struct IncrementNoise<T> {
 }
 
 impl<T: Real> IncrementNoise<T> {
-    /// Covariance of the increment `(dx, dy, dθ)` (the seed's `Q`, from configuration).
+    /// Covariance of the increment `(dx, dy, dθ)` (`Q` of El Masri El Chaarani et al. n.d.,
+    /// eq. 9, here from configuration).
     pub fn covariance(&self, inc: &OdometryIncrement<T>) -> Matrix3<T> {
         let dist = (inc.x * inc.x + inc.y * inc.y).sqrt();
         let sxy = self.translation_std + self.translation_std_per_metre * dist;

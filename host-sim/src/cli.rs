@@ -541,7 +541,7 @@ pub struct TextureArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Floor height band, metres: points with a world height in [LOW, HIGH] are floor
-    /// (the seed used −0.5 0.25).
+    /// (Du n.d., the grid particle filter paper, used −0.5 0.25).
     #[arg(long, num_args = 2, value_names = ["LOW", "HIGH"], allow_negative_numbers = true,
           default_values_t = [-0.1, 0.1])]
     pub band: Vec<f64>,

@@ -6,6 +6,12 @@
 //! from the conversion under test. Accuracy bounds are measured figures plus at most 5 %
 //! (see each test); re-measure with `cargo test -p microslam-replay-tests --test camera --
 //! --nocapture`.
+//!
+//! # References
+//!
+//! - El Masri El Chaarani, A., Ashraf, J., and Abu Hara, R. (n.d.). *EKF-SLAM with
+//!   Traffic sign images*. Undated report. The bearing formula (eq. 26) and the class-id
+//!   dictionary (§II-A).
 
 use host_sim::drivers::detections::{ClassUse, DetectorSettings};
 use host_sim::drivers::texture::TextureSettings;
@@ -193,11 +199,13 @@ fn signs_in_rendered_frames_give_true_range_and_ccw_bearing() {
             );
             assert!((got.height - sign.position[2]).abs() < 0.03);
             // Left of the camera's heading is left in the image (u < cx) and a positive
-            // bearing: the seed's atan((u − u0)/f) has the opposite sign.
-            let seed_theta = ((u - cam.camera.intrinsics.cx) / cam.camera.intrinsics.fx).atan();
+            // bearing: atan((u − u0)/f) of El Masri El Chaarani et al. (n.d., eq. 26) has
+            // the opposite sign.
+            let published_theta =
+                ((u - cam.camera.intrinsics.cx) / cam.camera.intrinsics.fx).atan();
             if bearing.abs() > 0.05 {
                 assert_eq!(got.z.bearing > 0.0, bearing > 0.0);
-                assert!(seed_theta * bearing < 0.0, "seed formula sign");
+                assert!(published_theta * bearing < 0.0, "published formula sign");
             }
             // Depth is not range: off-axis and below a pitched axis, the range exceeds the
             // depth by far more than the error allowed above.
@@ -284,7 +292,8 @@ fn association_corrects_wrong_class_ids() {
     assert_eq!(c.right_class_misassociated, 0);
     assert!(hints.ekf.ate_rmse_m.se2.unwrap() < 0.0385);
     assert_eq!(hints.ekf.landmarks_created, 24);
-    // Seed 1's dictionary (the class names the landmark) breaks on the same detections
+    // The dictionary of El Masri El Chaarani et al. (n.d.; the class names the landmark)
+    // breaks on the same detections
     // (measured: 3.5 % corrected, ATE 1.69 m): the contrast, not a figure to hold.
     let dict = mode(ClassUse::Dictionary);
     assert!(dict.classes.corrected_share.unwrap() < 0.1);

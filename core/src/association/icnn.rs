@@ -1,4 +1,4 @@
-//! Individual compatibility nearest neighbour (seed 1, Fig. 11).
+//! Individual compatibility nearest neighbour (El Masri El Chaarani et al. n.d., Fig. 11).
 //!
 //! Each sighting is compared with every landmark on its own: the nearest landmark by
 //! Mahalanobis distance among those that pass the individual χ² gate is its pairing; with
@@ -8,6 +8,11 @@
 //! is the weakness [`super::jcbb`] removes. With an
 //! [`AssociationConfig::ambiguity_margin`], a sighting whose two nearest compatible
 //! landmarks are about as near is dropped as ambiguous.
+//!
+//! # References
+//!
+//! - El Masri El Chaarani, A., Ashraf, J., and Abu Hara, R. (n.d.). *EKF-SLAM with
+//!   Traffic sign images*. Undated report. The association, Fig. 11.
 
 use super::compatibility::{AssociationConfig, Candidates, Pairing};
 use crate::ekf::EkfSlam;

@@ -91,8 +91,9 @@ pub enum Observed<T> {
     },
 }
 
-/// Seed 1's main loop for one sighting with a known id: update the landmark bound to `id`,
-/// or add a new landmark and bind the id to it.
+/// The main loop of El Masri El Chaarani et al. (n.d., §II-A) for one sighting with a
+/// known id: update the landmark bound to `id`, or add a new landmark and bind the id to
+/// it.
 ///
 /// When the filter or the table is full, the sighting is dropped with
 /// [`EkfError::MapFull`]; the filter goes on with the landmarks it has.

@@ -1,8 +1,15 @@
 //! What the perception front end called each landmark, and whether a new sighting's
 //! label agrees with the landmark the geometry chose.
 //!
-//! As in seed 1 (§III-C): the front end's class or id is checked against the data
-//! association; when they disagree the association wins and the disagreement is counted.
+//! As in El Masri El Chaarani et al. (n.d., §III-C): the front end's class or id is
+//! checked against the data association; when they disagree the association wins and the
+//! disagreement is counted.
+//!
+//! # References
+//!
+//! - El Masri El Chaarani, A., Ashraf, J., and Abu Hara, R. (n.d.). *EKF-SLAM with
+//!   Traffic sign images*. Undated report. The misclassified sign corrected by the
+//!   association, §III-C.
 
 use crate::event::Identity;
 use heapless::Vec;

@@ -1,4 +1,4 @@
-//! Occupancy grids of saturating integer log-odds (seed 2, §II-B).
+//! Occupancy grids of saturating integer log-odds (Du n.d., §II-B).
 //!
 //! - [`GridGeometry`]: size in cells, resolution and the world position of the grid's
 //!   lower-left corner (the ROS `map_server` convention: cell `(0, 0)` spans
@@ -22,6 +22,11 @@
 //! - `map_image` (feature `map-image`): a map as one versioned, checksummed binary image
 //!   for flash, read in place.
 //! - `ros_map` (feature `std`): reading a ROS `map_server` map (`map.yaml` + PGM).
+//!
+//! # References
+//!
+//! - Du, C. (n.d.). *ECE 276 Project: Particle Filter SLAM*. Undated report, University of
+//!   California, San Diego. The log-odds occupancy grid, §II-B.
 
 mod bitmap;
 mod bresenham;
@@ -52,7 +57,7 @@ pub struct GridGeometry {
     pub width: usize,
     /// Number of rows (cells along y).
     pub height: usize,
-    /// Edge length of a cell, metres (seed: 0.05).
+    /// Edge length of a cell, metres (Du n.d.: 0.05).
     pub resolution: f32,
     /// World x of the left edge of column 0, metres.
     pub origin_x: f32,
@@ -143,7 +148,7 @@ pub fn floor_i32(v: f32) -> i32 {
 /// The unit is a tenth of log 4 (0.1386 nats) by default: a hit adds `hit` (10 = +log 4),
 /// a free ray subtracts `miss` (10 = −log 4), cells saturate at `[min, max]`, a cell is
 /// *occupied* when its value is above `occupied_above` (20 = 2 log 4) and *free* when below
-/// `free_below` (−20 = −2 log 4): the seed's model with `p(hit | occupied) = 0.8`.
+/// `free_below` (−20 = −2 log 4): the model of Du (n.d.) with `p(hit | occupied) = 0.8`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]

@@ -228,7 +228,7 @@ impl<const P: usize> ParticleFilter<P> {
         best
     }
 
-    /// Pose of the heaviest particle: the estimate (seed).
+    /// Pose of the heaviest particle: the estimate (as in Du n.d., §III-C).
     pub fn best_pose(&self) -> Pose2<f32> {
         self.poses
             .get(self.best_index())

@@ -1,4 +1,4 @@
-//! Grid particle filter (seed 2): occupancy-grid SLAM and localization with map
+//! Grid particle filter (Du n.d.): occupancy-grid SLAM and localization with map
 //! correlation and a local shift search.
 //!
 //! - [`ParticleFilter`]: `P` poses with log-weights and a seeded generator
@@ -8,14 +8,22 @@
 //!   brute-force reference.
 //! - [`prediction`]: the differential-drive model with noise on the inputs.
 //! - [`resampling`]: stratified and systematic resampling.
-//! - [`GridSlam`]: the seed's SLAM: the best particle writes each scan into the one shared
-//!   grid, which starts from the first scan.
+//! - [`GridSlam`]: the SLAM of Du (n.d.): the best particle writes each scan into the one
+//!   shared grid, which starts from the first scan.
 //! - [`GridLocalizer`]: the same filter against a fixed map ([`crate::grid::GridView`],
 //!   e.g. in flash); it never writes the map. It detects when it is lost and finds
 //!   itself again anywhere in the map with [`global`], the exact correlative search.
 //! - [`GridEstimator`]: the interface a drive loop uses for either of them.
 //!
-//! All settings are in [`GridPfConfig`]; [`GridPfConfig::UNTUNED`] is the seed exactly.
+//! All settings are in [`GridPfConfig`]; [`GridPfConfig::UNTUNED`] reproduces the settings
+//! of Du (n.d.) exactly.
+//!
+//! # References
+//!
+//! - Du, C. (n.d.). *ECE 276 Project: Particle Filter SLAM*. Undated report, University of
+//!   California, San Diego. The particle filter (prediction eq. 6, correlation eqs. 21–24,
+//!   resampling eq. 25), the shared map written by the best particle, and the settings of
+//!   [`GridPfConfig::UNTUNED`].
 
 pub mod correlation;
 mod estimator;
@@ -56,15 +64,16 @@ pub const LOCALIZER_SHIFT_WINDOW: u8 = 1;
 pub struct FilterConfig {
     /// Input noise of the prediction.
     pub motion_noise: MotionNoise,
-    /// Half-width `k` of the shift window, cells: `(2k+1)²` shifts (seed: 4 → 9 × 9; at
+    /// Half-width `k` of the shift window, cells: `(2k+1)²` shifts (Du n.d.: 4 → 9 × 9; at
     /// most [`correlation::MAX_SHIFT_WINDOW`]).
     pub shift_window_cells: u8,
-    /// Log-likelihood per unit of correlation (per occupied hit of weight 1): the seed's
-    /// `weight ∝ exp(corr)` is 1.0. Smaller values keep more particles alive.
+    /// Log-likelihood per unit of correlation (per occupied hit of weight 1): the
+    /// `weight ∝ exp(corr)` of Du (n.d., eq. 23) is 1.0. Smaller values keep more
+    /// particles alive.
     pub log_likelihood_per_unit: f32,
-    /// Resample when `N_eff ≤ fraction · P` (seed: 0.75).
+    /// Resample when `N_eff ≤ fraction · P` (Du n.d.: 0.75).
     pub resample_neff_fraction: f32,
-    /// Resampling scheme (seed: stratified).
+    /// Resampling scheme (Du n.d.: stratified).
     pub resampling: Resampling,
     /// Seed of the random number generator.
     pub seed: u64,
@@ -106,18 +115,18 @@ impl FilterConfig {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct GridPfConfig {
-    /// Cell edge length, metres (seed: 0.05); build the grid with it.
+    /// Cell edge length, metres (Du n.d.: 0.05); build the grid with it.
     pub resolution: f32,
-    /// Log-odds model of the grid (seed: ±log 4, thresholds ±2 log 4).
+    /// Log-odds model of the grid (Du n.d.: ±log 4, thresholds ±2 log 4).
     pub log_odds: LogOdds,
     /// Use every n-th beam (1: all).
     pub beam_decimation: usize,
-    /// Range weighting exponent γ of the correlation (seed: 2; 0 = plain count).
+    /// Range weighting exponent γ of the correlation (Du n.d.: 2; 0 = plain count).
     pub range_weight_exponent: f32,
     /// The particle filter.
     pub filter: FilterConfig,
     /// Standard deviation, cells, of the Gaussian prior on each particle's shift in the
-    /// SLAM update (0: none, the seed): the shift search then maximises
+    /// SLAM update (0: none, as in Du n.d.): the shift search then maximises
     /// `log_likelihood_per_unit · corr − (dx² + dy²) / (2σ²)` instead of `corr`
     /// ([`correlation::best_shift_with_prior`]).
     pub shift_prior_std_cells: f32,
@@ -146,7 +155,8 @@ impl GridPfConfig {
         shift_prior_std_cells: 0.0,
     };
 
-    /// The seed's structure (0.05 m cells, 9 × 9 shifts, N_eff ≤ 0.75 P) with the changes
+    /// The structure of [`GridPfConfig::UNTUNED`] (0.05 m cells, 9 × 9 shifts,
+    /// N_eff ≤ 0.75 P) with the changes
     /// that make it work on real data, tuned on the Intel log with P = 200:
     /// - realistic motion noise ([`MotionNoise::INDOOR`]: floors and heading noise per
     ///   metre instead of 0.5 × |input|);

@@ -1,5 +1,4 @@
-//! Prediction: the seed's differential-drive model (seed 2, eq. 6) driven by a noisy
-//! input.
+//! Prediction: the differential-drive model of Du (n.d., eq. 6) driven by a noisy input.
 //!
 //! The input of one step is the arc the robot drove: distance `d` along the arc and
 //! heading change `Δθ` (from encoders: `d = v·τ`, `Δθ = ω·τ`; from odometry poses:
@@ -7,9 +6,14 @@
 //! `d̃ = d + σ_d·n₁`, `Δθ̃ = Δθ + σ_θ·n₂` (and an optional sideways slip `σ_s·n₃`), then
 //! moves along the arc: chord `d̃·sinc(Δθ̃/2)` in the direction `θ + Δθ̃/2`.
 //!
-//! The seed's noise is `σ = 0.5·|input|`, which is zero when driving straight and lets the
-//! heading drift uncorrected between turns; [`MotionNoise`] adds floors and noise that
-//! grows with the distance driven (see `DESIGN.md`).
+//! The noise of Du (n.d., §III-C) is `σ = 0.5·|input|`, which is zero when driving
+//! straight and lets the heading drift uncorrected between turns; [`MotionNoise`] adds
+//! floors and noise that grows with the distance driven (see `DESIGN.md`).
+//!
+//! # References
+//!
+//! - Du, C. (n.d.). *ECE 276 Project: Particle Filter SLAM*. Undated report, University of
+//!   California, San Diego. The motion model, eq. 6, and its input noise, §III-C.
 
 use crate::error::InvalidSetting;
 use crate::geometry::Pose2;
@@ -123,8 +127,8 @@ pub fn wrap(a: f32) -> f32 {
     }
 }
 
-/// Moves `pose` along the arc `(distance, heading_change)` plus a sideways slip (seed
-/// eq. 6 with τ = 1).
+/// Moves `pose` along the arc `(distance, heading_change)` plus a sideways slip (Du
+/// n.d., eq. 6 with τ = 1).
 #[inline]
 pub fn drive_arc(
     pose: &Pose2<f32>,

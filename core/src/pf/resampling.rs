@@ -1,10 +1,15 @@
-//! Low-variance resampling: systematic and stratified (seed 2, eq. 25 and its pseudocode).
+//! Low-variance resampling: systematic and stratified (Du n.d., eq. 25 and its pseudocode).
 //!
 //! Both draw `P` positions `β_k = (k + u_k) / P` in `[0, 1)` and take the particle whose
 //! cumulative weight first reaches `β_k`. *Stratified*: one uniform `u_k` per stratum (the
-//! seed's pseudocode). *Systematic*: one `u` shared by all strata. Both are unbiased (the
+//! pseudocode of Du n.d.). *Systematic*: one `u` shared by all strata. Both are unbiased (the
 //! expected number of copies of particle `i` is `P · w_i`) and keep the output indices in
 //! increasing order.
+//!
+//! # References
+//!
+//! - Du, C. (n.d.). *ECE 276 Project: Particle Filter SLAM*. Undated report, University of
+//!   California, San Diego. Stratified resampling when N_eff falls below 0.75 P, eq. 25.
 
 use rand_core::RngCore;
 use rand_distr::{Distribution, StandardUniform};
@@ -14,7 +19,7 @@ use rand_distr::{Distribution, StandardUniform};
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum Resampling {
-    /// One uniform draw per stratum (the seed).
+    /// One uniform draw per stratum (as in Du n.d.).
     Stratified,
     /// One uniform draw shared by all strata.
     Systematic,

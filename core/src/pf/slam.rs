@@ -1,4 +1,10 @@
-//! The seed's grid SLAM: one shared occupancy grid, written by the best particle.
+//! The grid SLAM of Du (n.d., §III-C): one shared occupancy grid, written by the best
+//! particle.
+//!
+//! # References
+//!
+//! - Du, C. (n.d.). *ECE 276 Project: Particle Filter SLAM*. Undated report, University of
+//!   California, San Diego.
 
 use super::correlation::{
     ScanPoints, search_window, search_window_sparse, search_window_sparse_rows,

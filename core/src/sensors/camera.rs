@@ -8,10 +8,11 @@
 //!   [`CameraMount`] (translation, then yaw–pitch–roll, Z-Y-X); a positive pitch tilts the
 //!   camera down towards the floor;
 //! - **optical**: z along the optical axis, x to the right in the image, y down (the pinhole
-//!   convention): `optical → body` is the fixed rotation [`BODY_FROM_OPTICAL`] (the seed's
-//!   `R_oc` of eq. 29 is its transpose).
+//!   convention): `optical → body` is the fixed rotation [`BODY_FROM_OPTICAL`] (`R_oc`
+//!   of Du n.d., eq. 29, is its transpose).
 //!
-//! Two mistakes that are easy to copy from seed 1 (§II-C, eq. 26) are handled here:
+//! Two mistakes that are easy to copy from El Masri El Chaarani et al. (n.d., §II-C,
+//! eq. 26) are handled here:
 //! - `θ = atan((u − u₀)/f)` is positive for a detection to the **right** of the image
 //!   centre, while bearings in this crate are counter-clockwise positive (to the left); and
 //!   it ignores a pitched camera, where the horizontal direction depends on `v` too;
@@ -22,6 +23,15 @@
 //! carry it to the robot frame, and measure range and bearing in the horizontal plane from
 //! the camera's planar pose [`Camera::planar_mount`] — the mount to give the EKF's
 //! [`RangeBearingSensor`](crate::sensors::range_bearing::RangeBearingSensor).
+//!
+//! # References
+//!
+//! - El Masri El Chaarani, A., Ashraf, J., and Abu Hara, R. (n.d.). *EKF-SLAM with
+//!   Traffic sign images*. Undated report. The bearing from a detection's pixel, §II-C,
+//!   eqs. 25–26.
+//! - Du, C. (n.d.). *ECE 276 Project: Particle Filter SLAM*. Undated report, University of
+//!   California, San Diego. The RGB-D registration and the pixel-to-world chain, eqs.
+//!   26–30.
 
 use crate::geometry::Pose2;
 use crate::scalar::Real;
@@ -82,7 +92,7 @@ pub struct PinholeIntrinsics<T> {
 
 impl<T: Real> PinholeIntrinsics<T> {
     /// The optical-frame point seen at pixel `(u, v)` with depth `depth` along the optical
-    /// axis (seed 2, eq. 27, with zero skew).
+    /// axis (Du n.d., eq. 27, with zero skew).
     pub fn back_project(&self, u: T, v: T, depth: T) -> Vector3<T> {
         Vector3::new(
             (u - self.cx) * depth / self.fx,
@@ -223,7 +233,7 @@ impl<T: Real> Camera<T> {
     }
 
     /// The point seen at `(u, v, depth)` in the world, for a robot at planar pose `robot`
-    /// (seed 2, eqs. 27–30).
+    /// (Du n.d., eqs. 27–30).
     pub fn pixel_to_world(
         &self,
         robot: &Pose2<T>,
@@ -392,7 +402,7 @@ pub mod kinect_v1 {
     }
 
     /// The RGB pixel `(rgb_i, rgb_j)` registered to disparity pixel `(i, j)` with raw
-    /// disparity `d` (seed 2, eq. 26, with −4.5 · 1750.46 = −7877.07):
+    /// disparity `d` (Du n.d., eq. 26, with −4.5 · 1750.46 = −7877.07):
     /// `rgb_i = (526.37 i + 19276 − 7877.07 dd) / 585.051`, `rgb_j = (526.37 j + 16662) / 585.051`.
     /// `i` and `j` index the image's first and second array axes, as in the dataset.
     pub fn disparity_pixel_to_rgb<T: Real>(i: T, j: T, disparity: T) -> (T, T) {
@@ -479,16 +489,17 @@ mod tests {
     }
 
     #[test]
-    fn seed_formula_has_the_opposite_sign_and_confuses_depth_with_range() {
+    fn the_published_bearing_has_the_opposite_sign_and_confuses_depth_with_range() {
         let cam = cameras()[0];
         // A sign to the robot's left (positive y) appears left of the image centre.
         let (u, v, depth) = cam.robot_to_pixel(&Vector3::new(3.0, 1.0, 0.3)).unwrap();
         assert!(u < cam.intrinsics.cx);
-        let seed_theta = libm::atan((u - cam.intrinsics.cx) / cam.intrinsics.fx);
+        // θ = atan((u − u₀)/f) (El Masri El Chaarani et al. n.d., eq. 26).
+        let published_theta = libm::atan((u - cam.intrinsics.cx) / cam.intrinsics.fx);
         let ours = cam.sighting(u, v, depth, &DetectionNoise::NONE).unwrap();
-        assert!(seed_theta < 0.0 && ours.z.bearing > 0.0);
+        assert!(published_theta < 0.0 && ours.z.bearing > 0.0);
         assert!(
-            (seed_theta + ours.z.bearing).abs() < 1e-12,
+            (published_theta + ours.z.bearing).abs() < 1e-12,
             "level camera: only the sign differs"
         );
         // Depth is along the optical axis: 2.9 m, while the range is √(2.9² + 1²).

@@ -1,5 +1,5 @@
-//! IMU yaw rate: the seed's 10 Hz low-pass filter and the alignment of the IMU stream to
-//! the encoder clock (seed 2, §III-B and §III-C).
+//! IMU yaw rate: a 10 Hz low-pass filter and the alignment of the IMU stream to the
+//! encoder clock, as in Du (n.d., §III-B and §III-C).
 //!
 //! - [`YawRateLowPass`]: a first-order (single-pole RC) low-pass filter
 //!   `y_k = y_{k−1} + α (x_k − y_{k−1})` with `α = dt / (RC + dt)`, `RC = 1 / (2π f_c)`,
@@ -7,9 +7,15 @@
 //!   handled). The first sample initialises the output. One scalar of state.
 //! - [`ImuAligner`]: keeps the last `N` (filtered) samples in a fixed ring; the encoder
 //!   clock is the main clock, and for an encoder stamp `t` it returns the nearest IMU sample
-//!   or the mean of the two nearest ones (the seed's choice for its noisy gyro).
+//!   or the mean of the two nearest ones (the choice of Du n.d. for its noisy gyro).
 //!   Push every IMU sample with a stamp up to the encoder stamp plus half the IMU period
 //!   before asking, so that the nearest sample after `t` is already in the ring.
+//!
+//! # References
+//!
+//! - Du, C. (n.d.). *ECE 276 Project: Particle Filter SLAM*. Undated report, University of
+//!   California, San Diego. The low-pass filter and the alignment to the encoder clock,
+//!   §III-B and §III-C.
 
 use crate::scalar::Real;
 use core::fmt;
@@ -38,7 +44,7 @@ impl fmt::Display for ImuError {
 
 impl core::error::Error for ImuError {}
 
-/// First-order low-pass filter of the yaw rate, cut-off `cutoff_hz` (seed: 10 Hz).
+/// First-order low-pass filter of the yaw rate, cut-off `cutoff_hz` (Du n.d.: 10 Hz).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct YawRateLowPass<T> {
     rc: T,
@@ -93,7 +99,7 @@ impl<T: Real> YawRateLowPass<T> {
 pub enum Alignment {
     /// The sample with the closest stamp (ties: the earlier one).
     Nearest,
-    /// The mean of the two samples with the closest stamps (seed 2).
+    /// The mean of the two samples with the closest stamps (Du n.d., §III-C).
     MeanOfTwoNearest,
 }
 

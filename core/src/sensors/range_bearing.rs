@@ -10,9 +10,15 @@
 //! ```
 //!
 //! The bearing is **counter-clockwise positive** (to the robot's left), zero straight
-//! ahead of the sensor. Both `h` and its inverse `g` are written in polar form; the seed's
-//! eq. 12 compares a Cartesian prediction with a polar measurement and is not used.
+//! ahead of the sensor. Both `h` and its inverse `g` are written in polar form; eq. 12 of
+//! El Masri El Chaarani et al. (n.d.) compares a Cartesian prediction with a polar
+//! measurement and is not used.
 //! Every Jacobian here is checked against central finite differences in the tests.
+//!
+//! # References
+//!
+//! - El Masri El Chaarani, A., Ashraf, J., and Abu Hara, R. (n.d.). *EKF-SLAM with
+//!   Traffic sign images*. Undated report. The observation model this one replaces, eq. 12.
 
 use crate::geometry::{Pose2, wrap_near};
 use crate::scalar::Real;

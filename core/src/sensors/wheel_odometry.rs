@@ -1,10 +1,15 @@
 //! Wheel encoders of a four-wheel differential (skid-steer) drive → travelled distances →
-//! linear and angular velocity `(v, ω)` (seed 2, §III: "velocity from the encoders").
+//! linear and angular velocity `(v, ω)` (Du n.d., §III: "velocity from the encoders").
 //!
 //! Each side's distance is the mean of its two wheels: right = (FR + RR)/2 · metres per
 //! tick, left = (FL + RL)/2 · metres per tick. Over an interval of `dt` seconds,
 //! `v = (right + left) / (2 dt)` and `ω = (right − left) / (track · dt)`.
 //! The geometry is configuration; [`DiffDriveGeometry::THOR`] holds the UCSD THOR robot.
+//!
+//! # References
+//!
+//! - Du, C. (n.d.). *ECE 276 Project: Particle Filter SLAM*. Undated report, University of
+//!   California, San Diego. The velocity from the encoders, §III.
 
 use crate::scalar::Real;
 use core::fmt;

@@ -19,7 +19,7 @@ pub struct TextureOptions {
     /// Seed of the simulation.
     pub seed: u64,
     /// Floor height band, metres: points with a world height in [LOW, HIGH] are floor
-    /// (the seed used −0.5 0.25).
+    /// (Du n.d., the grid particle filter paper, used −0.5 0.25).
     pub band: Vec<f64>,
     /// Frames per second of the trajectory.
     pub frame_rate: f64,

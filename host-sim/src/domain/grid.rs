@@ -13,7 +13,8 @@ use std::path::Path;
 pub const GRID_CELLS: usize = 1024;
 /// Bytes of the host grid's occupied-cell bitmap (128 KB): grid SLAM on the host keeps
 /// one, like the firmware, so that the shift search reads only the occupied cells
-/// (the scores are the same as without; Intel seed replay 4.3 → 3.5 CPU-s).
+/// (the scores are the same as without; Intel replay with `GridPfConfig::UNTUNED`
+/// 4.3 → 3.5 CPU-s).
 pub const GRID_BITMAP: usize = microslam::grid::occupancy_bytes(GRID_CELLS, GRID_CELLS);
 /// Grid edge in cells of the larger host grid: 2048 × 2048 cells (102.4 m at 5 cm), 4 MB,
 /// for a recording whose odometry does not fit [`GRID_CELLS`] ([`GridPlacement`]).

@@ -22,7 +22,8 @@ pub mod recording;
 pub enum AssociationMode {
     /// The sighting's id (barcode) names the landmark.
     Known,
-    /// Ids hidden; individual compatibility nearest neighbour (seed 1, Fig. 11).
+    /// Ids hidden; individual compatibility nearest neighbour (El Masri El Chaarani et
+    /// al. n.d., Fig. 11).
     Icnn,
     /// Ids hidden; joint compatibility branch and bound over each batch of sightings.
     Jcbb,

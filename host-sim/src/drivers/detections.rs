@@ -1,19 +1,26 @@
-//! Seed 1's whole chain on the simulator: a sign detector's bounding-box centre pixel and
-//! the depth sampled there (with pixel and depth noise, and a share of wrong class ids, as
-//! the seed's detector made) → [`Camera::sighting`](microslam::sensors::camera::Camera::sighting) → landmark EKF-SLAM with the class ids.
+//! The whole chain of El Masri El Chaarani et al. (n.d.) on the simulator: a sign
+//! detector's bounding-box centre pixel and the depth sampled there (with pixel and depth
+//! noise, and a share of wrong class ids, as their detector made) → [`Camera::sighting`](microslam::sensors::camera::Camera::sighting) → landmark EKF-SLAM with the class ids.
 //!
 //! Three ways to use the class id are compared:
-//! - [`ClassUse::Dictionary`]: the seed's class-id dictionary — the class names the
+//! - [`ClassUse::Dictionary`]: their class-id dictionary (§II-A) — the class names the
 //!   landmark (a [`KnownIds`] table); a wrong class updates the wrong landmark;
 //! - [`ClassUse::Geometry`]: the class is ignored, ICNN decides;
 //! - [`ClassUse::GeometryWithHints`]: ICNN decides; among several individually compatible
 //!   landmarks the one whose label (majority of the classes it was seen with) equals the
 //!   detection's class is preferred. The geometry always wins over the class: a detection
 //!   compatible with one landmark only is paired with it whatever its class says
-//!   (seed 1 §III-C: the data association overrides a misclassified sign).
+//!   (El Masri El Chaarani et al. n.d., §III-C: the data association overrides a
+//!   misclassified sign).
 //!
 //! A detection with a wrong class is *corrected* when it was associated with the map
 //! landmark of its true sign (the landmark most of whose sightings came from that sign).
+//!
+//! # References
+//!
+//! - El Masri El Chaarani, A., Ashraf, J., and Abu Hara, R. (n.d.). *EKF-SLAM with
+//!   Traffic sign images*. Undated report. The detector-to-EKF chain, the class-id
+//!   dictionary (§II-A) and the misclassified sign corrected by the association (§III-C).
 
 use crate::domain::config::Settings;
 use crate::domain::recording::Recording;
@@ -217,7 +224,8 @@ pub fn camera_recording(
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum ClassUse {
-    /// Seed 1's dictionary: the class names the landmark.
+    /// The dictionary of El Masri El Chaarani et al. (n.d., §II-A): the class names the
+    /// landmark.
     Dictionary,
     /// ICNN alone; classes ignored.
     Geometry,
@@ -374,7 +382,7 @@ pub fn run_chain(
                         if class_use == ClassUse::Dictionary
                             && let Ok(j) = added
                         {
-                            // The seed's dictionary: the class now names this landmark.
+                            // The dictionary: the class now names this landmark.
                             let _ = ids.insert(class, j);
                         }
                         match added {

@@ -337,7 +337,7 @@ impl Drop for Release<'_> {
 /// between scans and being woken for each. Between scans a grid step's serial part (map
 /// update, resampling, ≈ 60 µs on the Intel log) outlasts rayon's own spinning, and
 /// waking a sleeping thread takes tens of microseconds on a VM: on the Intel log with the
-/// seed's settings the replay takes 1.14 s instead of 1.46 s on two cores
+/// settings of `GridPfConfig::UNTUNED` the replay takes 1.14 s instead of 1.46 s on two cores
 /// (`docs/speed.md`). When there is no job it yields its core to any other thread that
 /// wants it. Same particles scored, same results: only who scores them changes.
 fn stay_awake(stepper: Option<usize>, done: &AtomicBool, awake: &AtomicUsize) {

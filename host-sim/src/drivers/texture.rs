@@ -1,12 +1,17 @@
-//! The coloured floor map from RGB-D frames and poses (seed 2, §II-C and §III-C).
+//! The coloured floor map from RGB-D frames and poses (Du n.d., §II-C and §III-C).
 //!
 //! Each pixel with a depth is carried pixel + depth → optical → camera body → robot →
 //! world by [`Camera::pixel_to_world`]; points whose height lies in the floor band are kept
-//! and their colour is averaged into the cell of the map they fall in. The seed keeps
+//! and their colour is averaged into the cell of the map they fall in. Du (n.d.) keeps
 //! heights in −0.5 … 0.25 m; here the default band is −0.10 … +0.10 m, because the
-//! simulated room has walls down to the floor: the seed's band would paint the bottom
-//! 25 cm of every wall into the border cells of the floor map (the seed's Kinect looked at
-//! a floor bounded by obstacles it did not need to colour). Both are options.
+//! simulated room has walls down to the floor: that band would paint the bottom 25 cm of
+//! every wall into the border cells of the floor map (the Kinect of Du n.d. looked at a
+//! floor bounded by obstacles it did not need to colour). Both are options.
+//!
+//! # References
+//!
+//! - Du, C. (n.d.). *ECE 276 Project: Particle Filter SLAM*. Undated report, University of
+//!   California, San Diego. Texture mapping, §II-C and §III-C.
 
 use crate::domain::recording::TruePose;
 use crate::domain::recording::interpolate_pose;

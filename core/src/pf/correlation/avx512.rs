@@ -1,4 +1,4 @@
-//! The seed's 9 × 9 window on an x86-64 CPU with AVX-512: the sums stay in nine 16-lane
+//! The 9 × 9 window on an x86-64 CPU with AVX-512: the sums stay in nine 16-lane
 //! vector registers, one per window row, and an end point adds its weight to the shifts
 //! of its window's occupied cells with one masked addition per row (the row's bits are
 //! the mask) — no loop over the set bits, no branch that follows the map, and the rows

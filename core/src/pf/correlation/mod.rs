@@ -1,6 +1,6 @@
-//! The seed's observation model: map correlation of a scan's end points with the occupied
+//! The observation model of Du (n.d.): map correlation of a scan's end points with the occupied
 //! cells, optionally range-weighted, over a `(2k+1) × (2k+1)` window of cell shifts
-//! (Du, n.d., eqs. 21 and 24).
+//! (Du n.d., eqs. 21 and 24).
 //!
 //! `corr(shift) = Σ_i w_i · 1[cell(end point i) + shift is occupied]`, with
 //! `w_i = range_i^γ` (γ = 0: the plain count). Weights are fixed point

@@ -19,7 +19,7 @@ pub fn search_window_sparse(
     half_width: u8,
     scores: &mut [u32; MAX_SHIFTS],
 ) -> ShiftScore {
-    // The seed's 9 × 9 window (every preset's) gets its own constant-size copy; the
+    // The 9 × 9 window (every preset's for SLAM) gets its own constant-size copy; the
     // other sizes share one.
     if half_width.min(MAX_SHIFT_WINDOW) == 4 {
         search_sparse::<NineByNineSums, 0>(map, map.occupancy_bits(), pose, points, 9, scores)

@@ -1,6 +1,6 @@
 //! The score accumulators of the sparse search ([`WindowSums`]): one loop over the set bits
 //! of each window row ([`RowSums`]), the window packed into one word ([`PackedSums`]) or
-//! two ([`WideSums`]), and the choice for the seed's 9 × 9 window ([`NineByNineSums`]).
+//! two ([`WideSums`]), and the choice for the 9 × 9 window ([`NineByNineSums`]).
 
 use super::MAX_SHIFTS;
 use super::checked::add_checked;
@@ -35,7 +35,7 @@ pub(super) trait WindowSums: Sized {
 }
 
 /// `R` rows of [`ROW`] sums, one loop over the set bits of each row: any window up to
-/// `R × R` (`R = 9` for the seed's window, so that its rows unroll; 15 for any other
+/// `R × R` (`R = 9` for the 9 × 9 window, so that its rows unroll; 15 for any other
 /// size: one copy for all of them, a microcontroller's flash is scarce).
 pub(super) struct RowSums<const R: usize>(pub(super) [[u32; ROW]; R]);
 
@@ -129,17 +129,17 @@ impl<const N: usize> WindowSums for PackedSums<N> {
     }
 }
 
-/// The accumulator of the seed's 9 × 9 window. On a microcontroller one loop over the set
-/// bits of each row ([`RowSums`]): the fewest instructions, and a branch costs a cycle or
-/// three there. On a host CPU the exit of each such loop is a branch its predictor often
-/// misses (a row's bit count follows the map, not a pattern), so [`WideSums`] packs the
-/// window into two words and runs two loops whatever the rows hold; a CPU with AVX-512
-/// takes [`avx512`] instead, without any loop.
+/// The accumulator of the 9 × 9 window (every preset's for SLAM). On a microcontroller one
+/// loop over the set bits of each row ([`RowSums`]): the fewest instructions, and a branch
+/// costs a cycle or three there. On a host CPU the exit of each such loop is a branch its
+/// predictor often misses (a row's bit count follows the map, not a pattern), so
+/// [`WideSums`] packs the window into two words and runs two loops whatever the rows hold;
+/// a CPU with AVX-512 takes [`avx512`] instead, without any loop.
 ///
 /// [`avx512`]: super::avx512
 #[cfg(target_os = "none")]
 pub(super) type NineByNineSums = RowSums<9>;
-/// The accumulator of the seed's 9 × 9 window on a host CPU (see the microcontroller's).
+/// The accumulator of the 9 × 9 window on a host CPU (see the microcontroller's).
 #[cfg(not(target_os = "none"))]
 pub(super) type NineByNineSums = WideSums;
 
@@ -147,8 +147,8 @@ pub(super) type NineByNineSums = WideSums;
 /// 81 bits are packed into a 128-bit mask held as two 64-bit words (row `r` at bits
 /// `9r .. 9r + 9`), and one loop per word over its set bits adds the weight to the shift
 /// of each occupied cell: two loop exits per window instead of nine. On the Intel log
-/// with the seed's settings, fewer mispredicted branches and less time than [`RowSums`]
-/// (measured in `docs/speed.md`). Same integer sums.
+/// with [`GridPfConfig::UNTUNED`](crate::pf::GridPfConfig::UNTUNED), fewer mispredicted
+/// branches and less time than [`RowSums`] (measured in `docs/speed.md`). Same integer sums.
 #[cfg(not(target_os = "none"))]
 pub(super) struct WideSums([u32; 128]);
 

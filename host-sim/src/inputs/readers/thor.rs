@@ -2,9 +2,15 @@
 //!
 //! `replay --dataset thor:<dir> --run 20` integrates the encoder + IMU trajectory with
 //! [`microslam::sensors`]: ticks → distance per interval ([`DiffDriveGeometry::THOR`]),
-//! yaw rate through the seed's 10 Hz low-pass ([`YawRateLowPass`]), aligned to the
-//! encoder clock as the mean of the two nearest IMU samples ([`ImuAligner`]), then the
-//! seed's arc model. No lidar exists for these runs, so there is no SLAM here.
+//! yaw rate through the 10 Hz low-pass of Du (n.d.) ([`YawRateLowPass`]), aligned to the
+//! encoder clock as the mean of the two nearest IMU samples ([`ImuAligner`]), then its
+//! arc model (eq. 6). No lidar exists for these runs, so there is no SLAM here.
+//!
+//! # References
+//!
+//! - Du, C. (n.d.). *ECE 276 Project: Particle Filter SLAM*. Undated report, University of
+//!   California, San Diego. The encoder and IMU processing, §III-B and §III-C, and the arc
+//!   model, eq. 6.
 
 use anyhow::{Context, Result, bail};
 use microslam::geometry::Pose2;
