@@ -5,6 +5,7 @@
 //! skipped. Messages are kept in **file order**: in the Intel log the time stamps go
 //! backwards 265 times and some scans are < 10 ms apart, so order and motion must never
 //! be derived from stamp differences — use the odometry pose increments between scans.
+//! A stamp that is not finite (`nan`, `inf`) is refused with its line number.
 
 use anyhow::{Context, Result, bail};
 use std::collections::BTreeMap;
@@ -97,6 +98,19 @@ fn num(tok: Option<&str>, line: usize, what: &str) -> Result<f64, CarmenError> {
         })
 }
 
+/// A message's `ipc_timestamp`, refused when it is not finite: a NaN or infinite stamp
+/// would reach the trajectory written and the stamp matching of the metrics.
+fn stamp(value: f64, line: usize) -> Result<f64, CarmenError> {
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(CarmenError {
+            line,
+            reason: format!("ipc_timestamp {value} is not finite"),
+        })
+    }
+}
+
 /// Reads a CARMEN log file: `.gz` files are decompressed (flate2), anything else is read
 /// as text.
 pub fn read(path: &Path) -> Result<CarmenLog> {
@@ -158,7 +172,7 @@ pub fn parse<R: BufRead>(
                     ranges,
                     pose: [f[0], f[1], f[2]],
                     odom: [f[3], f[4], f[5]],
-                    stamp: f[6],
+                    stamp: stamp(f[6], n)?,
                 }));
             }
             Some("ODOM") => {
@@ -174,7 +188,7 @@ pub fn parse<R: BufRead>(
                     pose: [f[0], f[1], f[2]],
                     tv: f[3],
                     rv: f[4],
-                    stamp: f[6],
+                    stamp: stamp(f[6], n)?,
                 }));
             }
             Some("PARAM") => {
@@ -239,5 +253,24 @@ mod tests {
         assert_eq!(lasers[0].stamp, 100.5);
         assert!(lasers[1].rear && lasers[1].stamp == 98.0); // stamps may go backwards
         assert!(parse("FLASER 3 1.0 2.0\n".as_bytes()).is_err());
+    }
+
+    #[test]
+    fn a_stamp_that_is_not_finite_is_refused_with_its_line() {
+        for (text, line, value) in [
+            (
+                "FLASER 1 1.0 0 0 0 0 0 0 5.0 h 1\nFLASER 1 1.0 0 0 0 0 0 0 nan h 1\n",
+                2,
+                "NaN",
+            ),
+            ("ODOM 0 0 0 0 0 0 inf h 1\n", 1, "inf"),
+            ("RLASER 1 1.0 0 0 0 0 0 0 -inf h 1\n", 1, "-inf"),
+        ] {
+            let e = parse(text.as_bytes()).unwrap_err().to_string();
+            assert_eq!(
+                e,
+                format!("CARMEN log line {line}: ipc_timestamp {value} is not finite")
+            );
+        }
     }
 }
