@@ -307,7 +307,8 @@ pub(crate) struct RunOutputs<'a> {
     pub plots: bool,
 }
 
-/// Scores a grid run over the lidar log `lidar` — the relation error when a relations file
+/// Refuses a run that used none of its scans or odometry ([`GridRun::check_used`]), then
+/// scores a grid run over the lidar log `lidar` — the relation error when a relations file
 /// is found ([`super::relation_error_for`]), the ATE against `--reference` when given —
 /// writes its outputs ([`write_outputs`]) and returns `metrics.json`'s document. The wall
 /// time is the command's since `started`, taken before the files are written.
@@ -319,6 +320,7 @@ pub(crate) fn score_and_write(
     started: Instant,
     outputs: RunOutputs<'_>,
 ) -> Result<serde_json::Value> {
+    run.check_used(&lidar.source)?;
     let rel = super::relation_error_for(&lidar.path, grid.relations.as_deref(), run)?;
     let wall = started.elapsed().as_secs_f64();
     let metrics = with_reference(
@@ -543,6 +545,8 @@ pub(crate) struct LidarLog {
     pub path: PathBuf,
     /// The name reports give it: the file's name.
     pub name: String,
+    /// The dataset as errors name it: its family and resolved path (`carmen:<path>`).
+    pub source: String,
     /// Its laser messages.
     pub log: CarmenLog,
     /// The grid settings for it.
@@ -569,6 +573,7 @@ pub(crate) fn lidar_log(
         .map_or_else(|| file.to_string(), |n| n.to_string_lossy().to_string());
     let (log, options) = read_lidar(spec, &path, config, grid, bag)?;
     Ok(LidarLog {
+        source: format!("{}:{}", spec.family(), path.display()),
         path,
         name,
         log,

@@ -112,6 +112,30 @@ pub(crate) fn changes(before: &mut [i8], now: &[i8], scans: usize) -> MapChanges
 }
 
 impl GridRun {
+    /// Refuses a run that used none of an input it needs, with `source` (the input, e.g.
+    /// `carmen:<file>`) and the counts in the message: no scans at all, every scan skipped
+    /// (no usable beam), or every odometry pose refused (not finite). Every grid command
+    /// calls it before it scores and writes a run, so such a run never exits 0.
+    pub fn check_used(&self, source: &str) -> anyhow::Result<()> {
+        let scans = self.trajectory.len();
+        if scans == 0 {
+            anyhow::bail!("{source}: no scans to use (no front laser scan)");
+        }
+        if self.skipped_scans >= scans {
+            anyhow::bail!(
+                "{source}: none of the {scans} scans could be used ({} skipped: no usable beam)",
+                self.skipped_scans
+            );
+        }
+        if self.refused_odometry >= scans {
+            anyhow::bail!(
+                "{source}: none of the {scans} odometry poses could be used ({} refused: not finite)",
+                self.refused_odometry
+            );
+        }
+        Ok(())
+    }
+
     pub(crate) fn empty(cells: Vec<i8>, geometry: GridGeometry, scans: usize) -> Self {
         Self {
             trajectory: Vec::with_capacity(scans),
