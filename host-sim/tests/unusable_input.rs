@@ -130,6 +130,62 @@ fn a_log_with_only_rear_scans_fails() {
 }
 
 #[test]
+fn a_relation_error_that_cannot_be_computed_fails_naming_the_relations_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let dataset = carmen(&good_log(dir.path()));
+    // One relation, between stamps no scan has.
+    let relations = dir.path().join("other.relations");
+    std::fs::write(&relations, "5000.0 5001.0 0.1 0 0 0 0 0\n").unwrap();
+    let err = fails(
+        dir.path(),
+        &[
+            "replay",
+            "--filter",
+            "grid-slam",
+            "--dataset",
+            &dataset,
+            "--relations",
+            relations.to_str().unwrap(),
+        ],
+    );
+    let expected = format!(
+        "{}: the relation error cannot be computed: none of its 1 relations has both stamps \
+         within 1 ms of a processed scan",
+        relations.display()
+    );
+    assert!(err.contains(&expected), "{err}");
+    assert!(!err.contains("NaN"), "{err}");
+}
+
+#[test]
+fn a_reference_ate_that_cannot_be_computed_fails_naming_the_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    let dataset = carmen(&good_log(dir.path()));
+    // One reference pose at the first scan's stamp: no SE(2) alignment from one pose.
+    let reference = dir.path().join("one.tum");
+    std::fs::write(&reference, "100.0 0 0 0 0 0 0 1\n").unwrap();
+    let err = fails(
+        dir.path(),
+        &[
+            "replay",
+            "--filter",
+            "grid-slam",
+            "--dataset",
+            &dataset,
+            "--reference",
+            reference.to_str().unwrap(),
+        ],
+    );
+    let expected = format!(
+        "{}: the ATE against the reference cannot be computed: its ate_m.se2 needs at least 2 \
+         matched poses, 1 matched",
+        reference.display()
+    );
+    assert!(err.contains(&expected), "{err}");
+    assert!(!dir.path().join("out").join("metrics.json").exists());
+}
+
+#[test]
 fn a_stamp_that_is_not_finite_is_refused_with_the_file_and_line() {
     let dir = tempfile::tempdir().unwrap();
     let log = good_log(dir.path());

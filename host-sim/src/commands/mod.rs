@@ -58,14 +58,21 @@ pub fn summary(m: &Metrics, out: &Path) -> String {
 }
 
 /// The relation error of a grid run on the log at `log`, with the relations file given or
-/// found next to the log; when there is none, a note on stderr says why and `None`.
+/// found next to the log; when there is none, a note on stderr says why and `None`. A
+/// relation error that cannot be computed (no relation matched) is an error
+/// ([`RelationError::computed`]).
 pub(crate) fn relation_error_for(
     log: &Path,
     given: Option<&Path>,
     run: &GridRun,
 ) -> anyhow::Result<Option<RelationError>> {
     match find_relations(log, given) {
-        Ok(file) => Ok(Some(relation_error(run, &relations::read(&file)?))),
+        Ok(file) => {
+            let relations = relations::read(&file)?;
+            relation_error(run, &relations)
+                .computed(&file, relations.len())
+                .map(Some)
+        }
         Err(why) => {
             eprintln!("note: {why}");
             Ok(None)

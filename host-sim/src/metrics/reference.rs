@@ -130,7 +130,9 @@ pub fn evaluate(
 
 /// ATE of a grid run's trajectory against the reference trajectory in `path` (TUM or a
 /// corrected CARMEN log, stamps + `offset_s`), matched by stamp within half a scan
-/// period ([`matching_tolerance_s`]). A reference that matches no scan is an error.
+/// period ([`matching_tolerance_s`]). A reference that matches no scan is an error, and so
+/// is a figure that cannot be computed (the SE(2) alignment with one matched pose) or is
+/// not finite: no figure is written as `null`.
 pub fn grid_run_ate(run: &GridRun, path: &Path, offset_s: f64) -> Result<ReferenceAte> {
     let poses = reference::read(path, offset_s)?;
     let traj: Vec<(f64, Pose2<f64>)> = run
@@ -156,6 +158,26 @@ pub fn grid_run_ate(run: &GridRun, path: &Path, offset_s: f64) -> Result<Referen
             path.display(),
             tolerance_s
         );
+    }
+    for (name, value) in [
+        ("ate_m.first_pose", ate.ate_m.first_pose),
+        ("ate_m.se2", ate.ate_m.se2),
+        ("yaw_deg.first_pose", ate.yaw_deg.first_pose),
+        ("yaw_deg.se2", ate.yaw_deg.se2),
+    ] {
+        match value {
+            Some(v) if v.is_finite() => {}
+            Some(v) => bail!(
+                "{}: the ATE against the reference cannot be computed: its {name} over {} matched poses is {v}",
+                path.display(),
+                ate.matched
+            ),
+            None => bail!(
+                "{}: the ATE against the reference cannot be computed: its {name} needs at least 2 matched poses, {} matched",
+                path.display(),
+                ate.matched
+            ),
+        }
     }
     Ok(ate)
 }

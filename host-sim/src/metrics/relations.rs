@@ -83,6 +83,37 @@ pub struct RelationError {
     pub rot_std_deg: f64,
 }
 
+impl RelationError {
+    /// `self` when every figure is finite; else an error naming the relations file
+    /// `file` (of `relations` relations) and why the relation error cannot be computed:
+    /// no relation matched two processed scans, or a figure that is not finite. A figure
+    /// that cannot be computed is never written (`metrics.json` would hold `null`).
+    pub fn computed(self, file: &Path, relations: usize) -> anyhow::Result<Self> {
+        if self.used == 0 {
+            anyhow::bail!(
+                "{}: the relation error cannot be computed: none of its {relations} relations \
+                 has both stamps within 1 ms of a processed scan (is it this log's relations file?)",
+                file.display()
+            );
+        }
+        for (name, value) in [
+            ("trans_mean_m", self.trans_mean_m),
+            ("trans_std_m", self.trans_std_m),
+            ("rot_mean_deg", self.rot_mean_deg),
+            ("rot_std_deg", self.rot_std_deg),
+        ] {
+            if !value.is_finite() {
+                anyhow::bail!(
+                    "{}: the relation error cannot be computed: its {name} over {} relations is {value}",
+                    file.display(),
+                    self.used
+                );
+            }
+        }
+        Ok(self)
+    }
+}
+
 fn mean_std(v: &[f64]) -> (f64, f64) {
     if v.is_empty() {
         return (f64::NAN, f64::NAN);
