@@ -171,13 +171,15 @@ impl<const P: usize> ParticleFilter<P> {
         self.local_mean(&first, f32::INFINITY, f32::INFINITY)
     }
 
-    /// Which heading offset makes the scan fit the map best around `around`: each offset
-    /// `j · step` with `|j · step| ≤ span` (tried 0, −step, +step, −2 step, …) is scored
-    /// by the shift search at `around` turned by it. Returns the offset whose best shift
-    /// scores highest and that score, and the score of no offset; `(0, s, s)` when none
-    /// scores more than no offset. For a robot that turns faster than its odometry
-    /// follows: the particles' heading noise covers the odometry's usual errors, not a
-    /// turn off by ten degrees.
+    /// Which heading offset makes the scan fit the map best around `around`, coarse to
+    /// fine: each offset `2j · step` with `|2j · step| ≤ span` (tried 0, −2 step,
+    /// +2 step, …) is scored by the shift search at `around` turned by it, then the two
+    /// offsets one `step` either side of the best of them (within `span`). Half the
+    /// shift searches of trying every `step`, and the answer on the same lattice.
+    /// Returns the offset whose best shift scores highest and that score, and the score
+    /// of no offset; `(0, s, s)` when none scores more than no offset. For a robot that
+    /// turns faster than its odometry follows: the particles' heading noise covers the
+    /// odometry's usual errors, not a turn off by ten degrees.
     pub(crate) fn search_heading(
         map: &GridView<'_>,
         around: &Pose2<f32>,
@@ -192,18 +194,27 @@ impl<const P: usize> ParticleFilter<P> {
         if !(span.is_finite() && step.is_finite() && step > 0.0) {
             return (0.0, none, none);
         }
-        let steps = libm::floorf(span / step) as i32;
-        let mut best = (0.0f32, none);
-        for k in 1..=2 * steps {
-            let j = if k % 2 == 1 { -(k + 1) / 2 } else { k / 2 };
+        let mut best = (0i32, none);
+        let mut score = |j: i32, best: &mut (i32, u32)| {
             let delta = j as f32 * step;
             let turned = Pose2::new(around.x, around.y, around.theta + delta);
             let s = search(map, &turned, points, half_width, &mut scores).score;
             if s > best.1 {
-                best = (delta, s);
+                *best = (j, s);
+            }
+        };
+        let steps = libm::floorf(span / step) as i32;
+        for k in 1..=2 * (steps / 2) {
+            let j = if k % 2 == 1 { -(k + 1) / 2 } else { k / 2 };
+            score(2 * j, &mut best);
+        }
+        let coarse = best.0;
+        for j in [coarse - 1, coarse + 1] {
+            if j.abs() <= steps {
+                score(j, &mut best);
             }
         }
-        (best.0, best.1, none)
+        (best.0 as f32 * step, best.1, none)
     }
 
     /// Normalised log-weights (`log Σ exp = 0` after every update).
