@@ -110,6 +110,39 @@ fn an_odometry_jump_beyond_100_km_is_refused_with_the_line_and_field() {
 }
 
 #[test]
+fn bag_options_on_a_carmen_log_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("good.clf");
+    log_with(&log, 0, |l| l);
+    let dataset = format!("carmen:{}", log.display());
+    let expected = "--lidar-mount applies to `rosbag:` datasets only, not to a `carmen:` dataset";
+    let err = fails(
+        dir.path(),
+        &["replay", "--dataset", &dataset, "--lidar-mount", "0.1,0,0"],
+    );
+    assert!(err.contains(expected), "{err}");
+    let map = dir.path().join("no-map.yaml");
+    let err = fails(
+        dir.path(),
+        &[
+            "localize",
+            "--map",
+            map.to_str().unwrap(),
+            "--dataset",
+            &dataset,
+            "--lidar-mount",
+            "0.1,0,0",
+            "--scan-topic",
+            "/front",
+        ],
+    );
+    assert!(
+        err.contains("--lidar-mount, --scan-topic applies to `rosbag:` datasets only"),
+        "{err}"
+    );
+}
+
+#[test]
 fn a_log_gz_of_several_gzip_members_is_read_to_the_end() {
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("parts.log.gz");

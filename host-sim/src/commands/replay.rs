@@ -64,6 +64,7 @@ pub struct ReplayOptions {
 
 /// `host-sim replay`.
 pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
+    bag_options_apply(&args.dataset, &args.bag)?;
     let lidar = matches!(
         args.dataset,
         DatasetSpec::Carmen(_) | DatasetSpec::Thor(_) | DatasetSpec::Rosbag(_)
@@ -555,6 +556,36 @@ pub(crate) struct LidarLog {
 
 /// The lidar dataset `spec` (its file found by [`resolve_log`]): a CARMEN log, or a ROS 2
 /// bag (its scans as laser messages, its lidar geometry), with its grid settings.
+/// Refuses the options of a ROS 2 bag (`--lidar-mount`, the topics) on a dataset that is
+/// not one: they would be ignored without a word.
+pub(crate) fn bag_options_apply(spec: &DatasetSpec, bag: &BagOptions) -> Result<()> {
+    if matches!(spec, DatasetSpec::Rosbag(_)) {
+        return Ok(());
+    }
+    let d = BagOptions::default();
+    let given: Vec<&str> = [
+        ("--lidar-mount", bag.lidar_mount.is_some()),
+        ("--scan-topic", bag.scan_topic != d.scan_topic),
+        ("--odom-topic", bag.odom_topic != d.odom_topic),
+        ("--imu-topic", bag.imu_topic != d.imu_topic),
+        (
+            "--tf-static-topic",
+            bag.tf_static_topic != d.tf_static_topic,
+        ),
+    ]
+    .into_iter()
+    .filter_map(|(name, set)| set.then_some(name))
+    .collect();
+    if !given.is_empty() {
+        bail!(
+            "{} applies to `rosbag:` datasets only, not to a `{}:` dataset, which has no topics and no lidar mount to set",
+            given.join(", "),
+            spec.family()
+        );
+    }
+    Ok(())
+}
+
 pub(crate) fn lidar_log(
     spec: &DatasetSpec,
     config: Option<&Path>,
