@@ -167,3 +167,18 @@ fn a_log_gz_of_several_gzip_members_is_read_to_the_end() {
         serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
     assert_eq!(metrics["scans"], SCANS);
 }
+
+/// A full disk under `--animate` (`/dev/full` takes no byte) names the animation's file.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_write_failure_under_animate_names_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("good.clf");
+    log_with(&log, 0, |l| l);
+    let dataset = format!("carmen:{}", log.display());
+    let err = fails(
+        dir.path(),
+        &["replay", "--dataset", &dataset, "--animate", "/dev/full"],
+    );
+    assert!(err.contains("writing /dev/full"), "{err}");
+}
