@@ -182,3 +182,78 @@ fn a_write_failure_under_animate_names_the_file() {
     );
     assert!(err.contains("writing /dev/full"), "{err}");
 }
+
+/// A run that skips a large share of its scans succeeds, but says so on stderr and in
+/// `metrics.json`; the threshold is the settings' `loss_warning_fraction`.
+#[test]
+fn a_run_that_skips_a_large_share_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("lossy.clf");
+    // 5 of the 20 scans (lines 3, 6, 9, 12, 15) have no usable beam.
+    let text: String = (0..SCANS)
+        .map(|i| {
+            if i % 3 == 2 && i < 15 {
+                line(i).replace(" 2.0", " -1.0")
+            } else {
+                line(i)
+            }
+        })
+        .collect();
+    std::fs::write(&log, text).unwrap();
+    let dataset = format!("carmen:{}", log.display());
+    let run = |config: Option<&Path>| {
+        let out = dir.path().join("out");
+        let mut command = host_sim();
+        command
+            .args(["replay", "--dataset", &dataset, "--quiet", "--no-plots"])
+            .args(["--particles", "16", "--out"])
+            .arg(&out);
+        if let Some(c) = config {
+            command.arg("--config").arg(c);
+        }
+        let stderr = String::from_utf8_lossy(&succeeds(&mut command).stderr).to_string();
+        let metrics: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap())
+                .unwrap();
+        (stderr, metrics)
+    };
+    let (stderr, metrics) = run(None);
+    let expected = format!(
+        "warning: {dataset}: 5 of 20 scans (25.0 %) skipped: no usable beam; more than the settings' loss_warning_fraction 0.1"
+    );
+    assert!(stderr.contains(&expected), "{stderr}");
+    let loss = &metrics["input_loss"];
+    assert_eq!(loss["scans"]["skipped"], 5);
+    assert_eq!(loss["scans"]["used"], 15);
+    assert_eq!(loss["scans"]["reason"], "no usable beam");
+    assert_eq!(loss["odometry"]["refused"], 0);
+    assert_eq!(loss["warnings"].as_array().unwrap().len(), 1);
+    // A threshold of one half: no warning.
+    let config = dir.path().join("lenient.toml");
+    std::fs::write(&config, "loss_warning_fraction = 0.5\n").unwrap();
+    let (stderr, metrics) = run(Some(&config));
+    assert!(!stderr.contains("warning"), "{stderr}");
+    assert_eq!(metrics["input_loss"]["warning_fraction"], 0.5);
+    assert!(
+        metrics["input_loss"]["warnings"]
+            .as_array()
+            .unwrap()
+            .is_empty()
+    );
+    // Out of range: refused, naming the file and the key.
+    std::fs::write(&config, "loss_warning_fraction = 2.0\n").unwrap();
+    let err = fails(
+        dir.path(),
+        &[
+            "replay",
+            "--dataset",
+            &dataset,
+            "--config",
+            config.to_str().unwrap(),
+        ],
+    );
+    assert!(
+        err.contains("lenient.toml: `loss_warning_fraction` = 2 must be within 0 ..= 1"),
+        "{err}"
+    );
+}

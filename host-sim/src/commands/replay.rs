@@ -300,6 +300,43 @@ pub(crate) fn metrics_json(
     })
 }
 
+/// What a grid run read, used and lost of each input stream, with the reason, and a
+/// warning for each stream whose lost share is above `threshold` (`metrics.json`'s
+/// `input_loss`).
+pub(crate) fn input_loss(run: &GridRun, threshold: f64) -> serde_json::Value {
+    let read = run.trajectory.len();
+    let mut warnings = Vec::new();
+    let mut stream = |name: &str, lost: usize, verb: &str, reason: &str| {
+        let share = lost as f64 / read.max(1) as f64;
+        if share > threshold {
+            warnings.push(format!(
+                "{lost} of {read} {name} ({:.1} %) {verb}: {reason}; more than the settings' loss_warning_fraction {threshold}",
+                100.0 * share
+            ));
+        }
+        serde_json::json!({
+            "read": read,
+            "used": read - lost.min(read),
+            verb: lost,
+            "reason": reason,
+            "share": share,
+        })
+    };
+    let scans = stream("scans", run.skipped_scans, "skipped", "no usable beam");
+    let odometry = stream(
+        "odometry poses",
+        run.refused_odometry,
+        "refused",
+        "not finite",
+    );
+    serde_json::json!({
+        "warning_fraction": threshold,
+        "scans": scans,
+        "odometry": odometry,
+        "warnings": warnings,
+    })
+}
+
 /// Where [`score_and_write`] writes a run's outputs.
 pub(crate) struct RunOutputs<'a> {
     /// The output folder.
@@ -324,11 +361,20 @@ pub(crate) fn score_and_write(
     run.check_used(&lidar.source)?;
     let rel = super::relation_error_for(&lidar.path, grid.relations.as_deref(), run)?;
     let wall = started.elapsed().as_secs_f64();
-    let metrics = with_reference(
+    let mut metrics = with_reference(
         metrics_json(&lidar.name, run, &lidar.options, rel, faults, wall),
         run,
         grid,
     )?;
+    let loss = input_loss(run, lidar.loss_warning);
+    for warning in loss["warnings"].as_array().into_iter().flatten() {
+        eprintln!(
+            "warning: {}: {}",
+            lidar.source,
+            warning.as_str().unwrap_or_default()
+        );
+    }
+    metrics["input_loss"] = loss;
     write_outputs(
         outputs.dir,
         run,
@@ -552,6 +598,9 @@ pub(crate) struct LidarLog {
     pub log: CarmenLog,
     /// The grid settings for it.
     pub options: GridRunOptions,
+    /// Share of its scans or odometry poses a run may lose without a warning (the
+    /// settings' `loss_warning_fraction`).
+    pub loss_warning: f64,
 }
 
 /// The lidar dataset `spec` (its file found by [`resolve_log`]): a CARMEN log, or a ROS 2
@@ -604,6 +653,7 @@ pub(crate) fn lidar_log(
         .map_or_else(|| file.to_string(), |n| n.to_string_lossy().to_string());
     let (log, options) = read_lidar(spec, &path, config, grid, bag)?;
     Ok(LidarLog {
+        loss_warning: crate::domain::grid::loss_warning_fraction(config)?,
         source: format!("{}:{}", spec.family(), path.display()),
         path,
         name,

@@ -232,6 +232,32 @@ pub struct GridToml {
     base: Option<String>,
     /// `[loop_closure]`: grid SLAM's loop closure ([`LoopClosureToml`]).
     loop_closure: Option<LoopClosureToml>,
+    /// Share of an input stream (scans, odometry poses) a run may skip or refuse before it
+    /// says so on stderr and in `metrics.json` (`input_loss`); default
+    /// [`LOSS_WARNING_FRACTION`].
+    loss_warning_fraction: Option<f64>,
+}
+
+/// Share of an input stream a grid run may skip or refuse without a warning (10 %), unless
+/// the settings file's `loss_warning_fraction` gives another.
+pub const LOSS_WARNING_FRACTION: f64 = 0.1;
+
+/// The `loss_warning_fraction` of the settings file `config` (else
+/// [`LOSS_WARNING_FRACTION`]); refused outside 0 ..= 1, naming the file.
+pub fn loss_warning_fraction(config: Option<&Path>) -> Result<f64> {
+    let Some(path) = config else {
+        return Ok(LOSS_WARNING_FRACTION);
+    };
+    let f = GridToml::read(path)?
+        .loss_warning_fraction
+        .unwrap_or(LOSS_WARNING_FRACTION);
+    if !(0.0..=1.0).contains(&f) {
+        bail!(
+            "in {}: `loss_warning_fraction` = {f} must be within 0 ..= 1",
+            path.display()
+        );
+    }
+    Ok(f)
 }
 
 /// The `[loop_closure]` table of a grid settings file: `enabled` (default `true` when
