@@ -374,3 +374,24 @@ fn the_geometry_of_every_bag_scan_is_checked() {
     });
     assert!(rosbag::read(&path, &defaults).is_ok());
 }
+
+#[test]
+fn an_odometry_pose_beyond_100_km_is_refused_with_its_message_and_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("far.mcap");
+    small_bag(&path, |bag| {
+        let mut far = msg::Odometry {
+            child_frame_id: "base_link".into(),
+            ..Default::default()
+        };
+        far.pose.pose.position.y = -3e6;
+        write_ros(bag, "/odom", odometry_schema, 1.05, &far).unwrap();
+        write_ros(bag, "/scan", laser_scan_schema, 1.1, &scan()).unwrap();
+    });
+    let e = error(&path, &BagOptions::default());
+    assert!(
+        e.contains("far.mcap: topic /odom, message 1")
+            && e.ends_with("pose.pose.position.y = -3000000 m is beyond 100 km of the origin"),
+        "{e}"
+    );
+}

@@ -572,6 +572,18 @@ pub fn read(path: &Path, options: &BagOptions) -> Result<RosBag> {
         } else if topic == options.odom_topic {
             let o: msg::Odometry = decode_cdr(m.data).map_err(bad)?;
             let p = &o.pose.pose;
+            for (field, v) in [
+                ("pose.pose.position.x", p.position.x),
+                ("pose.pose.position.y", p.position.y),
+            ] {
+                // A non-finite one is kept: the replay refuses and counts it.
+                if v.abs() > super::carmen::MAX_COORDINATE_M {
+                    return Err(bad(anyhow!(
+                        "{field} = {v} m is beyond {} km of the origin",
+                        super::carmen::MAX_COORDINATE_M / 1e3
+                    )));
+                }
+            }
             odom.push((
                 o.header.stamp.seconds(),
                 Pose2::new(p.position.x, p.position.y, p.orientation.yaw()),
