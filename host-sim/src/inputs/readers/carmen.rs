@@ -5,7 +5,10 @@
 //! skipped. Messages are kept in **file order**: in the Intel log the time stamps go
 //! backwards 265 times and some scans are < 10 ms apart, so order and motion must never
 //! be derived from stamp differences — use the odometry pose increments between scans.
-//! A stamp that is not finite (`nan`, `inf`) is refused with its line number.
+//! A stamp that is not finite (`nan`, `inf`) is refused with its line number, as are a
+//! laser line whose declared beam count is not the count of readings that follow (or 0),
+//! a scan of another length than the log's first of that laser, and a position beyond
+//! 100 km ([`MAX_COORDINATE_M`]).
 
 use anyhow::{Context, Result, bail};
 use std::collections::BTreeMap;
