@@ -258,6 +258,17 @@ fn a_setting_out_of_range_is_named_with_its_file_and_rule() {
         err.contains("sighting.range_std = 10000000000000000000000000000000000000000: beyond any physical range (0 ..= 100)"),
         "{err}"
     );
+    // Options of the estimator the replay does not run.
+    let out = host_sim()
+        .args([&ekf[..], &["--particles", "32", "--reference", "ref.tum"]].concat())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success()
+            && err.contains("--particles, --reference applies to the grid filters (`--filter grid-slam`), which this replay of `mrclam:` does not run"),
+        "{err}"
+    );
     // A global search option: named with the option that sets it.
     let out = host_sim()
         .args([

@@ -257,3 +257,29 @@ fn a_run_that_skips_a_large_share_says_so() {
         "{err}"
     );
 }
+
+#[test]
+fn ekf_options_on_a_grid_replay_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("good.clf");
+    log_with(&log, 0, |l| l);
+    let dataset = format!("carmen:{}", log.display());
+    let err = fails(
+        dir.path(),
+        &[
+            "replay",
+            "--dataset",
+            &dataset,
+            "--association",
+            "jcbb",
+            "--precision",
+            "f32",
+        ],
+    );
+    assert!(
+        err.contains(
+            "--association, --precision applies to the landmark EKF-SLAM (`--filter ekf-slam`), which this replay of `carmen:` does not run"
+        ),
+        "{err}"
+    );
+}

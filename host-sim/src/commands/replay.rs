@@ -80,6 +80,7 @@ pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
             args.dataset.family()
         );
     }
+    options_apply(args, grid)?;
     if grid {
         return grid_replay(args, quiet);
     }
@@ -605,6 +606,52 @@ pub(crate) struct LidarLog {
 
 /// The lidar dataset `spec` (its file found by [`resolve_log`]): a CARMEN log, or a ROS 2
 /// bag (its scans as laser messages, its lidar geometry), with its grid settings.
+/// Refuses the options of the estimator a replay does not run: the grid filter's on a
+/// landmark EKF-SLAM replay, the EKF's (`--association`, `--precision f32`) on a grid
+/// replay. They would be ignored without a word.
+fn options_apply(args: &ReplayOptions, grid: bool) -> Result<()> {
+    let g = &args.grid;
+    let (given, applies_to): (Vec<&str>, &str) = if grid {
+        let given = [
+            ("--association", args.association.is_some()),
+            ("--precision", args.precision != Precision::default()),
+        ];
+        (
+            given
+                .into_iter()
+                .filter_map(|(n, s)| s.then_some(n))
+                .collect(),
+            "the landmark EKF-SLAM (`--filter ekf-slam`)",
+        )
+    } else {
+        let given = [
+            ("--particles", g.particles != 200),
+            ("--window", g.window.is_some()),
+            ("--beams", g.beams.is_some()),
+            ("--relations", g.relations.is_some()),
+            ("--preset", g.preset.is_some()),
+            ("--reference", g.reference.is_some()),
+            ("--reference-offset", g.reference_offset != 0.0),
+            ("--loop-closure", g.loop_closure),
+        ];
+        (
+            given
+                .into_iter()
+                .filter_map(|(n, s)| s.then_some(n))
+                .collect(),
+            "the grid filters (`--filter grid-slam`)",
+        )
+    };
+    if !given.is_empty() {
+        bail!(
+            "{} applies to {applies_to}, which this replay of `{}:` does not run",
+            given.join(", "),
+            args.dataset.family()
+        );
+    }
+    Ok(())
+}
+
 /// Refuses the options of a ROS 2 bag (`--lidar-mount`, the topics) on a dataset that is
 /// not one: they would be ignored without a word.
 pub(crate) fn bag_options_apply(spec: &DatasetSpec, bag: &BagOptions) -> Result<()> {
