@@ -247,10 +247,26 @@ fn a_setting_out_of_range_is_named_with_its_file_and_rule() {
     assert!(err.contains("sighting.range_std = -1"), "{err}");
     let err = refused(&ekf, "[recovery]\nheading_std = nan\n");
     assert!(err.contains("recovery.heading_std = NaN"), "{err}");
+    let err = refused(&ekf, "[recovery]\nhuber_sigma = 1e40\n");
+    assert!(
+        err.contains("recovery.huber_sigma: beyond the range of f32"),
+        "{err}"
+    );
+    // A noise figure that large is beyond any physical range before f32's.
     let err = refused(&ekf, "[sighting]\nrange_std = 1e40\n");
     assert!(
-        err.contains("sighting.range_std: beyond the range of f32")
-            && err.contains("`range_std` must be finite and non-negative"),
+        err.contains("sighting.range_std = 10000000000000000000000000000000000000000: beyond any physical range (0 ..= 100)"),
+        "{err}"
+    );
+    // Options of the estimator the replay does not run.
+    let out = host_sim()
+        .args([&ekf[..], &["--particles", "32", "--reference", "ref.tum"]].concat())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success()
+            && err.contains("--particles, --reference applies to the grid filters (`--filter grid-slam`), which this replay of `mrclam:` does not run"),
         "{err}"
     );
     // A global search option: named with the option that sets it.

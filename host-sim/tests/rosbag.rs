@@ -129,6 +129,7 @@ fn scan() -> msg::LaserScan {
             frame_id: "laser".into(),
         },
         angle_min: -1.0,
+        angle_max: 1.0,
         angle_increment: 0.5,
         range_min: 0.1,
         range_max: 10.0,
@@ -300,4 +301,97 @@ fn replay_and_localize_take_a_bag_and_write_an_mcap() {
         loc.to_str().unwrap(),
     ]);
     assert!(std::fs::metadata(&loc).unwrap().len() > 0);
+}
+
+#[test]
+fn the_geometry_of_every_bag_scan_is_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let defaults = BagOptions::default();
+    // A good first scan, then `second`.
+    let bag = |name: &str, second: msg::LaserScan| {
+        let path = dir.path().join(name);
+        small_bag(&path, |bag| {
+            write_ros(bag, "/scan", laser_scan_schema, 1.0, &scan()).unwrap();
+            write_ros(bag, "/scan", laser_scan_schema, 1.1, &second).unwrap();
+        });
+        error(&path, &defaults)
+    };
+    let e = bag(
+        "zero.mcap",
+        msg::LaserScan {
+            angle_increment: 0.0,
+            ..scan()
+        },
+    );
+    assert!(
+        e.ends_with("zero.mcap: topic /scan, scan 1: angle_increment is 0: the beams would all point one way"),
+        "{e}"
+    );
+    // Five ranges over a span that holds nine beams.
+    let e = bag(
+        "span.mcap",
+        msg::LaserScan {
+            angle_max: 3.0,
+            ..scan()
+        },
+    );
+    assert!(
+        e.ends_with("span.mcap: topic /scan, scan 1: 5 ranges, but angle_min -1 … angle_max 3 by angle_increment 0.5 holds 9.0 beams"),
+        "{e}"
+    );
+    // The same count over another span: another lidar.
+    let e = bag(
+        "turned.mcap",
+        msg::LaserScan {
+            angle_min: -0.5,
+            angle_max: 1.5,
+            ..scan()
+        },
+    );
+    assert!(
+        e.ends_with("turned.mcap: topic /scan, scan 1: angle_min -0.5 differs from the first scan's -1: one lidar geometry a bag"),
+        "{e}"
+    );
+    let e = bag(
+        "range.mcap",
+        msg::LaserScan {
+            range_max: 30.0,
+            ..scan()
+        },
+    );
+    assert!(
+        e.contains("range.mcap: topic /scan, scan 1: range_max 30 differs"),
+        "{e}"
+    );
+    // A full-turn lidar's count (one fewer than the span's) is read.
+    let path = dir.path().join("full-turn.mcap");
+    small_bag(&path, |bag| {
+        let s = msg::LaserScan {
+            angle_max: 1.5,
+            ..scan()
+        };
+        write_ros(bag, "/scan", laser_scan_schema, 1.0, &s).unwrap();
+    });
+    assert!(rosbag::read(&path, &defaults).is_ok());
+}
+
+#[test]
+fn an_odometry_pose_beyond_100_km_is_refused_with_its_message_and_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("far.mcap");
+    small_bag(&path, |bag| {
+        let mut far = msg::Odometry {
+            child_frame_id: "base_link".into(),
+            ..Default::default()
+        };
+        far.pose.pose.position.y = -3e6;
+        write_ros(bag, "/odom", odometry_schema, 1.05, &far).unwrap();
+        write_ros(bag, "/scan", laser_scan_schema, 1.1, &scan()).unwrap();
+    });
+    let e = error(&path, &BagOptions::default());
+    assert!(
+        e.contains("far.mcap: topic /odom, message 1")
+            && e.ends_with("pose.pose.position.y = -3000000 m is beyond 100 km of the origin"),
+        "{e}"
+    );
 }

@@ -311,6 +311,7 @@ fn scan_at(t: f64) -> Stored {
             frame_id: "laser".into(),
         },
         angle_min: -1.0,
+        angle_max: 1.0,
         angle_increment: 0.5,
         range_min: 0.1,
         range_max: 10.0,

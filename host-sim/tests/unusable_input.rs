@@ -124,7 +124,10 @@ fn a_log_with_only_rear_scans_fails() {
         &["replay", "--filter", "grid-slam", "--dataset", &dataset],
     );
     assert!(
-        err.contains(&format!("{dataset}: no scans to use (no front laser scan)")),
+        err.contains(&format!(
+            "{}: no front laser scans (FLASER); its {SCANS} rear laser scans (RLASER) are not used",
+            log.display()
+        )),
         "{err}"
     );
 }

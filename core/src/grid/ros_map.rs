@@ -69,6 +69,8 @@ impl RosMap {
         let mut resolution = None;
         let mut origin = None;
         let mut negate = false;
+        // (value, line) of `occupied_thresh` and `free_thresh`.
+        let mut thresholds: [Option<(f64, usize)>; 2] = [None, None];
         for (n, line) in text.lines().enumerate() {
             let line = line.split('#').next().unwrap_or("");
             let Some((k, v)) = line.split_once(':') else {
@@ -97,9 +99,34 @@ impl RosMap {
                         _ => return Err(bad("expected [x, y, yaw]")),
                     }
                 }
-                "negate" => negate = v == "1" || v == "true",
+                "negate" => {
+                    negate = match v {
+                        "0" | "false" => false,
+                        "1" | "true" => true,
+                        _ => return Err(bad("must be 0 or 1")),
+                    }
+                }
+                // Read by `map_server` to make a trinary map; not used here, but a value
+                // no probability can have is an error in the file.
+                "occupied_thresh" | "free_thresh" => {
+                    let t: f64 = v.parse().map_err(|_| bad("not a number"))?;
+                    if !(0.0..=1.0).contains(&t) {
+                        return Err(bad("a probability threshold must be within 0 ..= 1"));
+                    }
+                    thresholds[usize::from(k == "free_thresh")] = Some((t, n + 1));
+                }
                 _ => {}
             }
+        }
+        if let [Some((occupied, _)), Some((free, line))] = thresholds
+            && free > occupied
+        {
+            return Err(error(
+                yaml,
+                format!(
+                    "line {line}: field `free_thresh`: {free} is above `occupied_thresh` {occupied}"
+                ),
+            ));
         }
         let missing = |f: &str| error(yaml, format!("field `{f}` is missing"));
         let image = image.ok_or_else(|| missing("image"))?;
@@ -161,7 +188,7 @@ pub struct Pgm<'a> {
 /// Parses a binary PGM (`P5`, 8-bit): the header (magic, width, height, maxval, with
 /// `#` comments) and exactly `width · height` pixel bytes after it. Refused: another
 /// magic, a missing or non-numeric field, a size of zero or above [`MAX_MAP_CELLS`],
-/// `maxval` outside 1 ..= 255 (16-bit PGMs are not read), too few pixel bytes.
+/// `maxval` outside 1 ..= 255 (16-bit PGMs are not read), fewer or more pixel bytes.
 pub fn parse_pgm(bytes: &[u8]) -> Result<Pgm<'_>, String> {
     let mut fields: Vec<&[u8]> = Vec::with_capacity(4);
     let mut i = 0;
@@ -216,17 +243,23 @@ pub fn parse_pgm(bytes: &[u8]) -> Result<Pgm<'_>, String> {
         .ok()
         .filter(|&m| m > 0)
         .ok_or_else(|| format!("PGM maxval {maxval} is not in 1 ..= 255 (8-bit PGMs only)"))?;
-    // One whitespace byte separates the header from the pixels.
+    // One whitespace byte separates the header from the pixels, which must be exactly
+    // as many as the header says: fewer is a truncated file, more a header that does
+    // not describe the data (or a second image, which a map does not have).
     let start = i + 1;
-    let pixels = bytes
-        .get(start..)
-        .and_then(|rest| rest.get(..cells))
-        .ok_or_else(|| {
-            format!(
-                "PGM is truncated: {} pixel bytes for {width} × {height}",
-                bytes.len().saturating_sub(start)
-            )
-        })?;
+    let data = bytes.len().saturating_sub(start);
+    if data < cells {
+        return Err(format!(
+            "PGM is truncated: {data} pixel bytes for {width} × {height}"
+        ));
+    }
+    if data > cells {
+        return Err(format!(
+            "PGM has {data} pixel bytes, {} more than its header's {width} × {height}",
+            data - cells
+        ));
+    }
+    let pixels = bytes.get(start..).unwrap_or_default();
     Ok(Pgm {
         width,
         height,
@@ -332,7 +365,7 @@ mod tests {
 
     #[test]
     fn bad_headers_are_refused_with_the_file_name() {
-        let cases: [(&[u8], &str); 8] = [
+        let cases: [(&[u8], &str); 9] = [
             (b"P2\n1 1\n255\n\0", "no P5"),
             (b"", "no P5"),
             (b"P5\n1 1\n", "ends early"),
@@ -341,6 +374,10 @@ mod tests {
             (b"P5\n2 2\n65535\n\0\0\0\0\0\0\0\0", "maxval 65535"),
             (b"P5\n2 2\n0\n\0\0\0\0", "maxval 0"),
             (b"P5\n4 4\n255\n\0\0\0", "truncated"),
+            (
+                b"P5\n2 1\n255\n\0\0\0",
+                "PGM has 3 pixel bytes, 1 more than its header's 2 × 1",
+            ),
         ];
         for (n, (bytes, why)) in cases.into_iter().enumerate() {
             let yaml = files(&format!("header{n}"), YAML, bytes);
@@ -350,5 +387,36 @@ mod tests {
             assert!(error.contains("m.pgm"), "{why}: {error}");
             assert!(error.contains(why), "{why}: {error}");
         }
+    }
+
+    #[test]
+    fn thresholds_and_negate_out_of_range_are_refused_with_their_line() {
+        let pgm = b"P5\n1 1\n255\n\0";
+        for (n, (extra, why)) in [
+            (
+                "occupied_thresh: 1.5\n",
+                "line 4: field `occupied_thresh`: a probability threshold must be within 0 ..= 1",
+            ),
+            (
+                "free_thresh: -0.2\n",
+                "line 4: field `free_thresh`: a probability threshold must be within 0 ..= 1",
+            ),
+            (
+                "occupied_thresh: 0.2\nfree_thresh: 0.65\n",
+                "line 5: field `free_thresh`: 0.65 is above `occupied_thresh` 0.2",
+            ),
+            ("negate: 2\n", "line 4: field `negate`: must be 0 or 1"),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let yaml = files(&format!("thresh{n}"), &format!("{YAML}{extra}"), pgm);
+            let error = RosMap::read(&yaml, &LogOdds::SYMMETRIC)
+                .unwrap_err()
+                .to_string();
+            assert!(error.contains("m.yaml") && error.ends_with(why), "{error}");
+        }
+        let ok = format!("{YAML}occupied_thresh: 0.65\nfree_thresh: 0.196\nnegate: 0\n");
+        assert!(RosMap::read(&files("thresh-ok", &ok, pgm), &LogOdds::SYMMETRIC).is_ok());
     }
 }

@@ -38,6 +38,7 @@ pub struct LocalizeOptions {
 
 /// `host-sim localize --map map.yaml --dataset carmen:<file>`.
 pub fn localize_cli(args: &LocalizeOptions, quiet: bool) -> Result<()> {
+    super::replay::bag_options_apply(&args.dataset, &args.bag)?;
     if args.global.enabled {
         return super::global::localize_cli(
             &args.map,

@@ -64,6 +64,7 @@ pub struct ReplayOptions {
 
 /// `host-sim replay`.
 pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
+    bag_options_apply(&args.dataset, &args.bag)?;
     let lidar = matches!(
         args.dataset,
         DatasetSpec::Carmen(_) | DatasetSpec::Thor(_) | DatasetSpec::Rosbag(_)
@@ -79,6 +80,7 @@ pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
             args.dataset.family()
         );
     }
+    options_apply(args, grid)?;
     if grid {
         return grid_replay(args, quiet);
     }
@@ -299,6 +301,43 @@ pub(crate) fn metrics_json(
     })
 }
 
+/// What a grid run read, used and lost of each input stream, with the reason, and a
+/// warning for each stream whose lost share is above `threshold` (`metrics.json`'s
+/// `input_loss`).
+pub(crate) fn input_loss(run: &GridRun, threshold: f64) -> serde_json::Value {
+    let read = run.trajectory.len();
+    let mut warnings = Vec::new();
+    let mut stream = |name: &str, lost: usize, verb: &str, reason: &str| {
+        let share = lost as f64 / read.max(1) as f64;
+        if share > threshold {
+            warnings.push(format!(
+                "{lost} of {read} {name} ({:.1} %) {verb}: {reason}; more than the settings' loss_warning_fraction {threshold}",
+                100.0 * share
+            ));
+        }
+        serde_json::json!({
+            "read": read,
+            "used": read - lost.min(read),
+            verb: lost,
+            "reason": reason,
+            "share": share,
+        })
+    };
+    let scans = stream("scans", run.skipped_scans, "skipped", "no usable beam");
+    let odometry = stream(
+        "odometry poses",
+        run.refused_odometry,
+        "refused",
+        "not finite",
+    );
+    serde_json::json!({
+        "warning_fraction": threshold,
+        "scans": scans,
+        "odometry": odometry,
+        "warnings": warnings,
+    })
+}
+
 /// Where [`score_and_write`] writes a run's outputs.
 pub(crate) struct RunOutputs<'a> {
     /// The output folder.
@@ -323,11 +362,20 @@ pub(crate) fn score_and_write(
     run.check_used(&lidar.source)?;
     let rel = super::relation_error_for(&lidar.path, grid.relations.as_deref(), run)?;
     let wall = started.elapsed().as_secs_f64();
-    let metrics = with_reference(
+    let mut metrics = with_reference(
         metrics_json(&lidar.name, run, &lidar.options, rel, faults, wall),
         run,
         grid,
     )?;
+    let loss = input_loss(run, lidar.loss_warning);
+    for warning in loss["warnings"].as_array().into_iter().flatten() {
+        eprintln!(
+            "warning: {}: {}",
+            lidar.source,
+            warning.as_str().unwrap_or_default()
+        );
+    }
+    metrics["input_loss"] = loss;
     write_outputs(
         outputs.dir,
         run,
@@ -551,10 +599,89 @@ pub(crate) struct LidarLog {
     pub log: CarmenLog,
     /// The grid settings for it.
     pub options: GridRunOptions,
+    /// Share of its scans or odometry poses a run may lose without a warning (the
+    /// settings' `loss_warning_fraction`).
+    pub loss_warning: f64,
 }
 
 /// The lidar dataset `spec` (its file found by [`resolve_log`]): a CARMEN log, or a ROS 2
 /// bag (its scans as laser messages, its lidar geometry), with its grid settings.
+/// Refuses the options of the estimator a replay does not run: the grid filter's on a
+/// landmark EKF-SLAM replay, the EKF's (`--association`, `--precision f32`) on a grid
+/// replay. They would be ignored without a word.
+fn options_apply(args: &ReplayOptions, grid: bool) -> Result<()> {
+    let g = &args.grid;
+    let (given, applies_to): (Vec<&str>, &str) = if grid {
+        let given = [
+            ("--association", args.association.is_some()),
+            ("--precision", args.precision != Precision::default()),
+        ];
+        (
+            given
+                .into_iter()
+                .filter_map(|(n, s)| s.then_some(n))
+                .collect(),
+            "the landmark EKF-SLAM (`--filter ekf-slam`)",
+        )
+    } else {
+        let given = [
+            ("--particles", g.particles != 200),
+            ("--window", g.window.is_some()),
+            ("--beams", g.beams.is_some()),
+            ("--relations", g.relations.is_some()),
+            ("--preset", g.preset.is_some()),
+            ("--reference", g.reference.is_some()),
+            ("--reference-offset", g.reference_offset != 0.0),
+            ("--loop-closure", g.loop_closure),
+        ];
+        (
+            given
+                .into_iter()
+                .filter_map(|(n, s)| s.then_some(n))
+                .collect(),
+            "the grid filters (`--filter grid-slam`)",
+        )
+    };
+    if !given.is_empty() {
+        bail!(
+            "{} applies to {applies_to}, which this replay of `{}:` does not run",
+            given.join(", "),
+            args.dataset.family()
+        );
+    }
+    Ok(())
+}
+
+/// Refuses the options of a ROS 2 bag (`--lidar-mount`, the topics) on a dataset that is
+/// not one: they would be ignored without a word.
+pub(crate) fn bag_options_apply(spec: &DatasetSpec, bag: &BagOptions) -> Result<()> {
+    if matches!(spec, DatasetSpec::Rosbag(_)) {
+        return Ok(());
+    }
+    let d = BagOptions::default();
+    let given: Vec<&str> = [
+        ("--lidar-mount", bag.lidar_mount.is_some()),
+        ("--scan-topic", bag.scan_topic != d.scan_topic),
+        ("--odom-topic", bag.odom_topic != d.odom_topic),
+        ("--imu-topic", bag.imu_topic != d.imu_topic),
+        (
+            "--tf-static-topic",
+            bag.tf_static_topic != d.tf_static_topic,
+        ),
+    ]
+    .into_iter()
+    .filter_map(|(name, set)| set.then_some(name))
+    .collect();
+    if !given.is_empty() {
+        bail!(
+            "{} applies to `rosbag:` datasets only, not to a `{}:` dataset, which has no topics and no lidar mount to set",
+            given.join(", "),
+            spec.family()
+        );
+    }
+    Ok(())
+}
+
 pub(crate) fn lidar_log(
     spec: &DatasetSpec,
     config: Option<&Path>,
@@ -573,6 +700,7 @@ pub(crate) fn lidar_log(
         .map_or_else(|| file.to_string(), |n| n.to_string_lossy().to_string());
     let (log, options) = read_lidar(spec, &path, config, grid, bag)?;
     Ok(LidarLog {
+        loss_warning: crate::domain::grid::loss_warning_fraction(config)?,
         source: format!("{}:{}", spec.family(), path.display()),
         path,
         name,

@@ -179,6 +179,12 @@ impl Default for RecoverySettings {
     }
 }
 
+/// Largest noise figure of a landmark settings file, in its unit (m, m/s, rad/s, or per
+/// m/s, per rad/s, a scale): beyond it a value is a typo, not a noise model.
+pub const MAX_NOISE_STD: f64 = 100.0;
+/// Longest odometry latency a landmark settings file may give, seconds.
+pub const MAX_LATENCY_S: f64 = 10.0;
+
 impl Settings {
     /// The built-in defaults of a dataset family (`mrclam`, `sim`).
     pub fn builtin(family: &str) -> Result<Self> {
@@ -300,6 +306,45 @@ impl Settings {
             bail!(
                 "{name} = {v}: noise figures, ranges and windows must be finite and non-negative"
             );
+        }
+        // Finite and non-negative, but beyond any physical range: a typo (1e30), not a
+        // noise model. The bounds are stated in docs/guide.md.
+        let bounded = [
+            ("odometry.linear_std", o.linear_std, MAX_NOISE_STD),
+            (
+                "odometry.linear_std_per_mps",
+                o.linear_std_per_mps,
+                MAX_NOISE_STD,
+            ),
+            ("odometry.angular_std", o.angular_std, MAX_NOISE_STD),
+            (
+                "odometry.angular_std_per_radps",
+                o.angular_std_per_radps,
+                MAX_NOISE_STD,
+            ),
+            (
+                "odometry.angular_std_per_mps",
+                o.angular_std_per_mps,
+                MAX_NOISE_STD,
+            ),
+            ("odometry.speed_scale_std", o.speed_scale_std, MAX_NOISE_STD),
+            ("odometry.turn_scale_std", o.turn_scale_std, MAX_NOISE_STD),
+            ("odometry.latency_s", o.latency_s, MAX_LATENCY_S),
+            ("sighting.range_std", s.range_std, MAX_NOISE_STD),
+            ("sighting.bearing_std", s.bearing_std, core::f64::consts::PI),
+            (
+                "sighting.range_bias_offset_std",
+                s.range_bias_offset_std,
+                MAX_NOISE_STD,
+            ),
+            (
+                "sighting.range_bias_curvature_std",
+                s.range_bias_curvature_std,
+                MAX_NOISE_STD,
+            ),
+        ];
+        if let Some((name, v, max)) = bounded.iter().find(|(_, v, max)| v > max) {
+            bail!("{name} = {v}: beyond any physical range (0 ..= {max})");
         }
         if !(s.range_bias_offset_mean.is_finite() && s.range_bias_curvature_mean.is_finite()) {
             bail!("sighting.range_bias_offset_mean and range_bias_curvature_mean must be finite");
@@ -511,6 +556,25 @@ mod tests {
         );
         std::fs::write(&p, "[sighting]\nrange_std = -1.0\n").unwrap();
         assert!(Settings::load("mrclam", Some(&p)).is_err());
+        // Finite, but beyond any physical range: refused with the key and the range.
+        for (text, expected) in [
+            (
+                "[sighting]\nrange_std = 1e30\n",
+                "sighting.range_std = 1000000000000000000000000000000: beyond any physical range (0 ..= 100)",
+            ),
+            (
+                "[odometry]\nlatency_s = 3600.0\n",
+                "odometry.latency_s = 3600: beyond any physical range (0 ..= 10)",
+            ),
+            (
+                "[sighting]\nbearing_std = 7.0\n",
+                "sighting.bearing_std = 7: beyond any physical range (0 ..= 3.141592653589793)",
+            ),
+        ] {
+            std::fs::write(&p, text).unwrap();
+            let e = format!("{:#}", Settings::load("mrclam", Some(&p)).unwrap_err());
+            assert!(e.contains(expected), "{e}");
+        }
         // The unknown-id overlay applies to ICNN/JCBB only.
         std::fs::write(&p, "[unknown_ids.sighting]\nrange_std = 0.3\n").unwrap();
         let known = Settings::load_for("mrclam", Some(&p), Some(AssociationMode::Known)).unwrap();
@@ -526,12 +590,9 @@ mod tests {
         base.validate().unwrap();
         let huge = 1e39; // finite as an f64, ∞ as an f32
         type SetValue = fn(&mut Settings, f64);
-        let cases: [(SetValue, &str); 5] = [
-            (
-                |s, v| s.odometry.angular_std_per_radps = v,
-                "odometry.angular_std_per_radps",
-            ),
-            (|s, v| s.sighting.bearing_std = v, "sighting.bearing_std"),
+        // Keys without a physical bound (the noise figures have one, checked first:
+        // `builtins_parse_and_overlay_changes_only_given_keys`).
+        let cases: [(SetValue, &str); 3] = [
             (|s, v| s.sighting.mount[2] = v, "sighting.mount"),
             (|s, v| s.recovery.huber_sigma = v, "recovery.huber_sigma"),
             (|s, v| s.recovery.heading_std = v, "recovery.heading_std"),
@@ -548,8 +609,10 @@ mod tests {
             set(&mut s, 1e38);
             s.validate().unwrap();
         }
+        // A noise figure that large is beyond any physical range before it is beyond f32.
         base.sighting.range_std = 1e38;
-        base.validate().unwrap();
+        let err = format!("{:#}", base.validate().unwrap_err());
+        assert!(err.contains("beyond any physical range"), "{err}");
     }
 
     #[test]

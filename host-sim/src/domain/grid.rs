@@ -232,6 +232,32 @@ pub struct GridToml {
     base: Option<String>,
     /// `[loop_closure]`: grid SLAM's loop closure ([`LoopClosureToml`]).
     loop_closure: Option<LoopClosureToml>,
+    /// Share of an input stream (scans, odometry poses) a run may skip or refuse before it
+    /// says so on stderr and in `metrics.json` (`input_loss`); default
+    /// [`LOSS_WARNING_FRACTION`].
+    loss_warning_fraction: Option<f64>,
+}
+
+/// Share of an input stream a grid run may skip or refuse without a warning (10 %), unless
+/// the settings file's `loss_warning_fraction` gives another.
+pub const LOSS_WARNING_FRACTION: f64 = 0.1;
+
+/// The `loss_warning_fraction` of the settings file `config` (else
+/// [`LOSS_WARNING_FRACTION`]); refused outside 0 ..= 1, naming the file.
+pub fn loss_warning_fraction(config: Option<&Path>) -> Result<f64> {
+    let Some(path) = config else {
+        return Ok(LOSS_WARNING_FRACTION);
+    };
+    let f = GridToml::read(path)?
+        .loss_warning_fraction
+        .unwrap_or(LOSS_WARNING_FRACTION);
+    if !(0.0..=1.0).contains(&f) {
+        bail!(
+            "in {}: `loss_warning_fraction` = {f} must be within 0 ..= 1",
+            path.display()
+        );
+    }
+    Ok(f)
 }
 
 /// The `[loop_closure]` table of a grid settings file: `enabled` (default `true` when
@@ -376,8 +402,48 @@ impl GridToml {
         if let Some(invalid) = c.invalid_setting() {
             bail!("grid filter settings: {invalid}");
         }
+        if let Some((key, value, range)) = beyond_physical_range(&c) {
+            bail!("grid filter settings: `{key}` = {value} is beyond any physical range ({range})");
+        }
         Ok(c)
     }
+}
+
+/// Smallest and largest cell edge a grid setting may give, metres.
+pub const RESOLUTION_RANGE_M: (f32, f32) = (0.001, 10.0);
+/// Largest odometry noise figure a grid setting may give (m, rad, or m/m, rad/rad …):
+/// the library takes any finite one, but a standard deviation of 100 m or 100 rad a step
+/// is no model of a wheel, only a typo.
+pub const MAX_MOTION_NOISE: f32 = 100.0;
+
+/// The first value of `c` that is finite and of the right sign (the library checked
+/// that) but beyond any physical range: `(key, value, the range)`.
+fn beyond_physical_range(c: &GridPfConfig) -> Option<(&'static str, f32, String)> {
+    let (lo, hi) = RESOLUTION_RANGE_M;
+    if !(lo..=hi).contains(&c.resolution) {
+        return Some(("resolution", c.resolution, format!("{lo} ..= {hi} m")));
+    }
+    let n = &c.filter.motion_noise;
+    [
+        ("distance_std", n.distance_std, "m"),
+        ("distance_std_per_metre", n.distance_std_per_metre, "m/m"),
+        (
+            "distance_std_per_radian",
+            n.distance_std_per_radian,
+            "m/rad",
+        ),
+        ("heading_std", n.heading_std, "rad"),
+        (
+            "heading_std_per_radian",
+            n.heading_std_per_radian,
+            "rad/rad",
+        ),
+        ("heading_std_per_metre", n.heading_std_per_metre, "rad/m"),
+        ("sideways_std_per_metre", n.sideways_std_per_metre, "m/m"),
+    ]
+    .into_iter()
+    .find(|(_, v, _)| *v > MAX_MOTION_NOISE)
+    .map(|(key, v, unit)| (key, v, format!("0 ..= {MAX_MOTION_NOISE} {unit}")))
 }
 
 /// The lidar geometry of a CARMEN log's front laser: `n` beams over 180° from −90°
@@ -815,6 +881,42 @@ impl Default for GlobalOptions {
             first_pass: None,
             full_turn_below: None,
             bitmap_only: false,
+        }
+    }
+}
+
+#[cfg(test)]
+mod physical_range_tests {
+    use super::*;
+
+    #[test]
+    fn settings_beyond_any_physical_range_are_refused_with_their_key() {
+        let read = |text: &str| {
+            toml::from_str::<GridToml>(text)
+                .unwrap()
+                .apply()
+                .map_err(|e| e.to_string())
+        };
+        assert_eq!(
+            read("distance_std = 1e30").unwrap_err(),
+            "grid filter settings: `distance_std` = 1000000000000000000000000000000 is beyond any physical range (0 ..= 100 m)"
+        );
+        assert_eq!(
+            read("heading_std_per_metre = 500.0").unwrap_err(),
+            "grid filter settings: `heading_std_per_metre` = 500 is beyond any physical range (0 ..= 100 rad/m)"
+        );
+        assert_eq!(
+            read("resolution = 1e-5").unwrap_err(),
+            "grid filter settings: `resolution` = 0.00001 is beyond any physical range (0.001 ..= 10 m)"
+        );
+        assert!(read("resolution = 0.0").unwrap_err().contains("resolution"));
+        assert!(
+            read("resolution = -0.05")
+                .unwrap_err()
+                .contains("resolution")
+        );
+        for base in ["default", "untuned", "microcontroller"] {
+            assert!(read(&format!("base = \"{base}\"")).is_ok(), "{base}");
         }
     }
 }

@@ -145,9 +145,14 @@ pub fn write_gif(
     );
     let file =
         std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    // Every write names the file (a full disk included), and the end of the file is
+    // written and flushed here, where its error is seen, not when the encoder is dropped.
+    let writing = || format!("writing {}", path.display());
     let mut encoder = gif::Encoder::new(std::io::BufWriter::new(file), wu, hu, &palette())
-        .with_context(|| format!("writing {}", path.display()))?;
-    encoder.set_repeat(gif::Repeat::Infinite)?;
+        .with_context(writing)?;
+    encoder
+        .set_repeat(gif::Repeat::Infinite)
+        .with_context(writing)?;
     let delay = (100 / settings.fps.max(1)).max(2);
     let hold = ((settings.hold_s * 100.0).round() as u16).max(delay);
     let mut cells = vec![0i8; run.cells.len()];
@@ -175,11 +180,17 @@ pub fn write_gif(
         let last = k + 1 == run.snapshots.len();
         let mut f = delta(&indexed, previous.as_deref(), w, h);
         f.delay = if last { hold } else { delay };
-        encoder.write_frame(&f)?;
+        encoder.write_frame(&f).with_context(writing)?;
         previous = Some(indexed);
     }
-    drop(encoder);
-    let bytes = std::fs::metadata(path)?.len();
+    // The trailer, then the buffer flushed.
+    let out = encoder.into_inner().with_context(writing)?;
+    out.into_inner()
+        .map_err(|e| e.into_error())
+        .with_context(writing)?;
+    let bytes = std::fs::metadata(path)
+        .with_context(|| format!("reading the size of {}", path.display()))?
+        .len();
     Ok(AnimationReport {
         frames: run.snapshots.len(),
         size: (w, h),

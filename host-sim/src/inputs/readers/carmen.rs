@@ -5,7 +5,10 @@
 //! skipped. Messages are kept in **file order**: in the Intel log the time stamps go
 //! backwards 265 times and some scans are < 10 ms apart, so order and motion must never
 //! be derived from stamp differences — use the odometry pose increments between scans.
-//! A stamp that is not finite (`nan`, `inf`) is refused with its line number.
+//! A stamp that is not finite (`nan`, `inf`) is refused with its line number, as are a
+//! laser line whose declared beam count is not the count of readings that follow (or 0),
+//! a scan of another length than the log's first of that laser, and a position beyond
+//! 100 km ([`MAX_COORDINATE_M`]).
 
 use anyhow::{Context, Result, bail};
 use std::collections::BTreeMap;
@@ -98,6 +101,52 @@ fn num(tok: Option<&str>, line: usize, what: &str) -> Result<f64, CarmenError> {
         })
 }
 
+/// The fields of a laser message after its readings.
+const LASER_TAIL: [&str; 9] = [
+    "x",
+    "y",
+    "theta",
+    "odom_x",
+    "odom_y",
+    "odom_theta",
+    "ipc_timestamp",
+    "ipc_hostname",
+    "logger_timestamp",
+];
+
+/// The fields of an `ODOM` message.
+const ODOM_FIELDS: [&str; 9] = [
+    "x",
+    "y",
+    "theta",
+    "tv",
+    "rv",
+    "accel",
+    "ipc_timestamp",
+    "ipc_hostname",
+    "logger_timestamp",
+];
+
+/// Farthest a pose may lie from the origin of its frame, metres, along either axis: the
+/// library refuses steps beyond 100 km (where `f32` coordinates are coarser than 8 mm).
+pub const MAX_COORDINATE_M: f64 = 1e5;
+
+/// A pose coordinate, refused beyond [`MAX_COORDINATE_M`] (a non-finite one is kept: the
+/// replay refuses and counts such an odometry pose).
+fn coordinate(value: f64, line: usize, what: &str) -> Result<f64, CarmenError> {
+    if value.abs() > MAX_COORDINATE_M {
+        Err(CarmenError {
+            line,
+            reason: format!(
+                "{what} = {value} m is beyond {} km of the origin",
+                MAX_COORDINATE_M / 1e3
+            ),
+        })
+    } else {
+        Ok(value)
+    }
+}
+
 /// A message's `ipc_timestamp`, refused when it is not finite: a NaN or infinite stamp
 /// would reach the trajectory written and the stamp matching of the metrics.
 fn stamp(value: f64, line: usize) -> Result<f64, CarmenError> {
@@ -117,7 +166,9 @@ pub fn read(path: &Path) -> Result<CarmenLog> {
     let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
     let gz = path.extension().is_some_and(|e| e == "gz");
     let log = if gz {
-        parse(BufReader::new(flate2::read::GzDecoder::new(file)))
+        // Every member of a multi-member gzip file (`cat a.gz b.gz`, `gzip` of a stream
+        // written in parts), not only the first.
+        parse(BufReader::new(flate2::read::MultiGzDecoder::new(file)))
     } else {
         parse(BufReader::new(file))
     };
@@ -130,6 +181,8 @@ pub fn parse<R: BufRead>(
     reader: R,
 ) -> std::result::Result<CarmenLog, Box<dyn std::error::Error + Send + Sync>> {
     let mut log = CarmenLog::default();
+    // (line, readings) of the first front and the first rear scan.
+    let mut first_scan: [Option<(usize, usize)>; 2] = [None, None];
     for (i, line) in reader.lines().enumerate() {
         let line = line?;
         let n = i + 1;
@@ -147,28 +200,62 @@ pub fn parse<R: BufRead>(
                     .into());
                 }
                 let count = count as usize;
+                if count == 0 {
+                    return Err(CarmenError {
+                        line: n,
+                        reason: format!("{kind} declares 0 readings: a scan needs at least one"),
+                    }
+                    .into());
+                }
+                // The declared count must be the count of readings that follow: one more
+                // or fewer would shift every later field (a reading read as x, a stamp as
+                // a pose).
+                let fields: Vec<&str> = tok.collect();
+                if fields.len() != count + LASER_TAIL.len() {
+                    return Err(CarmenError {
+                        line: n,
+                        reason: format!(
+                            "{kind} declares {count} readings but {} fields follow ({count} readings and {} more fields expected: {})",
+                            fields.len(),
+                            LASER_TAIL.len(),
+                            LASER_TAIL.join(" ")
+                        ),
+                    }
+                    .into());
+                }
+                // Every scan of one laser has one geometry: a scan of another length is
+                // refused, naming the line of the first scan of that laser.
+                let rear = kind == "RLASER";
+                let first = &mut first_scan[usize::from(rear)];
+                match *first {
+                    None => *first = Some((n, count)),
+                    Some((line, beams)) if beams != count => {
+                        return Err(CarmenError {
+                            line: n,
+                            reason: format!(
+                                "{kind} declares {count} readings, the log's first {kind} (line {line}) {beams}: scans of different lengths in one log are not read"
+                            ),
+                        }
+                        .into());
+                    }
+                    Some(_) => {}
+                }
+                let mut tok = fields.into_iter();
                 let mut ranges = Vec::with_capacity(count);
                 for _ in 0..count {
                     ranges.push(num(tok.next(), n, "range")? as f32);
                 }
                 let mut f = [0.0; 7];
                 for (k, v) in f.iter_mut().enumerate() {
-                    *v = num(
-                        tok.next(),
-                        n,
-                        [
-                            "x",
-                            "y",
-                            "theta",
-                            "odom_x",
-                            "odom_y",
-                            "odom_theta",
-                            "ipc_timestamp",
-                        ][k],
-                    )?;
+                    *v = num(tok.next(), n, LASER_TAIL[k])?;
+                }
+                let _hostname = tok.next();
+                num(tok.next(), n, "logger_timestamp")?;
+                for (k, name) in [(0, "x"), (1, "y"), (3, "odom_x"), (4, "odom_y")] {
+                    coordinate(f[k], n, name)?;
                 }
                 log.messages.push(Message::Laser(LaserMessage {
-                    rear: kind == "RLASER",
+                    rear,
                     ranges,
                     pose: [f[0], f[1], f[2]],
                     odom: [f[3], f[4], f[5]],
@@ -176,14 +263,28 @@ pub fn parse<R: BufRead>(
                 }));
             }
             Some("ODOM") => {
+                let fields: Vec<&str> = tok.collect();
+                if fields.len() != ODOM_FIELDS.len() {
+                    return Err(CarmenError {
+                        line: n,
+                        reason: format!(
+                            "ODOM has {} fields, expected {}: {}",
+                            fields.len(),
+                            ODOM_FIELDS.len(),
+                            ODOM_FIELDS.join(" ")
+                        ),
+                    }
+                    .into());
+                }
+                let mut tok = fields.into_iter();
                 let mut f = [0.0; 7];
                 for (k, v) in f.iter_mut().enumerate() {
-                    *v = num(
-                        tok.next(),
-                        n,
-                        ["x", "y", "theta", "tv", "rv", "accel", "ipc_timestamp"][k],
-                    )?;
+                    *v = num(tok.next(), n, ODOM_FIELDS[k])?;
                 }
+                let _hostname = tok.next();
+                num(tok.next(), n, "logger_timestamp")?;
+                coordinate(f[0], n, "x")?;
+                coordinate(f[1], n, "y")?;
                 log.messages.push(Message::Odom(OdomMessage {
                     pose: [f[0], f[1], f[2]],
                     tv: f[3],
@@ -217,11 +318,19 @@ pub fn resolve_log(spec: &str) -> Result<PathBuf> {
     crate::domain::datasets::dataset_path(spec)
 }
 
-/// Reads a CARMEN log.
+/// Reads a CARMEN log for the grid filters: refused without a front laser scan (the rear
+/// laser's are not used).
 pub fn read_log(path: &Path) -> Result<CarmenLog> {
     let log = read(path)?;
-    if log.lasers().next().is_none() {
-        bail!("{}: no laser scans", path.display());
+    let rear = log.lasers().filter(|l| l.rear).count();
+    if rear == log.lasers().count() {
+        if rear == 0 {
+            bail!("{}: no laser scans", path.display());
+        }
+        bail!(
+            "{}: no front laser scans (FLASER); its {rear} rear laser scans (RLASER) are not used",
+            path.display()
+        );
     }
     Ok(log)
 }
@@ -272,5 +381,102 @@ mod tests {
                 format!("CARMEN log line {line}: ipc_timestamp {value} is not finite")
             );
         }
+    }
+
+    fn error(text: &str) -> String {
+        parse(text.as_bytes()).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn a_declared_beam_count_that_disagrees_with_the_fields_is_refused_with_its_line() {
+        let good = "FLASER 3 1 2 3 0 0 0 0 0 0 5.0 h 5.0\n";
+        assert!(parse(good.as_bytes()).is_ok());
+        // One reading more than declared: it would be read as x, and x as y, …
+        let e = error(&format!("{good}FLASER 3 1 2 3 4 0 0 0 0 0 0 5.1 h 5.1\n"));
+        assert_eq!(
+            e,
+            "CARMEN log line 2: FLASER declares 3 readings but 13 fields follow (3 readings and 9 \
+             more fields expected: x y theta odom_x odom_y odom_theta ipc_timestamp ipc_hostname \
+             logger_timestamp)"
+        );
+        // One fewer.
+        let e = error("RLASER 3 1 2 0 0 0 0 0 0 5.1 h 5.1\n");
+        assert!(
+            e.starts_with("CARMEN log line 1: RLASER declares 3 readings but 11 fields follow"),
+            "{e}"
+        );
+        // An ODOM message with a field missing.
+        let e = error("ODOM 0 0 0 0 0 5.0 h 5.0\n");
+        assert!(
+            e.starts_with("CARMEN log line 1: ODOM has 8 fields, expected 9"),
+            "{e}"
+        );
+        // A logger stamp that is not a number.
+        let e = error("FLASER 1 1 0 0 0 0 0 0 5.0 h x\n");
+        assert_eq!(e, "CARMEN log line 1: missing or invalid logger_timestamp");
+    }
+
+    #[test]
+    fn scans_of_another_length_are_refused_naming_both_lines() {
+        let text = "FLASER 2 1 2 0 0 0 0 0 0 5.0 h 5.0\nRLASER 1 1 0 0 0 0 0 0 5.0 h 5.0\n\
+            FLASER 2 1 2 0 0 0 0 0 0 5.1 h 5.1\nFLASER 3 1 2 3 0 0 0 0 0 0 5.2 h 5.2\n";
+        assert_eq!(
+            error(text),
+            "CARMEN log line 4: FLASER declares 3 readings, the log's first FLASER (line 1) 2: \
+             scans of different lengths in one log are not read"
+        );
+        // The rear laser has its own length.
+        assert!(parse(&text.as_bytes()[..text.rfind("FLASER 3").unwrap()]).is_ok());
+    }
+
+    #[test]
+    fn a_scan_of_no_reading_is_refused_as_such() {
+        assert_eq!(
+            error("FLASER 0 0 0 0 0 0 0 5.0 h 5.0\n"),
+            "CARMEN log line 1: FLASER declares 0 readings: a scan needs at least one"
+        );
+    }
+
+    #[test]
+    fn a_pose_beyond_100_km_is_refused_with_its_field() {
+        assert_eq!(
+            error("FLASER 1 1 0 0 0 0 2e5 0 5.0 h 5.0\n"),
+            "CARMEN log line 1: odom_y = 200000 m is beyond 100 km of the origin"
+        );
+        assert_eq!(
+            error("ODOM 0 0 0 0 0 0 5.0 h 5.0\nODOM -1e7 0 0 0 0 0 5.1 h 5.1\n"),
+            "CARMEN log line 2: x = -10000000 m is beyond 100 km of the origin"
+        );
+    }
+
+    #[test]
+    fn every_member_of_a_multi_member_gzip_file_is_read() {
+        use std::io::Write;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("two.log.gz");
+        let mut bytes = Vec::new();
+        for stamp in [5.0, 5.1] {
+            let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+            writeln!(gz, "FLASER 1 1 0 0 0 0 0 0 {stamp} h {stamp}").unwrap();
+            bytes.extend(gz.finish().unwrap());
+        }
+        std::fs::write(&path, bytes).unwrap();
+        let log = read(&path).unwrap();
+        assert_eq!(
+            log.lasers().map(|l| l.stamp).collect::<Vec<_>>(),
+            [5.0, 5.1]
+        );
+    }
+
+    #[test]
+    fn a_log_of_rear_scans_only_has_no_scans_to_use() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rear.clf");
+        std::fs::write(&path, "RLASER 1 1 0 0 0 0 0 0 5.0 h 5.0\n").unwrap();
+        let e = read_log(&path).unwrap_err().to_string();
+        assert!(
+            e.ends_with("rear.clf: no front laser scans (FLASER); its 1 rear laser scans (RLASER) are not used"),
+            "{e}"
+        );
     }
 }

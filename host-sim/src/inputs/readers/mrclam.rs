@@ -60,16 +60,20 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
         });
         let truth = s.spawn(|| {
             let mut poses = Vec::with_capacity(65_536);
+            let mut far = None;
             if gt_path.exists() {
                 read_table_with::<4>(&gt_path, |row| {
                     let [stamp, x, y, theta] = row.values;
+                    if far.is_none() {
+                        far = beyond(&gt_path, row.line, [("x", x), ("y", y)]).err();
+                    }
                     poses.push(TruePose {
                         stamp,
                         pose: Pose2::new(x, y, theta),
                     });
                 })?;
             }
-            Ok::<_, ReadError>(poses)
+            far.map_or(Ok(poses), Err)
         });
         let measurements = read_table::<4>(&meas_path);
         let panicked = |_| anyhow::anyhow!("reader thread panicked");
@@ -119,6 +123,11 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
     if lm_path.exists() {
         for row in read_table::<5>(&lm_path)? {
             let id = whole(&lm_path, row.line, row.values[0], "subject")?;
+            beyond(
+                &lm_path,
+                row.line,
+                [("x", row.values[1]), ("y", row.values[2])],
+            )?;
             landmarks.push(TrueLandmark {
                 id,
                 position: [row.values[1], row.values[2]],
@@ -145,6 +154,26 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
     })
 }
 
+/// Refuses a position coordinate beyond 100 km of the origin
+/// ([`super::carmen::MAX_COORDINATE_M`]), naming the line and the field.
+fn beyond<const N: usize>(
+    path: &Path,
+    line: usize,
+    fields: [(&str, f64); N],
+) -> Result<(), ReadError> {
+    match fields
+        .into_iter()
+        .find(|(_, v)| v.abs() > super::carmen::MAX_COORDINATE_M)
+    {
+        Some((what, v)) => Err(invalid(
+            path,
+            line,
+            format!("{what} = {v} m is beyond 100 km of the origin"),
+        )),
+        None => Ok(()),
+    }
+}
+
 /// A field that must hold a non-negative whole number.
 fn whole(path: &Path, line: usize, v: f64, what: &str) -> Result<u32, ReadError> {
     if v >= 0.0 && v.fract() == 0.0 && v <= f64::from(u32::MAX) {
@@ -155,5 +184,48 @@ fn whole(path: &Path, line: usize, v: f64, what: &str) -> Result<u32, ReadError>
             line,
             format!("{what} `{v}` is not a whole number"),
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A one-robot MRCLAM folder whose ground truth's second row is `truth_row`.
+    fn folder(truth_row: &str, landmark_row: &str) -> tempfile::TempDir {
+        let dir = tempfile::tempdir().unwrap();
+        let head = "# a\n# b\n# c\n# d\n";
+        let write = |name: &str, rows: &str| {
+            std::fs::write(dir.path().join(name), format!("{head}{rows}")).unwrap();
+        };
+        write("Barcodes.dat", "6\t72\n");
+        write("Robot1_Odometry.dat", "10.0\t0.1\t0.0\n10.1\t0.1\t0.0\n");
+        write("Robot1_Measurement.dat", "10.05\t72\t2.0\t0.1\n");
+        write(
+            "Robot1_Groundtruth.dat",
+            &format!("10.0\t1.0\t2.0\t0.0\n{truth_row}\n"),
+        );
+        write("Landmark_Groundtruth.dat", &format!("{landmark_row}\n"));
+        dir
+    }
+
+    #[test]
+    fn a_position_beyond_100_km_is_refused_with_its_line_and_field() {
+        let good = folder("10.1\t1.01\t2.0\t0.0", "6\t3.0\t4.0\t0.01\t0.01");
+        assert_eq!(read(good.path(), 1).unwrap().landmarks.len(), 1);
+        let far = folder("10.1\t1.01\t-2e8\t0.0", "6\t3.0\t4.0\t0.01\t0.01");
+        let e = read(far.path(), 1).unwrap_err().to_string();
+        assert!(
+            e.ends_with(
+                "Robot1_Groundtruth.dat:6: y = -200000000 m is beyond 100 km of the origin"
+            ),
+            "{e}"
+        );
+        let far = folder("10.1\t1.01\t2.0\t0.0", "6\t3e6\t4.0\t0.01\t0.01");
+        let e = read(far.path(), 1).unwrap_err().to_string();
+        assert!(
+            e.ends_with("Landmark_Groundtruth.dat:5: x = 3000000 m is beyond 100 km of the origin"),
+            "{e}"
+        );
     }
 }

@@ -431,6 +431,99 @@ fn odometry_at(odom: &[(f64, Pose2<f64>)], before: usize, t: f64) -> Option<Pose
         .map(|(_, p)| *p)
 }
 
+/// Checks one `LaserScan` on its own: finite angles, an angle increment that is not 0,
+/// ranges as many as its angle span holds (`(angle_max − angle_min) / angle_increment +
+/// 1`, or one fewer: a full-turn lidar whose last beam would repeat its first; to half a
+/// beam), `0 ≤ range_min < range_max`. The error names the field.
+pub fn check_scan(s: &msg::LaserScan) -> std::result::Result<(), String> {
+    for (name, v) in [
+        ("angle_min", s.angle_min),
+        ("angle_max", s.angle_max),
+        ("angle_increment", s.angle_increment),
+        ("range_min", s.range_min),
+        ("range_max", s.range_max),
+    ] {
+        if !v.is_finite() {
+            return Err(format!("{name} {v} is not finite"));
+        }
+    }
+    if s.angle_increment == 0.0 {
+        return Err("angle_increment is 0: the beams would all point one way".into());
+    }
+    if s.ranges.is_empty() {
+        return Err("no ranges: a scan needs at least one".into());
+    }
+    let span = f64::from(s.angle_max) - f64::from(s.angle_min);
+    let steps = span / f64::from(s.angle_increment);
+    let n = s.ranges.len() as f64;
+    if !((steps - 0.5)..=(steps + 1.5)).contains(&n) {
+        return Err(format!(
+            "{} ranges, but angle_min {} … angle_max {} by angle_increment {} holds {:.1} beams",
+            s.ranges.len(),
+            s.angle_min,
+            s.angle_max,
+            s.angle_increment,
+            steps + 1.0
+        ));
+    }
+    if !(s.range_min >= 0.0 && s.range_max > s.range_min) {
+        return Err(format!(
+            "range_min {} and range_max {}: need 0 ≤ range_min < range_max",
+            s.range_min, s.range_max
+        ));
+    }
+    Ok(())
+}
+
+/// The fields of a scan that make its geometry, compared scan by scan.
+#[derive(Clone, Debug, PartialEq)]
+struct ScanGeometry {
+    angle_min: f32,
+    angle_increment: f32,
+    range_min: f32,
+    range_max: f32,
+    frame_id: String,
+}
+
+impl ScanGeometry {
+    fn of(s: &msg::LaserScan) -> Self {
+        Self {
+            angle_min: s.angle_min,
+            angle_increment: s.angle_increment,
+            range_min: s.range_min,
+            range_max: s.range_max,
+            frame_id: s.header.frame_id.trim_start_matches('/').to_owned(),
+        }
+    }
+
+    /// The first field in which `self` differs from `other`.
+    fn differs_from(&self, other: &Self) -> Option<&'static str> {
+        [
+            ("angle_min", self.angle_min == other.angle_min),
+            (
+                "angle_increment",
+                self.angle_increment == other.angle_increment,
+            ),
+            ("range_min", self.range_min == other.range_min),
+            ("range_max", self.range_max == other.range_max),
+            ("header.frame_id", self.frame_id == other.frame_id),
+        ]
+        .into_iter()
+        .find(|(_, same)| !same)
+        .map(|(name, _)| name)
+    }
+
+    fn value(&self, field: &str) -> String {
+        match field {
+            "angle_min" => self.angle_min.to_string(),
+            "angle_increment" => self.angle_increment.to_string(),
+            "range_min" => self.range_min.to_string(),
+            "range_max" => self.range_max.to_string(),
+            _ => self.frame_id.clone(),
+        }
+    }
+}
+
 /// Reads a ROS 2 bag (MCAP) for grid SLAM or localization.
 pub fn read(path: &Path, options: &BagOptions) -> Result<RosBag> {
     let bag = BagFiles::open(path)?;
@@ -479,6 +572,18 @@ pub fn read(path: &Path, options: &BagOptions) -> Result<RosBag> {
         } else if topic == options.odom_topic {
             let o: msg::Odometry = decode_cdr(m.data).map_err(bad)?;
             let p = &o.pose.pose;
+            for (field, v) in [
+                ("pose.pose.position.x", p.position.x),
+                ("pose.pose.position.y", p.position.y),
+            ] {
+                // A non-finite one is kept: the replay refuses and counts it.
+                if v.abs() > super::carmen::MAX_COORDINATE_M {
+                    return Err(bad(anyhow!(
+                        "{field} = {v} m is beyond {} km of the origin",
+                        super::carmen::MAX_COORDINATE_M / 1e3
+                    )));
+                }
+            }
             odom.push((
                 o.header.stamp.seconds(),
                 Pose2::new(p.position.x, p.position.y, p.orientation.yaw()),
@@ -504,6 +609,13 @@ pub fn read(path: &Path, options: &BagOptions) -> Result<RosBag> {
             options.scan_topic
         )
     })?;
+    if let Err(why) = check_scan(first) {
+        bail!(
+            "{}: topic {}, scan 0: {why}",
+            path.display(),
+            options.scan_topic
+        );
+    }
     let lidar_frame = first.header.frame_id.trim_start_matches('/').to_owned();
     let base = robot_frame.unwrap_or_else(|| "base_link".into());
     let table = static_transforms(&tf);
@@ -533,14 +645,28 @@ pub fn read(path: &Path, options: &BagOptions) -> Result<RosBag> {
         );
     }
     let beams = first.ranges.len();
+    let first_geometry = ScanGeometry::of(first);
     let mut out = Vec::with_capacity(scans.len());
     for (i, (s, before)) in scans.into_iter().enumerate() {
+        // Every scan's geometry is checked, not the first's only: on its own, then
+        // against the first's (one lidar geometry for the whole run).
+        let at = || format!("{}: topic {}, scan {i}", path.display(), options.scan_topic);
+        if let Err(why) = check_scan(&s) {
+            bail!("{}: {why}", at());
+        }
         if s.ranges.len() != beams {
             bail!(
-                "{}: topic {}, scan {i}: {} ranges, the first scan has {beams}",
-                path.display(),
-                options.scan_topic,
+                "{}: {} ranges, the first scan has {beams}",
+                at(),
                 s.ranges.len()
+            );
+        }
+        if let Some(field) = ScanGeometry::of(&s).differs_from(&first_geometry) {
+            bail!(
+                "{}: {field} {} differs from the first scan's {}: one lidar geometry a bag",
+                at(),
+                ScanGeometry::of(&s).value(field),
+                first_geometry.value(field)
             );
         }
         let stamp = s.header.stamp.seconds();
