@@ -508,6 +508,9 @@ pub struct Comparison {
     /// The CRC-32 of the map image in the device's flash, from its last status (`None`:
     /// no valid map, or no status).
     pub device_map_checksum: Option<u32>,
+    /// Index (in the messages sent, from 0) of the first reply that differs from the
+    /// host's, when one does.
+    pub first_difference: Option<usize>,
 }
 
 /// Refuses a device that speaks another wire protocol version than this host, with what
@@ -579,8 +582,12 @@ pub fn compare(messages: usize, device: &LinkRun, host: &[ToHost]) -> Comparison
         seconds: device.elapsed.as_secs_f64(),
         ..Comparison::default()
     };
-    for (got, want) in device.replies.iter().zip(host) {
-        c.identical += usize::from(canonical(got) == canonical(want));
+    for (i, (got, want)) in device.replies.iter().zip(host).enumerate() {
+        let same = canonical(got) == canonical(want);
+        c.identical += usize::from(same);
+        if !same && c.first_difference.is_none() {
+            c.first_difference = Some(i);
+        }
         if let (ToHost::Estimate(a), ToHost::Estimate(b)) = (got, want) {
             for (m, (x, y)) in c
                 .max_pose_difference
