@@ -894,6 +894,23 @@ mod tests {
     }
 
     #[test]
+    fn the_comparison_names_the_first_message_answered_differently() {
+        let host = vec![answer(PROTOCOL_VERSION, None); 4];
+        let mut replies = host.clone();
+        let run = |replies: Vec<ToHost>| LinkRun {
+            replies,
+            bad_frames: 0,
+            elapsed: Duration::from_secs(1),
+        };
+        let same = compare(4, &run(replies.clone()), &host);
+        assert_eq!((same.identical, same.first_difference), (4, None));
+        replies[2] = answer(PROTOCOL_VERSION + 1, None);
+        replies[3] = answer(PROTOCOL_VERSION + 1, None);
+        let differs = compare(4, &run(replies), &host);
+        assert_eq!((differs.identical, differs.first_difference), (2, Some(2)));
+    }
+
+    #[test]
     fn the_first_refused_command_stops_the_run_with_its_reason() {
         let refused = |seq, reason| ToHost::Refused {
             seq,
