@@ -710,3 +710,42 @@ fn building_slam_firmware_in_qemu_equals_host_bit_for_bit_on_intel() {
         "{stack_peak_bytes}"
     );
 }
+
+/// The building-scale SLAM firmware keeps a 4-landmark EKF beside the SLAM: the synthetic
+/// EKF drive (12 landmarks, a reset half way, line noise) is answered like the host's
+/// session with the same small EKF, bit for bit — 4 landmarks mapped each time, the
+/// sightings of the others refused as `Rejected`, never a fault.
+#[test]
+#[ignore = "needs qemu-system-arm and the building-slam ELF: run by .ci/firmware.sh"]
+fn building_slam_firmware_refuses_landmarks_beyond_its_small_ekf_like_the_host() {
+    use host_sim::drivers::hil_slam::host_slam_replies;
+    use microslam_replay_tests::firmware::slam_elf;
+    let elf = built(slam_elf());
+    let messages = synthetic_drive();
+    let (bytes, noise) = with_line_noise(&encode_all(&messages), 97);
+    let expected = host_slam_replies(&bytes).expect("host reference").replies;
+    assert_eq!(expected.len(), messages.len(), "one reply per message");
+    let count = |f: &dyn Fn(StepResult) -> bool| {
+        expected
+            .iter()
+            .filter(|r| matches!(r, ToHost::Estimate(e) if f(e.result)))
+            .count()
+    };
+    let added = count(&|r| r == StepResult::Added);
+    let rejected = count(&|r| matches!(r, StepResult::Rejected { .. }));
+    assert_eq!(
+        added,
+        2 * microslam::profile::SLAM_EKF_LANDMARKS,
+        "four landmarks mapped before and after the reset"
+    );
+    assert!(rejected > 0, "the other landmarks' sightings are refused");
+    let run = run_equal_to_host(&elf, bytes, &expected, Duration::from_secs(240));
+    let (_, status, _) = final_status(&run.replies);
+    assert_eq!(status.frames_bad, noise, "every noise burst counted once");
+    println!(
+        "building slam, EKF drive: {} replies, {added} landmarks added, {rejected} sightings \
+         refused, in {:.2} s",
+        run.replies.len(),
+        run.elapsed.as_secs_f64()
+    );
+}
