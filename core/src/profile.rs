@@ -134,6 +134,36 @@ pub type Slam = GraphSlam<
 /// Settings of [`Slam`]: [`GraphSlamConfig::MICROCONTROLLER`].
 pub const SLAM_CONFIG: GraphSlamConfig = GraphSlamConfig::MICROCONTROLLER;
 
+/// Bytes of flash the [`Slam`]'s keyframe store takes (the STM32F411's two 128 KB sectors
+/// 6 and 7: room for over a thousand 90-beam keyframes, more than the graph's
+/// [`SLAM_NODES`]).
+pub const SLAM_KEYFRAME_BYTES: u32 = 256 * 1024;
+
+/// [`Slam`] with the storage `S` of its keyframes, as a grid estimator
+/// ([`crate::pf::GridEstimator`]): what a wire session drives.
+pub type SlamEstimator<'a, S> = crate::slam::WithKeyframes<
+    'a,
+    S,
+    GRID_PARTICLES,
+    GRID_BEAMS,
+    SLAM_NEAR,
+    { occupancy_bytes(SLAM_NEAR, SLAM_NEAR) },
+    SLAM_FAR,
+    { occupancy_bytes(SLAM_FAR, SLAM_FAR) },
+    SLAM_NODES,
+    SLAM_LOOPS,
+    { scratch_len(SLAM_NODES, SLAM_LOOPS) },
+>;
+
+/// Landmarks of the EKF beside [`Slam`]: the 112 KB SLAM leaves no room for the 35 KB
+/// 64-landmark EKF in 128 KB, so a firmware carrying it keeps a small EKF (its requests
+/// work, with at most this many landmarks; more are refused).
+pub const SLAM_EKF_LANDMARKS: usize = 4;
+
+/// The EKF beside [`Slam`] ([`SLAM_EKF_LANDMARKS`] landmarks).
+pub type SlamEkf =
+    EkfSlam<f32, { state_dim(SLAM_EKF_LANDMARKS) }, { factor_len(SLAM_EKF_LANDMARKS) }>;
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -6,6 +6,7 @@
 //!   `stm32f411`.
 //! - [`stack`]: the stack high-water mark (cortex-m-rt `paint-stack`).
 //! - [`config`]: the estimator settings, shared with the host reference.
+//! - `flash` (QEMU): a NOR flash stand-in in QEMU's SRAM for the keyframe store.
 #![no_std]
 
 #[cfg(all(feature = "qemu", feature = "stm32f411"))]
@@ -19,6 +20,8 @@ pub mod board;
 pub mod config;
 #[cfg(feature = "qemu")]
 pub mod cost;
+#[cfg(feature = "qemu")]
+pub mod flash;
 pub mod nb_io;
 pub mod stack;
 

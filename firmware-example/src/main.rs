@@ -4,12 +4,26 @@
 //! Built without a map it carries the grid SLAM (its 64 KB grid in RAM); built with
 //! `MICROSLAM_MAP=<map.yaml>` it carries the localizer on the map image in flash instead,
 //! checked at boot: a bad image is reported to the host (`Refusal::BadMap`) when it asks
-//! for the localizer, never a fault.
+//! for the localizer, never a fault. With the feature `building-slam` (QEMU) it carries
+//! the building-scale grid SLAM with loop closure (`profile::Slam`, 112 KB) as its grid
+//! estimator, its keyframes in the flash stand-in, beside a 4-landmark EKF.
 #![no_std]
 #![no_main]
 
+#[cfg(all(feature = "building-slam", microslam_map))]
+compile_error!("`building-slam` carries the grid SLAM: build it without MICROSLAM_MAP");
+#[cfg(all(feature = "building-slam", not(feature = "qemu")))]
+compile_error!(
+    "`building-slam` keeps its keyframes in QEMU's flash stand-in: a board needs its flash \
+     driver wired in first"
+);
+
 use cortex_m_rt::entry;
-use firmware_example::config::{EKF_CONFIG, EKF_LANDMARKS, Ekf, GRID_SETUP, ZEROED_EKF_CONFIG};
+use firmware_example::config::{EKF_CONFIG, GRID_SETUP, ZEROED_EKF_CONFIG};
+#[cfg(not(feature = "building-slam"))]
+use firmware_example::config::{EKF_LANDMARKS, Ekf};
+#[cfg(feature = "building-slam")]
+use firmware_example::config::{SLAM_EKF_LANDMARKS as EKF_LANDMARKS, SlamEkf as Ekf};
 use firmware_example::{board, serve, stack};
 use microslam::wire::Session;
 use panic_probe as _;
@@ -39,7 +53,7 @@ fn main() -> ! {
 }
 
 /// The grid SLAM (firmware built without a map).
-#[cfg(not(microslam_map))]
+#[cfg(not(any(microslam_map, feature = "building-slam")))]
 mod grid {
     use super::*;
     use firmware_example::config::{GRID_CONFIG, GRID_PARTICLES, Grid, GridEstimator};
@@ -133,6 +147,54 @@ mod grid {
         Session::new(ekf, EKF_CONFIG)
             .with_localizer(localizer, GRID_SETUP)
             .with_map_checksum(checksum)
+    }
+}
+
+/// The building-scale grid SLAM with loop closure (feature `building-slam`).
+#[cfg(feature = "building-slam")]
+mod grid {
+    use super::*;
+    use firmware_example::config::{
+        SLAM_CONFIG, SLAM_KEYFRAME_BYTES, SLAM_NODES, Slam, SlamEstimator,
+    };
+    use firmware_example::flash::SramFlash;
+    use microslam::geometry::Pose2;
+    use microslam::slam::keyframes::NorFlashStorage;
+    use static_cell::StaticCell;
+
+    /// The estimator (maps, pose graph, workspace: 112 KB), zero bytes but for the
+    /// graph's unit noise, handed out once.
+    static SLAM: ConstStaticCell<Slam> = ConstStaticCell::new(Slam::zeroed());
+
+    /// Where its keyframes go: the flash stand-in.
+    type Storage = NorFlashStorage<SramFlash>;
+
+    /// The SLAM with its keyframe storage, as the session's grid estimator.
+    static ESTIMATOR: StaticCell<SlamEstimator<'static, Storage>> = StaticCell::new();
+
+    /// The session with the small EKF and the building-scale SLAM; localizer requests
+    /// are refused (no map).
+    pub fn session(ekf: &'static mut Ekf) -> FirmwareSession {
+        let Some(flash) = SramFlash::take(SLAM_KEYFRAME_BYTES) else {
+            defmt::error!("flash stand-in taken");
+            board::halt(4)
+        };
+        let Ok(storage) = Storage::new(flash, 0, SLAM_KEYFRAME_BYTES) else {
+            defmt::error!("keyframe storage refused");
+            board::halt(4)
+        };
+        let Ok(slam) =
+            SlamEstimator::new(SLAM.take(), storage, SLAM_CONFIG, Pose2::new(0.0, 0.0, 0.0))
+        else {
+            defmt::error!("building-scale SLAM configuration invalid");
+            board::halt(4)
+        };
+        defmt::info!(
+            "building-scale grid SLAM: {} keyframes, {} bytes of keyframe flash",
+            SLAM_NODES,
+            SLAM_KEYFRAME_BYTES
+        );
+        Session::with_grid(ekf, EKF_CONFIG, ESTIMATOR.init(slam), GRID_SETUP)
     }
 }
 

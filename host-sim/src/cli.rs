@@ -457,14 +457,24 @@ pub struct HilArgs {
     /// Baud rate of the serial port.
     #[arg(long, default_value_t = 115_200)]
     pub baud: u32,
-    /// Dataset: `mrclam:<dir>` or `mrclam:<dir>/robot<k>` (EKF), as for `replay`, or `carmen:<log>` (the localizer
-    /// on the map in the firmware's flash; needs `--map`).
+    /// Dataset: `mrclam:<dir>` or `mrclam:<dir>/robot<k>` (EKF), as for `replay`, or `carmen:<log>`: with `--map`
+    /// the localizer on the map in the firmware's flash, without it the building-scale
+    /// grid SLAM (a firmware built with `--features building-slam`).
     #[arg(long, short)]
     pub dataset: DatasetSpec,
     /// With `carmen:`: the map the firmware was built with (`MICROSLAM_MAP`), for the
     /// host reference.
     #[arg(long)]
     pub map: Option<PathBuf>,
+    /// With `carmen:` and no `--map` (grid SLAM): reference trajectory for ATE (a TUM file
+    /// or a corrected CARMEN log, e.g. `intel/intel.gfs.log`), matched to the scans by
+    /// stamp.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// Seconds added to the reference's stamps (976052857.337 for `intel.gfs.log`
+    /// against `intel-raw-part.clf`).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub reference_offset: f64,
     /// With `carmen:`: stream only the first N scans.
     #[arg(long)]
     pub scans: Option<usize>,
@@ -645,6 +655,8 @@ impl From<&HilArgs> for HilOptions {
             config: a.config.clone(),
             map: a.map.clone(),
             scans: a.scans,
+            reference: a.reference.clone(),
+            reference_offset: a.reference_offset,
             mcap: a.mcap.clone(),
         }
     }

@@ -281,6 +281,12 @@ pub fn localizer_elf() -> PathBuf {
     path_from_env("LOCALIZER_ELF", "target/firmware-elf/localizer.elf")
 }
 
+/// The building-scale SLAM firmware (built with `--features building-slam`):
+/// `$SLAM_ELF`, else `target/firmware-elf/slam.elf` (where `.ci/firmware.sh` puts it).
+pub fn slam_elf() -> PathBuf {
+    path_from_env("SLAM_ELF", "target/firmware-elf/slam.elf")
+}
+
 /// The map the localizer firmware was built with: `$LOCALIZER_MAP`, else
 /// `target/firmware-elf/intel-map/map.yaml` (the map of the host grid-SLAM run on the
 /// Intel log that `.ci/firmware.sh` makes).

@@ -646,3 +646,106 @@ fn ekf_settings_out_of_range_are_refused_naming_the_value() {
         run.replies[2]
     );
 }
+
+/// Scans of the Intel raw log the building-scale SLAM test streams: the prefix in which
+/// its first loop closures are tried and accepted.
+const SLAM_SCANS: usize = 3000;
+
+/// The building-scale SLAM firmware (`--features building-slam`: `profile::Slam` with
+/// loop closure as its grid estimator, keyframes in the QEMU flash stand-in) in grid mode
+/// on the first [`SLAM_SCANS`] scans of the Intel raw log: every reply equals the host's
+/// (the firmware's session with the same SLAM) bit for bit, every scan is applied, loops
+/// are closed on the way, and the stack stays in what 128 KB leave beside the SLAM.
+#[test]
+#[ignore = "needs qemu-system-arm, the building-slam ELF and the datasets: run by .ci/firmware.sh"]
+fn building_slam_firmware_in_qemu_equals_host_bit_for_bit_on_intel() {
+    use host_sim::drivers::hil_localizer::lidar_messages;
+    use host_sim::drivers::hil_slam::host_slam_replies;
+    use microslam_replay_tests::firmware::slam_elf;
+    let elf = built(slam_elf());
+    let log_path = host_sim::inputs::readers::carmen::resolve_log("intel/intel-raw-part.clf")
+        .expect("Intel log");
+    let log = host_sim::inputs::readers::carmen::read_log(&log_path).expect("Intel log reads");
+    let mut scans = host_sim::inputs::readers::carmen::front_scans(&log);
+    scans.truncate(SLAM_SCANS);
+    let (messages, last_chunks) = lidar_messages(
+        &scans,
+        microslam::geometry::Pose2::IDENTITY,
+        EstimatorKind::Grid,
+    );
+    let bytes = encode_all(&messages);
+    let host = host_slam_replies(&bytes).expect("host reference");
+    let expected = host.replies;
+    assert_eq!(expected.len(), messages.len(), "one reply per message");
+    let applied = last_chunks
+        .iter()
+        .filter(|&&i| {
+            matches!(expected.get(i), Some(ToHost::Estimate(e))
+                if e.result == StepResult::Applied && e.estimator == EstimatorKind::Grid)
+        })
+        .count();
+    assert_eq!(applied, scans.len(), "every scan reaches the SLAM");
+    let c = host.counters;
+    assert!(c.closures > 0, "loops closed in the prefix: {c:?}");
+    assert_eq!(c.keyframes_refused, 0, "{c:?}");
+
+    let run = run_equal_to_host(&elf, bytes, &expected, Duration::from_secs(900));
+    println!(
+        "building slam: {} scans, {} frames → {} replies in {:.2} s; {} keyframes, {} of {} \
+         loop closures accepted",
+        scans.len(),
+        messages.len(),
+        run.replies.len(),
+        run.elapsed.as_secs_f64(),
+        c.keyframes,
+        c.closures,
+        c.attempts
+    );
+    let (_, _, stack_peak_bytes) = final_status(&run.replies);
+    println!("firmware stack peak with building slam: {stack_peak_bytes} bytes");
+    // 128 KB less the SLAM's 112 KB (its statics: .ci/firmware.sh checks static RAM +
+    // stack against 128 KB with the ELF's own figures).
+    assert!(
+        stack_peak_bytes > 0 && stack_peak_bytes <= 131_072 - 112_640,
+        "{stack_peak_bytes}"
+    );
+}
+
+/// The building-scale SLAM firmware keeps a 4-landmark EKF beside the SLAM: the synthetic
+/// EKF drive (12 landmarks, a reset half way, line noise) is answered like the host's
+/// session with the same small EKF, bit for bit — 4 landmarks mapped each time, the
+/// sightings of the others refused as `Rejected`, never a fault.
+#[test]
+#[ignore = "needs qemu-system-arm and the building-slam ELF: run by .ci/firmware.sh"]
+fn building_slam_firmware_refuses_landmarks_beyond_its_small_ekf_like_the_host() {
+    use host_sim::drivers::hil_slam::host_slam_replies;
+    use microslam_replay_tests::firmware::slam_elf;
+    let elf = built(slam_elf());
+    let messages = synthetic_drive();
+    let (bytes, noise) = with_line_noise(&encode_all(&messages), 97);
+    let expected = host_slam_replies(&bytes).expect("host reference").replies;
+    assert_eq!(expected.len(), messages.len(), "one reply per message");
+    let count = |f: &dyn Fn(StepResult) -> bool| {
+        expected
+            .iter()
+            .filter(|r| matches!(r, ToHost::Estimate(e) if f(e.result)))
+            .count()
+    };
+    let added = count(&|r| r == StepResult::Added);
+    let rejected = count(&|r| matches!(r, StepResult::Rejected { .. }));
+    assert_eq!(
+        added,
+        2 * microslam::profile::SLAM_EKF_LANDMARKS,
+        "four landmarks mapped before and after the reset"
+    );
+    assert!(rejected > 0, "the other landmarks' sightings are refused");
+    let run = run_equal_to_host(&elf, bytes, &expected, Duration::from_secs(240));
+    let (_, status, _) = final_status(&run.replies);
+    assert_eq!(status.frames_bad, noise, "every noise burst counted once");
+    println!(
+        "building slam, EKF drive: {} replies, {added} landmarks added, {rejected} sightings \
+         refused, in {:.2} s",
+        run.replies.len(),
+        run.elapsed.as_secs_f64()
+    );
+}

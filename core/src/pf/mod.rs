@@ -317,6 +317,10 @@ pub enum PfError {
     InvalidScan,
     /// The map's geometry differs from the configuration (resolution).
     MapMismatch,
+    /// A building-scale SLAM's keyframe store, pose graph or local map refused the step
+    /// (the [`crate::slam::SlamError`] is kept by [`crate::slam::WithKeyframes`]); the
+    /// scan may have been scored.
+    Slam,
 }
 
 impl fmt::Display for PfError {
@@ -329,6 +333,7 @@ impl fmt::Display for PfError {
             Self::EmptyScan => "scan has no usable beam",
             Self::InvalidScan => "scan geometry is invalid",
             Self::MapMismatch => "map geometry does not match the configuration",
+            Self::Slam => "keyframe store, pose graph or local map refused the step",
         })
     }
 }

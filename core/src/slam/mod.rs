@@ -23,5 +23,5 @@ pub mod matcher;
 pub use config::{ChainNoise, EstimateRadius, GraphSlamConfig, KeyframeSpacing, LoopClosureConfig};
 pub use graph_slam::{
     ClosureOutcome, GraphCounters, GraphSlam, GraphStep, MATCH_BYTES, MATCH_CELLS, MATCH_LEVELS,
-    SlamError, workspace_bytes,
+    SlamError, WithKeyframes, workspace_bytes,
 };

@@ -7,7 +7,7 @@
 //! that every scan's cost is measured, including those that close a loop (the matcher
 //! over the old keyframes, the graph solved) with the graph at its largest. The odometry
 //! turns 1 % too much, so that the loops have something to close. The keyframes go to a
-//! NOR flash stand-in ([`firmware_example::cost::SramFlash`]) in QEMU's SRAM beyond the
+//! NOR flash stand-in ([`firmware_example::flash::SramFlash`]) in QEMU's SRAM beyond the
 //! board's 128 KB, through the same `NorFlashStorage` a board's flash uses.
 //!
 //! Prints `slam …` lines on UART0 and exits through semihosting.
@@ -19,7 +19,8 @@ use core::fmt::Write;
 use cortex_m_rt::entry;
 use firmware_example::board::Serial;
 use firmware_example::config::{GRID_PARTICLES, SLAM_CONFIG, SLAM_LOOPS, SLAM_NODES, Slam};
-use firmware_example::cost::{BEAMS, LIDAR, RING_WAYPOINTS, SramFlash, Ticks, ring_range};
+use firmware_example::cost::{BEAMS, LIDAR, RING_WAYPOINTS, Ticks, ring_range};
+use firmware_example::flash::SramFlash;
 use microslam::geometry::Pose2;
 use microslam::sensors::lidar::LidarScan;
 use microslam::slam::keyframes::{KeyframeStore, NorFlashStorage};
@@ -29,8 +30,9 @@ use static_cell::ConstStaticCell;
 /// The estimator, zero bytes at reset (`.bss`).
 static SLAM: ConstStaticCell<Slam> = ConstStaticCell::new(Slam::zeroed());
 
-/// Bytes of the keyframe store (the STM32F411's two 128 KB flash sectors 6 and 7).
-const STORE_BYTES: u32 = 256 * 1024;
+/// Bytes of the keyframe store (the board profile's: the STM32F411's two 128 KB flash
+/// sectors 6 and 7).
+const STORE_BYTES: u32 = firmware_example::config::SLAM_KEYFRAME_BYTES;
 
 /// The odometry's heading error, as a fraction of each turn.
 const TURN_SCALE_ERROR: f32 = 0.01;

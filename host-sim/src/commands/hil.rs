@@ -74,7 +74,8 @@ pub struct HilOptions {
     pub serial: Option<String>,
     /// Baud rate of the serial port.
     pub baud: u32,
-    /// Dataset: `mrclam:<dir>` (EKF) or `carmen:<log>` (the localizer; needs `map`).
+    /// Dataset: `mrclam:<dir>` (EKF) or `carmen:<log>` (the localizer with `map`, the
+    /// building-scale grid SLAM without).
     pub dataset: DatasetSpec,
     /// Robot whose log is streamed.
     pub robot: u8,
@@ -96,6 +97,11 @@ pub struct HilOptions {
     pub map: Option<PathBuf>,
     /// With a `carmen:` dataset: stream only the first N scans.
     pub scans: Option<usize>,
+    /// With a `carmen:` dataset and no `map` (the building-scale SLAM): reference
+    /// trajectory for ATE.
+    pub reference: Option<PathBuf>,
+    /// Seconds added to the reference's stamps.
+    pub reference_offset: f64,
 }
 
 /// `host-sim hil`.
@@ -103,6 +109,31 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
     let device = Device::from_options(args.qemu.as_deref(), args.serial.as_deref(), args.baud)?;
     if let Device::Qemu(elf) = device {
         check_firmware_elf(elf)?;
+    }
+    if let DatasetSpec::Carmen(log) = &args.dataset
+        && args.map.is_none()
+    {
+        use crate::commands::hil_slam::{SlamHilOptions, run_cli};
+        // What this mode does not do is refused, never ignored.
+        if args.mcap.is_some() || args.dataset_settings || args.corrupt_frames != 0.0 {
+            bail!(
+                "the building-scale SLAM HIL (a carmen: log without --map) takes neither \
+                 --mcap, --dataset-settings nor --corrupt-frames"
+            );
+        }
+        let options = SlamHilOptions {
+            device,
+            log,
+            scans: args.scans,
+            out: &args.out,
+            timeout_s: args.timeout_s,
+            reference: args.reference.as_deref(),
+            reference_offset: args.reference_offset,
+        };
+        return run_cli(&options, quiet);
+    }
+    if args.reference.is_some() {
+        bail!("--reference scores the building-scale SLAM (a carmen: log without --map)");
     }
     if let DatasetSpec::Carmen(log) = &args.dataset {
         use crate::commands::hil_localizer::{LocalizerHilOptions, run_cli};

@@ -6,6 +6,7 @@ pub mod detections;
 pub mod global;
 pub mod hil;
 pub mod hil_localizer;
+pub mod hil_slam;
 pub mod localize;
 pub mod replay;
 pub mod rosbag;

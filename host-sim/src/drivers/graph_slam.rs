@@ -181,7 +181,7 @@ fn run_p<const N: usize, const BITMAP: usize, const P: usize>(
             *pose = g.compose(motion);
         }
     }
-    let (cells, geometry) = draw_map::<N, BITMAP, P>(&slam, &store, &lidar, options)?;
+    let (cells, geometry) = draw_map::<N, BITMAP, P, _>(&slam, &store, options.grid_origin)?;
     run.cells = cells;
     run.geometry = geometry;
     let counters = slam.counters();
@@ -198,22 +198,23 @@ fn run_p<const N: usize, const BITMAP: usize, const P: usize>(
     Ok((run, counters.into()))
 }
 
-/// Every stored keyframe's scan written at its final graph pose into an `N × N` grid.
-fn draw_map<const N: usize, const BITMAP: usize, const P: usize>(
+/// Every stored keyframe's scan written at its final graph pose into an `N × N` grid
+/// whose lower-left corner is at `grid_origin` (centred on the origin without).
+pub fn draw_map<const N: usize, const BITMAP: usize, const P: usize, S: KeyframeStorage>(
     slam: &HostGraphSlam<P>,
-    store: &KeyframeStore<VecStorage>,
-    lidar: &LidarGeometry,
-    options: &GridRunOptions,
+    store: &KeyframeStore<S>,
+    grid_origin: Option<[f32; 2]>,
 ) -> Result<(Vec<i8>, microslam::grid::GridGeometry)> {
     let c = slam.config().grid;
-    let mut grid = Box::new(match options.grid_origin {
+    let mut grid = Box::new(match grid_origin {
         Some([x, y]) => OccupancyGrid::<N, N, BITMAP>::new(c.resolution, x, y, c.log_odds),
         None => OccupancyGrid::<N, N, BITMAP>::centred(c.resolution, c.log_odds),
     });
     let decimation = store.decimation();
+    let lidar = store.lidar();
     let geometry = LidarGeometry {
         angle_increment: lidar.angle_increment * decimation as f32,
-        ..*lidar
+        ..lidar
     };
     let mut ranges = vec![0.0f32; store.beams()];
     for k in 0..store.len() {

@@ -508,6 +508,9 @@ pub struct Comparison {
     /// The CRC-32 of the map image in the device's flash, from its last status (`None`:
     /// no valid map, or no status).
     pub device_map_checksum: Option<u32>,
+    /// Index (in the messages sent, from 0) of the first reply that differs from the
+    /// host's, when one does.
+    pub first_difference: Option<usize>,
 }
 
 /// Refuses a device that speaks another wire protocol version than this host, with what
@@ -579,8 +582,12 @@ pub fn compare(messages: usize, device: &LinkRun, host: &[ToHost]) -> Comparison
         seconds: device.elapsed.as_secs_f64(),
         ..Comparison::default()
     };
-    for (got, want) in device.replies.iter().zip(host) {
-        c.identical += usize::from(canonical(got) == canonical(want));
+    for (i, (got, want)) in device.replies.iter().zip(host).enumerate() {
+        let same = canonical(got) == canonical(want);
+        c.identical += usize::from(same);
+        if !same && c.first_difference.is_none() {
+            c.first_difference = Some(i);
+        }
         if let (ToHost::Estimate(a), ToHost::Estimate(b)) = (got, want) {
             for (m, (x, y)) in c
                 .max_pose_difference
@@ -884,6 +891,23 @@ mod tests {
             dropped.load(Ordering::SeqCst),
             "the reader thread still holds the port"
         );
+    }
+
+    #[test]
+    fn the_comparison_names_the_first_message_answered_differently() {
+        let host = vec![answer(PROTOCOL_VERSION, None); 4];
+        let mut replies = host.clone();
+        let run = |replies: Vec<ToHost>| LinkRun {
+            replies,
+            bad_frames: 0,
+            elapsed: Duration::from_secs(1),
+        };
+        let same = compare(4, &run(replies.clone()), &host);
+        assert_eq!((same.identical, same.first_difference), (4, None));
+        replies[2] = answer(PROTOCOL_VERSION + 1, None);
+        replies[3] = answer(PROTOCOL_VERSION + 1, None);
+        let differs = compare(4, &run(replies), &host);
+        assert_eq!((differs.identical, differs.first_difference), (2, Some(2)));
     }
 
     #[test]

@@ -66,11 +66,21 @@ pub fn localizer_messages(
     scans: &[&LaserMessage],
     start: Pose2<f32>,
 ) -> (Vec<ToDevice>, Vec<usize>) {
+    lidar_messages(scans, start, EstimatorKind::Localizer)
+}
+
+/// [`localizer_messages`] for the estimator `kind`: the localizer, or the grid SLAM
+/// ([`super::hil_slam`]).
+pub fn lidar_messages(
+    scans: &[&LaserMessage],
+    start: Pose2<f32>,
+    kind: EstimatorKind,
+) -> (Vec<ToDevice>, Vec<usize>) {
     let mut out = vec![
         super::hil::handshake(),
         ToDevice::Command {
             seq: 0,
-            command: WireCommand::SelectEstimator(EstimatorKind::Localizer),
+            command: WireCommand::SelectEstimator(kind),
         },
         ToDevice::Command {
             seq: 1,

@@ -12,7 +12,9 @@
 //!   graph, loop closure) over lidar scans.
 //! - [`detections`]: sign detections → range/bearing → EKF-SLAM with class hints.
 //! - [`hil`]: the host's side of hardware in the loop: the wire frames of a recording,
-//!   the QEMU and serial links, the bit-for-bit comparison of the replies.
+//!   the QEMU and serial links, the bit-for-bit comparison of the replies;
+//!   [`hil_localizer`] and [`hil_slam`]: the localizer's and the building-scale grid
+//!   SLAM's lidar messages and host references.
 //! - [`texture`]: RGB-D frames + poses → the coloured floor map.
 
 pub mod detections;
@@ -23,5 +25,6 @@ pub mod grid;
 pub mod grid_run;
 pub mod hil;
 pub mod hil_localizer;
+pub mod hil_slam;
 pub mod odometry;
 pub mod texture;

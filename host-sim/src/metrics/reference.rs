@@ -134,7 +134,6 @@ pub fn evaluate(
 /// is a figure that cannot be computed (the SE(2) alignment with one matched pose) or is
 /// not finite: no figure is written as `null`.
 pub fn grid_run_ate(run: &GridRun, path: &Path, offset_s: f64) -> Result<ReferenceAte> {
-    let poses = reference::read(path, offset_s)?;
     let traj: Vec<(f64, Pose2<f64>)> = run
         .trajectory
         .iter()
@@ -145,13 +144,23 @@ pub fn grid_run_ate(run: &GridRun, path: &Path, offset_s: f64) -> Result<Referen
             )
         })
         .collect();
-    let Some(tolerance_s) = matching_tolerance_s(&traj) else {
+    trajectory_ate(&traj, path, offset_s)
+}
+
+/// [`grid_run_ate`] of any trajectory (stamp, pose; e.g. a device's estimates).
+pub fn trajectory_ate(
+    traj: &[(f64, Pose2<f64>)],
+    path: &Path,
+    offset_s: f64,
+) -> Result<ReferenceAte> {
+    let poses = reference::read(path, offset_s)?;
+    let Some(tolerance_s) = matching_tolerance_s(traj) else {
         bail!(
             "{}: the run has fewer than two distinct scan stamps: no scan period to match the reference by",
             path.display()
         );
     };
-    let ate = evaluate(&traj, &poses, tolerance_s);
+    let ate = evaluate(traj, &poses, tolerance_s);
     if ate.matched == 0 {
         bail!(
             "{}: no reference pose matches a scan's stamp within half a scan period ({:.4} s; is --reference-offset right?)",

@@ -2,6 +2,7 @@
 //! [`KeyframeStore`], and a [`PoseGraph`] over them that closes loops.
 
 mod closure;
+mod estimator;
 mod stored;
 #[cfg(test)]
 mod tests;
@@ -16,6 +17,7 @@ use crate::grid::{GridError, ScanIntegration, occupancy_bytes};
 use crate::pf::{ParticleFilter, PfError, ScanPoints};
 use crate::sensors::lidar::LidarScan;
 use core::fmt;
+pub use estimator::WithKeyframes;
 use workspace::Workspace;
 pub use workspace::workspace_bytes;
 
@@ -334,6 +336,13 @@ impl<
     ) -> Result<(), SlamError> {
         self.filter_mut()?.predict_odometry(from, to)?;
         self.turned += crate::geometry::wrap_near(to.theta - from.theta).abs();
+        Ok(())
+    }
+
+    /// Prediction with the arc `(distance, heading_change)` driven since the last step.
+    pub fn predict(&mut self, distance: f32, heading_change: f32) -> Result<(), SlamError> {
+        self.filter_mut()?.predict(distance, heading_change)?;
+        self.turned += heading_change.abs();
         Ok(())
     }
 

@@ -156,3 +156,70 @@ fn refused_inputs_leave_the_estimator_usable() {
     slam.observe(&scan, &mut store).unwrap();
     assert_eq!(slam.scans(), 2);
 }
+
+#[test]
+fn with_keyframes_drives_the_slam_as_a_grid_estimator() {
+    use crate::pf::GridEstimator;
+    let walls = ring_corridor();
+    let d = drive(
+        &walls,
+        &laps(&RING_WAYPOINTS, 1, 2),
+        &LIDAR_270,
+        180,
+        0.01,
+        3,
+    );
+    let n = d.scans.len().min(400);
+    // Direct calls, with the store made by hand; odometry as increments, as a wire
+    // session sends it.
+    let increment = |i: usize| d.odometry[i - 1].between(&d.odometry[i]);
+    let mut direct = Box::new(Slam::zeroed());
+    let mut store = store();
+    direct.init(config(), d.truth[0]).unwrap();
+    let mut expected = Vec::new();
+    for i in 0..n {
+        if i > 0 {
+            direct
+                .predict_odometry(&Pose2::new(0.0, 0.0, 0.0), &increment(i))
+                .unwrap();
+        }
+        direct
+            .observe(&LidarScan::new(&d.scans[i], LIDAR_270), &mut store)
+            .unwrap();
+        expected.push((direct.pose(), direct.filter().unwrap().pose_covariance()));
+    }
+    assert!(direct.counters().keyframes > 10, "{:?}", direct.counters());
+
+    // Through the trait object, twice: a reset starts the same run over, store and all.
+    let mut slam = Box::new(Slam::zeroed());
+    let mut storage = Box::new(RamStorage::<{ 256 * 1024 }>::new());
+    let mut estimator = WithKeyframes::new(
+        &mut slam,
+        &mut *storage,
+        config(),
+        Pose2::new(5.0, 5.0, 1.0),
+    )
+    .unwrap();
+    for _run in 0..2 {
+        let e: &mut dyn GridEstimator = &mut estimator;
+        e.reset(d.truth[0]).unwrap();
+        for (i, want) in expected.iter().enumerate() {
+            if i > 0 {
+                e.predict_increment(&increment(i)).unwrap();
+            }
+            e.observe(&LidarScan::new(&d.scans[i], LIDAR_270)).unwrap();
+            assert_eq!((e.pose(), e.pose_covariance()), *want, "scan {i}");
+        }
+        assert_eq!(estimator.slam().counters(), direct.counters());
+        assert_eq!(estimator.store().map(KeyframeStore::len), Some(store.len()));
+    }
+    // A scan of another length is refused before the filter sees it; the run goes on.
+    let before = (estimator.slam().scans(), estimator.pose());
+    let short = [2.0f32; 90];
+    assert_eq!(
+        estimator.observe(&LidarScan::new(&short, LIDAR_270)),
+        Err(PfError::InvalidScan)
+    );
+    assert_eq!((estimator.slam().scans(), estimator.pose()), before);
+    assert_eq!(estimator.last_error(), None);
+}

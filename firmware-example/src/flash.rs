@@ -1,0 +1,90 @@
+//! A NOR flash stand-in in QEMU's SRAM ([`SramFlash`]): where the building-scale SLAM's
+//! keyframes go under QEMU (the `building-slam` firmware and the `cost_slam` probe), as
+//! they would go to a board's flash sectors.
+
+/// A NOR flash stand-in in QEMU's SRAM: mps2-an386 has 4 MB of SRAM at `0x2000_0000`, of
+/// which the linker uses the first 128 KB (`memory-qemu.x`, the board's RAM); the bytes
+/// from [`SramFlash::BASE`] stand in for the board's flash sectors. It keeps NOR flash's
+/// rules (erase sets whole sectors to `0xFF`, a write only clears bits, word-aligned
+/// writes), so code that runs on it runs on a board's flash.
+pub struct SramFlash {
+    bytes: &'static mut [u8],
+}
+
+impl SramFlash {
+    /// Where the stand-in starts: 1 MB into QEMU's SRAM, far above the 128 KB the
+    /// firmware's RAM (and its stack) use.
+    pub const BASE: usize = 0x2010_0000;
+    /// Erase sector, bytes.
+    pub const SECTOR: usize = 4096;
+
+    /// The stand-in, `len` bytes (at most 2 MB), handed out once; `None` after.
+    pub fn take(len: u32) -> Option<Self> {
+        static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+        let len = len as usize;
+        if len > 2 << 20 || TAKEN.swap(true, core::sync::atomic::Ordering::AcqRel) {
+            return None;
+        }
+        // SAFETY: QEMU's mps2-an386 maps SRAM at 0x2000_0000..0x2040_0000; nothing the
+        // linker places reaches BASE (RAM ends at 0x2002_0000), `len` ≤ 2 MB keeps the
+        // slice inside the SRAM, and TAKEN hands it out once, so this is the only reference.
+        let bytes = unsafe { core::slice::from_raw_parts_mut(Self::BASE as *mut u8, len) };
+        Some(Self { bytes })
+    }
+}
+
+impl embedded_storage::nor_flash::ErrorType for SramFlash {
+    type Error = embedded_storage::nor_flash::NorFlashErrorKind;
+}
+
+impl embedded_storage::nor_flash::ReadNorFlash for SramFlash {
+    const READ_SIZE: usize = 1;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        let start = offset as usize;
+        let src = self
+            .bytes
+            .get(start..start.saturating_add(bytes.len()))
+            .ok_or(Self::Error::OutOfBounds)?;
+        bytes.copy_from_slice(src);
+        Ok(())
+    }
+
+    fn capacity(&self) -> usize {
+        self.bytes.len()
+    }
+}
+
+impl embedded_storage::nor_flash::NorFlash for SramFlash {
+    const WRITE_SIZE: usize = 4;
+    const ERASE_SIZE: usize = Self::SECTOR;
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        let (from, to) = (from as usize, to as usize);
+        if !from.is_multiple_of(Self::SECTOR) || !to.is_multiple_of(Self::SECTOR) {
+            return Err(Self::Error::NotAligned);
+        }
+        self.bytes
+            .get_mut(from..to)
+            .ok_or(Self::Error::OutOfBounds)?
+            .fill(0xFF);
+        Ok(())
+    }
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        let start = offset as usize;
+        if !start.is_multiple_of(Self::WRITE_SIZE) || !bytes.len().is_multiple_of(Self::WRITE_SIZE)
+        {
+            return Err(Self::Error::NotAligned);
+        }
+        let dst = self
+            .bytes
+            .get_mut(start..start.saturating_add(bytes.len()))
+            .ok_or(Self::Error::OutOfBounds)?;
+        // NOR flash programs by clearing bits.
+        for (d, s) in dst.iter_mut().zip(bytes) {
+            *d &= s;
+        }
+        Ok(())
+    }
+}

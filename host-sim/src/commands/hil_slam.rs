@@ -1,0 +1,277 @@
+//! `host-sim hil --dataset carmen:<log>` without `--map`: the firmware's building-scale
+//! grid SLAM in the loop (through [`crate::drivers::hil_slam`]). The device (a firmware
+//! built with the feature `building-slam`) is put in grid mode at the origin, then every
+//! front scan of the log is streamed (its odometry increment, then its chunks); every
+//! reply is compared bit for bit with the host running the firmware's session on the
+//! same bytes. Writes `hil.json`, `firmware.tum` (the device's estimate after each scan)
+//! and `host-map/` (PGM + YAML + PNG: the map of the host reference's keyframes at their
+//! final graph poses — the host's copy; the device keeps its keyframes in flash and sends
+//! no map). The device's trajectory is scored with the relation error when a relations
+//! file is found, and against `--reference` (ATE, with the number of poses matched).
+
+use std::path::Path;
+use std::time::Duration;
+
+use anyhow::{Result, bail};
+use microslam::geometry::Pose2;
+use microslam::wire::{EstimatorKind, ToHost};
+use serde::Serialize;
+
+use crate::drivers::hil::{Device, Expected, compare, encode_all};
+use crate::drivers::hil_localizer::lidar_messages;
+use crate::drivers::hil_slam::host_slam_replies;
+use crate::inputs::readers::carmen::{LaserMessage, front_scans, read_log, resolve_log};
+use crate::metrics::reference::ReferenceAte;
+use crate::output::tum_text;
+
+/// What `hil.json` holds for a building-scale SLAM run.
+#[derive(Debug, Serialize)]
+pub struct SlamHil {
+    /// Replies equal to the host's bit for bit (the stack figure aside).
+    pub replies_identical: usize,
+    /// Replies expected (one per message).
+    pub replies_expected: usize,
+    /// Replies received.
+    pub replies_received: usize,
+    /// Scans streamed.
+    pub scans: usize,
+    /// Particles, beams, keyframes and loop edges of the firmware's SLAM.
+    pub particles: usize,
+    /// Beams a scan the filter scores at most.
+    pub beams: usize,
+    /// Keyframes the pose graph holds.
+    pub graph_nodes: usize,
+    /// The host reference's counters at the end (keyframes, loop closures tried and
+    /// accepted), which the device's, bit-identical in every reply, shares.
+    pub host_counters: HostCounters,
+    /// The device's stack high-water mark from its final status, bytes.
+    pub stack_peak_bytes: Option<u32>,
+    /// Wall time, s.
+    pub seconds: f64,
+    /// Relation error of the device's trajectory (when a relations file was found).
+    pub relation_error: Option<crate::metrics::relations::RelationError>,
+    /// ATE of the device's trajectory against `--reference`, with the poses matched.
+    pub reference: Option<ReferenceReport>,
+    /// The map written: whose copy it is.
+    pub map: Option<String>,
+    /// The full comparison (pose and covariance differences, first differing message).
+    pub comparison: crate::drivers::hil::Comparison,
+}
+
+/// The host reference's SLAM counters.
+#[derive(Debug, Serialize)]
+pub struct HostCounters {
+    /// Keyframes made.
+    pub keyframes: u32,
+    /// Keyframes refused (graph or store full).
+    pub keyframes_refused: u32,
+    /// Loop closures tried.
+    pub closure_attempts: u32,
+    /// Loop edges added.
+    pub closures: u32,
+}
+
+/// `--reference` and what it gave.
+#[derive(Debug, Serialize)]
+pub struct ReferenceReport {
+    /// The reference file.
+    pub file: String,
+    /// Seconds added to its stamps.
+    pub time_offset_s: f64,
+    /// The ATE.
+    pub ate: ReferenceAte,
+}
+
+/// Options of the building-scale SLAM HIL (from `host-sim hil` with a `carmen:` dataset
+/// and no `--map`).
+#[derive(Debug, Clone)]
+pub struct SlamHilOptions<'a> {
+    /// The device running the `building-slam` firmware: under QEMU or a board.
+    pub device: Device<'a>,
+    /// The CARMEN log (`carmen:<file>`).
+    pub log: &'a str,
+    /// Stream only the first N scans.
+    pub scans: Option<usize>,
+    /// Output folder.
+    pub out: &'a Path,
+    /// Give up waiting for replies after this many seconds.
+    pub timeout_s: u64,
+    /// Reference trajectory for ATE (TUM or a corrected CARMEN log).
+    pub reference: Option<&'a Path>,
+    /// Seconds added to the reference's stamps.
+    pub reference_offset: f64,
+}
+
+/// The device's trajectory: the estimate after each scan's last chunk, at the scan's
+/// stamp.
+fn trajectory(
+    replies: &[ToHost],
+    scans: &[&LaserMessage],
+    last_chunks: &[usize],
+) -> Vec<(f64, [f64; 3])> {
+    scans
+        .iter()
+        .zip(last_chunks)
+        .filter_map(|(laser, &i)| match replies.get(i) {
+            Some(ToHost::Estimate(estimate)) => Some((laser.stamp, estimate.pose.map(f64::from))),
+            _ => None,
+        })
+        .collect()
+}
+
+/// `host-sim hil --dataset carmen:<log>` (no `--map`).
+pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
+    let path = resolve_log(args.log)?;
+    let log = read_log(&path)?;
+    let mut scans = front_scans(&log);
+    if let Some(n) = args.scans {
+        scans.truncate(n);
+    }
+    let (messages, last_chunks) = lidar_messages(&scans, Pose2::IDENTITY, EstimatorKind::Grid);
+    let bytes = encode_all(&messages);
+    let host = host_slam_replies(&bytes)?;
+    if !quiet {
+        println!(
+            "{}: {} scans → {} frames ({} bytes), building-scale grid SLAM",
+            path.display(),
+            scans.len(),
+            messages.len(),
+            bytes.len(),
+        );
+    }
+    let run = args.device.run(
+        bytes,
+        Expected::host(&host.replies),
+        Duration::from_secs(args.timeout_s),
+    )?;
+    let comparison = compare(messages.len(), &run, &host.replies);
+    let traj = trajectory(&run.replies, &scans, &last_chunks);
+    let relation_error = match crate::metrics::relations::find_relations(&path, None) {
+        Ok(r) => {
+            let rels = crate::metrics::relations::read(&r)?;
+            Some(crate::metrics::relations::evaluate(&traj, &rels, 1e-3)).filter(|e| e.used > 0)
+        }
+        Err(note) => {
+            eprintln!("note: {note}");
+            None
+        }
+    };
+    let poses: Vec<(f64, Pose2<f64>)> = traj
+        .iter()
+        .map(|&(t, [x, y, th])| (t, Pose2::new(x, y, th)))
+        .collect();
+    let reference = match args.reference {
+        Some(file) => Some(ReferenceReport {
+            file: file.display().to_string(),
+            time_offset_s: args.reference_offset,
+            ate: crate::metrics::reference::trajectory_ate(&poses, file, args.reference_offset)?,
+        }),
+        None => None,
+    };
+    crate::output::create_folder(args.out)?;
+    let map = match &host.map {
+        Some((cells, geometry)) => {
+            let dir = args.out.join("host-map");
+            crate::output::create_folder(&dir)?;
+            let est: Vec<(f64, Pose2<f32>)> = traj
+                .iter()
+                .map(|&(t, [x, y, th])| (t, Pose2::new(x as f32, y as f32, th as f32)))
+                .collect();
+            crate::output::grid_map::write_map(
+                &dir,
+                cells,
+                geometry,
+                &microslam::profile::SLAM_CONFIG.grid.log_odds,
+                &est,
+            )?;
+            Some(format!(
+                "{}: the host reference's copy (its keyframes at their final graph poses; the \
+                 device's run is bit-identical to it, but the device sends no map)",
+                dir.join("map.yaml").display()
+            ))
+        }
+        None => None,
+    };
+    let c = host.counters;
+    let report = SlamHil {
+        replies_identical: comparison.identical,
+        replies_expected: comparison.expected,
+        replies_received: comparison.received,
+        scans: scans.len(),
+        particles: microslam::profile::GRID_PARTICLES,
+        beams: microslam::profile::GRID_BEAMS,
+        graph_nodes: microslam::profile::SLAM_NODES,
+        host_counters: HostCounters {
+            keyframes: c.keyframes,
+            keyframes_refused: c.keyframes_refused,
+            closure_attempts: c.attempts,
+            closures: c.closures,
+        },
+        stack_peak_bytes: comparison.stack_peak_bytes,
+        seconds: comparison.seconds,
+        relation_error,
+        reference,
+        map,
+        comparison,
+    };
+    let json = args.out.join("hil.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&report)?)?;
+    std::fs::write(
+        args.out.join("firmware.tum"),
+        tum_text(poses.iter().copied()),
+    )?;
+    if !quiet {
+        println!(
+            "{} of {} replies identical to the host bit for bit; {} keyframes, {} of {} loop \
+             closures accepted; relation error {}; ATE vs reference {}; {:.1} s; report in {}",
+            report.replies_identical,
+            report.replies_expected,
+            c.keyframes,
+            c.closures,
+            c.attempts,
+            report.relation_error.as_ref().map_or_else(
+                || "–".to_string(),
+                |r| format!(
+                    "{:.4} ± {:.4} m over {}",
+                    r.trans_mean_m, r.trans_std_m, r.used
+                )
+            ),
+            report.reference.as_ref().map_or_else(
+                || "–".to_string(),
+                |r| format!(
+                    "{:.4} m SE(2) over {} matched poses of {} in span",
+                    r.ate.ate_m.se2.unwrap_or(f64::NAN),
+                    r.ate.matched,
+                    r.ate.in_span
+                )
+            ),
+            report.seconds,
+            json.display()
+        );
+        if let Some(map) = &report.map {
+            println!("map: {map}");
+        }
+    }
+    crate::drivers::hil::check_protocol(&report.comparison)?;
+    crate::drivers::hil::check_refusals(&run.replies)?;
+    if report.replies_received != report.replies_expected
+        || report.replies_identical != report.replies_expected
+    {
+        let first = report.comparison.first_difference.map_or_else(
+            || format!("{} received", report.replies_received),
+            |i| {
+                format!(
+                    "the first difference is the reply to message {i} of {}: is the firmware \
+                     built with --features building-slam?",
+                    messages.len()
+                )
+            },
+        );
+        bail!(
+            "the device's replies differ from the host's ({} of {} identical): {first}",
+            report.replies_identical,
+            report.replies_expected,
+        );
+    }
+    Ok(())
+}
