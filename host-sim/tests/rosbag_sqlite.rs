@@ -507,3 +507,111 @@ fn replay_takes_an_sqlite_bag_folder_like_the_mcap_file() {
         "the same trajectory, byte for byte"
     );
 }
+
+/// Runs `host-sim replay` on the bag `path`; returns its standard error, failing the test
+/// when it succeeds.
+fn replay_fails(path: &Path, out: &Path) -> String {
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        .args(["replay", "--quiet", "--particles", "16", "--dataset"])
+        .arg(format!("rosbag:{}", path.display()))
+        .arg("--out")
+        .arg(out)
+        .output()
+        .expect("host-sim starts");
+    assert!(!run.status.success(), "exit 0 on {}", path.display());
+    String::from_utf8_lossy(&run.stderr).to_string()
+}
+
+#[test]
+fn crafted_sqlite_bags_are_refused_promptly_naming_the_file_and_the_table() {
+    let dir = tempfile::tempdir().unwrap();
+    // Endless rows: reading such a view would never end (issue 62's 8 KB bag).
+    let endless = "WITH RECURSIVE r(x) AS (SELECT 1 UNION ALL SELECT x + 1 FROM r)";
+    let topics = "CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT NOT NULL,
+        type TEXT NOT NULL, serialization_format TEXT NOT NULL);
+        INSERT INTO topics VALUES (1, '/scan', 'sensor_msgs/msg/LaserScan', 'cdr'),
+            (2, '/odom', 'nav_msgs/msg/Odometry', 'cdr');";
+    let messages = "CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL,
+        timestamp INTEGER NOT NULL, data BLOB NOT NULL);";
+    let cases = [
+        (
+            "views.db3",
+            format!(
+                "{topics} CREATE VIEW messages AS {endless}
+                 SELECT x AS id, 1 AS topic_id, x AS timestamp, x'00010000' AS data FROM r;"
+            ),
+            "table `messages`",
+            "it is a view, not a table",
+        ),
+        (
+            "topic_view.db3",
+            format!(
+                "{messages} CREATE VIEW topics AS {endless}
+                 SELECT x AS id, 'a' || x AS name, 'x' AS type, 'cdr' AS serialization_format FROM r;"
+            ),
+            "table `topics`",
+            "it is a view, not a table",
+        ),
+        (
+            "virtual.db3",
+            format!("{topics} CREATE VIRTUAL TABLE messages USING fts5(id, topic_id, timestamp, data);"),
+            "table `messages`",
+            "it is a virtual table",
+        ),
+        (
+            "generated.db3",
+            format!(
+                "{topics} CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL,
+                 timestamp INTEGER NOT NULL, data BLOB GENERATED ALWAYS AS (zeroblob(100000000)));
+                 INSERT INTO messages (id, topic_id, timestamp) VALUES (1, 1, 1);"
+            ),
+            "table `messages`",
+            "its column `data` is generated or hidden",
+        ),
+        (
+            "text_stamps.db3",
+            format!(
+                "{topics} CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL,
+                 timestamp TEXT NOT NULL, data BLOB NOT NULL);"
+            ),
+            "table `messages`",
+            "its column `timestamp` is declared `TEXT`, rosbag2's is `INTEGER`",
+        ),
+        (
+            "no_data.db3",
+            format!(
+                "{topics} CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL,
+                 timestamp INTEGER NOT NULL);"
+            ),
+            "table `messages`",
+            "it has no column `data`",
+        ),
+    ];
+    for (name, sql, table, why) in cases {
+        let path = dir.path().join(name);
+        Connection::open(&path)
+            .unwrap()
+            .execute_batch(&sql)
+            .unwrap();
+        let start = std::time::Instant::now();
+        let e = error(&path);
+        assert!(
+            e.contains(name) && e.contains(table) && e.contains(why),
+            "{name}: {e}"
+        );
+        let err = replay_fails(&path, &dir.path().join("out"));
+        assert!(err.contains(name) && err.contains(why), "{name}: {err}");
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(20),
+            "{name}: refused only after {:?}",
+            start.elapsed()
+        );
+    }
+    // The bag of the issue is small: 8 KB.
+    assert!(
+        std::fs::metadata(dir.path().join("views.db3"))
+            .unwrap()
+            .len()
+            <= 8192
+    );
+}

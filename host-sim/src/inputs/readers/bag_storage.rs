@@ -82,8 +82,8 @@ impl StoredMessage<'_> {
 enum Storage {
     /// An MCAP file, read into memory.
     Mcap(Vec<u8>),
-    /// An SQLite 3 database, opened read-only.
-    Sqlite(Connection),
+    /// An SQLite 3 database, opened read-only, its schema checked.
+    Sqlite(SqliteBag),
 }
 
 /// The files of a bag, opened.
@@ -285,7 +285,10 @@ fn open_file(path: &Path) -> Result<Storage> {
             let flags = OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX;
             let db = Connection::open_with_flags(path, flags)
                 .with_context(|| format!("{}: cannot open the SQLite bag", path.display()))?;
-            Ok(Storage::Sqlite(db))
+            let bytes = std::fs::metadata(path)
+                .with_context(|| format!("reading {}", path.display()))?
+                .len();
+            Ok(Storage::Sqlite(SqliteBag::guard(path, db, bytes)?))
         }
         Some(Kind::Zstd) => open_compressed(path),
         None => bail!(
@@ -325,7 +328,11 @@ fn open_compressed(path: &Path) -> Result<Storage> {
                     path.display()
                 )
             })?;
-            Ok(Storage::Sqlite(db))
+            Ok(Storage::Sqlite(SqliteBag::guard(
+                path,
+                db,
+                bytes.len() as u64,
+            )?))
         }
         Some(Kind::Zstd) | None => bail!(
             "{}: zstd-compressed, but what it holds is neither an MCAP nor an SQLite 3 file",
@@ -465,15 +472,223 @@ fn mcap_messages(
     Ok(())
 }
 
+/// The tables of rosbag2's SQLite storage that are read, with the columns read and their
+/// declared types (as every rosbag2 release creates them).
+const SQLITE_TABLES: [(&str, [(&str, &str); 4]); 2] = [
+    (
+        "topics",
+        [
+            ("id", "INTEGER"),
+            ("name", "TEXT"),
+            ("type", "TEXT"),
+            ("serialization_format", "TEXT"),
+        ],
+    ),
+    (
+        "messages",
+        [
+            ("id", "INTEGER"),
+            ("topic_id", "INTEGER"),
+            ("timestamp", "INTEGER"),
+            ("data", "BLOB"),
+        ],
+    ),
+];
+
+/// The SQLite virtual-machine instructions one query of a bag file may take, whatever the
+/// file's size: 10⁸ (about a second).
+pub const SQLITE_BASE_INSTRUCTIONS: u64 = 100_000_000;
+
+/// The SQLite instructions one query may take besides, per byte of the file: reading
+/// rosbag2's real tables takes a few tens of instructions a row, and a row takes more than
+/// ten bytes of the file, so this is more than ten times what any bag needs; only a
+/// crafted or corrupt file reaches it.
+pub const SQLITE_INSTRUCTIONS_PER_BYTE: u64 = 64;
+
+/// The longest message (bytes) read from an SQLite bag: SQLite's own limit on a blob (its
+/// default and most, 10⁹ bytes), set explicitly so that it is one that is named.
+pub const SQLITE_MESSAGE_LIMIT: i32 = 1_000_000_000;
+
+/// How often (SQLite instructions) the progress handler counts.
+const SQLITE_PROGRESS_STEP: i32 = 10_000;
+
+/// An SQLite bag file, opened read-only, hardened against a crafted file, its schema
+/// checked; every query on it is bounded by a budget of SQLite instructions.
+struct SqliteBag {
+    db: Connection,
+    /// The file's size (bytes).
+    bytes: u64,
+    /// The instructions one query may take.
+    budget: u64,
+    /// The instructions the running query has taken, counted by the progress handler.
+    spent: std::sync::Arc<std::sync::atomic::AtomicU64>,
+}
+
+impl SqliteBag {
+    /// Hardens `db` (a bag file of `bytes` bytes) against a crafted file, as SQLite's
+    /// "defense against the dark arts" advises: the defensive mode, an untrusted schema
+    /// (no function with side effects in it), cell size checks, the blob length limit,
+    /// and a progress handler that interrupts a query past its budget of instructions;
+    /// then checks that `topics` and `messages` are real tables (not views or virtual
+    /// tables, whose reading an input could make endless) with rosbag2's columns and
+    /// declared types, before any query reads them.
+    fn guard(path: &Path, db: Connection, bytes: u64) -> Result<Self> {
+        let budget = SQLITE_BASE_INSTRUCTIONS
+            .saturating_add(SQLITE_INSTRUCTIONS_PER_BYTE.saturating_mul(bytes));
+        Self::guard_with_budget(path, db, bytes, budget)
+    }
+
+    /// [`Self::guard`] with a budget of `budget` instructions a query.
+    fn guard_with_budget(path: &Path, mut db: Connection, bytes: u64, budget: u64) -> Result<Self> {
+        use rusqlite::config::DbConfig;
+        use rusqlite::limits::Limit;
+        use std::sync::atomic::{AtomicU64, Ordering};
+        let spent = std::sync::Arc::new(AtomicU64::new(0));
+        let counter = spent.clone();
+        let harden = |db: &mut Connection| {
+            db.set_db_config(DbConfig::SQLITE_DBCONFIG_DEFENSIVE, true)?;
+            db.set_db_config(DbConfig::SQLITE_DBCONFIG_TRUSTED_SCHEMA, false)?;
+            db.set_limit(Limit::SQLITE_LIMIT_LENGTH, SQLITE_MESSAGE_LIMIT)?;
+            db.pragma_update(None, "cell_size_check", true)?;
+            db.progress_handler(
+                SQLITE_PROGRESS_STEP,
+                Some(move || {
+                    let step = SQLITE_PROGRESS_STEP as u64;
+                    counter.fetch_add(step, Ordering::Relaxed) + step > budget
+                }),
+            )
+        };
+        harden(&mut db).map_err(|e| {
+            anyhow!(
+                "{}: cannot set up SQLite to read the bag: {e}",
+                path.display()
+            )
+        })?;
+        let bag = Self {
+            db,
+            bytes,
+            budget,
+            spent,
+        };
+        for (table, columns) in SQLITE_TABLES {
+            bag.check_table(path, table, &columns)?;
+        }
+        Ok(bag)
+    }
+
+    /// Checks that `table` is a real table with `columns` (declared types as rosbag2's,
+    /// none generated).
+    fn check_table(&self, path: &Path, table: &str, columns: &[(&str, &str)]) -> Result<()> {
+        let listed = columns
+            .iter()
+            .map(|(c, _)| format!("`{c}`"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        let cannot = |why: String| {
+            anyhow!(
+                "{}: cannot read rosbag2's table `{table}` ({listed}): {why}",
+                path.display()
+            )
+        };
+        let sql_error = |e: rusqlite::Error| cannot(self.why(&e, "the schema"));
+        self.start();
+        let mut statement = self
+            .db
+            .prepare("SELECT type, sql FROM main.sqlite_master WHERE name = ?1 COLLATE NOCASE")
+            .map_err(sql_error)?;
+        let found = statement
+            .query_map([table], |row| {
+                Ok((row.get::<_, String>(0)?, row.get::<_, Option<String>>(1)?))
+            })
+            .map_err(sql_error)?
+            .collect::<rusqlite::Result<Vec<_>>>()
+            .map_err(sql_error)?;
+        let (kind, sql) = match found.as_slice() {
+            [] => return Err(cannot("the file has no such table".into())),
+            [one] => one,
+            _ => return Err(cannot("the schema names it more than once".into())),
+        };
+        if kind != "table" {
+            return Err(cannot(format!(
+                "it is a {kind}, not a table: refused, since reading a {kind} can take without bound"
+            )));
+        }
+        let sql = sql.as_deref().unwrap_or("");
+        let head: String = sql.split_whitespace().take(2).collect::<Vec<_>>().join(" ");
+        if head.eq_ignore_ascii_case("CREATE VIRTUAL") {
+            return Err(cannot(
+                "it is a virtual table, not a table: refused, since reading a virtual table can take without bound".into(),
+            ));
+        }
+        let mut statement = self
+            .db
+            .prepare("SELECT name, type, hidden FROM pragma_table_xinfo(?1, 'main')")
+            .map_err(sql_error)?;
+        let declared = statement
+            .query_map([table], |row| {
+                Ok((
+                    row.get::<_, String>(0)?,
+                    row.get::<_, String>(1)?,
+                    row.get::<_, i64>(2)?,
+                ))
+            })
+            .map_err(sql_error)?
+            .collect::<rusqlite::Result<Vec<_>>>()
+            .map_err(sql_error)?;
+        for (column, kind) in columns {
+            let Some((_, found, hidden)) = declared
+                .iter()
+                .find(|(name, _, _)| name.eq_ignore_ascii_case(column))
+            else {
+                return Err(cannot(format!("it has no column `{column}`")));
+            };
+            if !found.eq_ignore_ascii_case(kind) {
+                return Err(cannot(format!(
+                    "its column `{column}` is declared `{found}`, rosbag2's is `{kind}`"
+                )));
+            }
+            if *hidden != 0 {
+                return Err(cannot(format!(
+                    "its column `{column}` is generated or hidden, not stored"
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Starts counting a query's instructions from 0.
+    fn start(&self) {
+        self.spent.store(0, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Why a query on `what` failed: the budget, the blob limit, or SQLite's error.
+    fn why(&self, e: &rusqlite::Error, what: &str) -> String {
+        use rusqlite::ErrorCode;
+        match e.sqlite_error_code() {
+            Some(ErrorCode::OperationInterrupted) => format!(
+                "reading {what} took more than {} SQLite instructions, the limit for a bag file of {} bytes ({SQLITE_BASE_INSTRUCTIONS} + {SQLITE_INSTRUCTIONS_PER_BYTE} a byte): a crafted or corrupt file",
+                self.budget, self.bytes
+            ),
+            Some(ErrorCode::TooBig) => format!(
+                "a value in {what} is longer than the limit of {SQLITE_MESSAGE_LIMIT} bytes"
+            ),
+            _ => e.to_string(),
+        }
+    }
+}
+
 /// The `topics` table of a rosbag2 SQLite file: id → (name, channel).
-fn sqlite_topics(path: &Path, db: &Connection) -> Result<BTreeMap<i64, (String, Channel)>> {
+fn sqlite_topics(path: &Path, bag: &SqliteBag) -> Result<BTreeMap<i64, (String, Channel)>> {
     let not_a_bag = |e: rusqlite::Error| {
         anyhow!(
-            "{}: cannot read rosbag2's table `topics` (`id`, `name`, `type`, `serialization_format`): {e}",
-            path.display()
+            "{}: cannot read rosbag2's table `topics` (`id`, `name`, `type`, `serialization_format`): {}",
+            path.display(),
+            bag.why(&e, "the table `topics`")
         )
     };
-    let mut statement = db
+    bag.start();
+    let mut statement = bag
+        .db
         .prepare("SELECT id, name, type, serialization_format FROM topics ORDER BY id")
         .map_err(not_a_bag)?;
     let rows = statement
@@ -501,17 +716,20 @@ fn sqlite_topics(path: &Path, db: &Connection) -> Result<BTreeMap<i64, (String, 
 /// The `messages` table of a rosbag2 SQLite file, in rosbag2's play order.
 fn sqlite_messages(
     path: &Path,
-    db: &Connection,
+    bag: &SqliteBag,
     each: &mut impl FnMut(StoredMessage<'_>) -> Result<()>,
 ) -> Result<()> {
-    let topics = sqlite_topics(path, db)?;
+    let topics = sqlite_topics(path, bag)?;
     let corrupt = |e: rusqlite::Error| {
         anyhow!(
-            "{}: cannot read rosbag2's table `messages` (`id`, `topic_id`, `timestamp`, `data`): {e}",
-            path.display()
+            "{}: cannot read rosbag2's table `messages` (`id`, `topic_id`, `timestamp`, `data`): {}",
+            path.display(),
+            bag.why(&e, "the table `messages`")
         )
     };
-    let mut statement = db
+    bag.start();
+    let mut statement = bag
+        .db
         .prepare("SELECT id, topic_id, timestamp, data FROM messages ORDER BY timestamp, id")
         .map_err(corrupt)?;
     let mut rows = statement.query([]).map_err(corrupt)?;
@@ -566,6 +784,48 @@ mod tests {
         assert_eq!(
             v.map(|p| p.display().to_string()),
             ["b_1.db3", "b_2.db3", "b_10.db3", "a.db3"]
+        );
+    }
+
+    #[test]
+    fn a_query_past_its_budget_of_sqlite_instructions_is_interrupted_naming_the_limit() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rows.db3");
+        let db = Connection::open(&path).unwrap();
+        db.execute_batch(
+            "CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT NOT NULL, type TEXT NOT NULL,
+                serialization_format TEXT NOT NULL);
+             CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL,
+                timestamp INTEGER NOT NULL, data BLOB NOT NULL);
+             INSERT INTO topics VALUES (1, '/scan', 'sensor_msgs/msg/LaserScan', 'cdr');
+             WITH RECURSIVE r(x) AS (SELECT 1 UNION ALL SELECT x + 1 FROM r WHERE x < 20000)
+             INSERT INTO messages SELECT x, 1, x, x'00010000' FROM r;",
+        )
+        .unwrap();
+        drop(db);
+        let open = |budget| {
+            let db = Connection::open_with_flags(&path, OpenFlags::SQLITE_OPEN_READ_ONLY).unwrap();
+            SqliteBag::guard_with_budget(&path, db, 1000, budget).unwrap()
+        };
+        let count = |bag: &SqliteBag| {
+            let mut n = 0;
+            sqlite_messages(&path, bag, &mut |_| {
+                n += 1;
+                Ok(())
+            })
+            .map(|()| n)
+        };
+        // The real budget reads every row; a small one stops the query with an error
+        // naming the file, the table and the limit.
+        let bag = open(SQLITE_BASE_INSTRUCTIONS);
+        assert_eq!(count(&bag).unwrap(), 20000);
+        let bag = open(100_000);
+        let e = count(&bag).unwrap_err().to_string();
+        assert!(
+            e.contains("rows.db3")
+                && e.contains("table `messages`")
+                && e.contains("more than 100000 SQLite instructions"),
+            "{e}"
         );
     }
 
