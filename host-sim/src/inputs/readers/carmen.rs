@@ -160,15 +160,50 @@ fn stamp(value: f64, line: usize) -> Result<f64, CarmenError> {
     }
 }
 
+/// The most bytes a gzip-compressed CARMEN log (`.log.gz`) may decompress to: 4 GiB
+/// (the largest public CARMEN logs are a few hundred MB). More is refused, naming the
+/// limit, rather than read into memory: a decompression bomb.
+pub const GZ_DECOMPRESSED_LIMIT: u64 = 4 << 30;
+
+/// A reader that fails once more than `limit` bytes have come through it.
+struct Limited<R> {
+    inner: R,
+    limit: u64,
+    read: u64,
+}
+
+impl<R: std::io::Read> std::io::Read for Limited<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.read += n as u64;
+        if self.read > self.limit {
+            return Err(std::io::Error::other(format!(
+                "the gzip-compressed log decompresses to more than {} bytes, the limit for a CARMEN log (decompress it on disk to read it)",
+                self.limit
+            )));
+        }
+        Ok(n)
+    }
+}
+
 /// Reads a CARMEN log file: `.gz` files are decompressed (flate2), anything else is read
 /// as text.
 pub fn read(path: &Path) -> Result<CarmenLog> {
+    read_with_limit(path, GZ_DECOMPRESSED_LIMIT)
+}
+
+/// [`read`], a `.gz` file decompressing to at most `limit` bytes.
+fn read_with_limit(path: &Path, limit: u64) -> Result<CarmenLog> {
     let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
     let gz = path.extension().is_some_and(|e| e == "gz");
     let log = if gz {
         // Every member of a multi-member gzip file (`cat a.gz b.gz`, `gzip` of a stream
-        // written in parts), not only the first.
-        parse(BufReader::new(flate2::read::MultiGzDecoder::new(file)))
+        // written in parts), not only the first; at most `limit` bytes in all.
+        parse(BufReader::new(Limited {
+            inner: flate2::read::MultiGzDecoder::new(file),
+            limit,
+            read: 0,
+        }))
     } else {
         parse(BufReader::new(file))
     };
@@ -465,6 +500,26 @@ mod tests {
         assert_eq!(
             log.lasers().map(|l| l.stamp).collect::<Vec<_>>(),
             [5.0, 5.1]
+        );
+    }
+
+    #[test]
+    fn a_gzip_log_decompressing_past_the_limit_is_refused_naming_it() {
+        use std::io::Write;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bomb.log.gz");
+        // 4 MB of one comment line compress to a few KB.
+        let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+        writeln!(gz, "FLASER 1 1 0 0 0 0 0 0 5 h 5").unwrap();
+        gz.write_all(&vec![b'#'; 4 << 20]).unwrap();
+        let bytes = gz.finish().unwrap();
+        assert!(bytes.len() < 16 << 10, "{}", bytes.len());
+        std::fs::write(&path, bytes).unwrap();
+        assert_eq!(read_with_limit(&path, 8 << 20).unwrap().lasers().count(), 1);
+        let e = read_with_limit(&path, 1 << 20).unwrap_err().to_string();
+        assert!(
+            e.contains("bomb.log.gz") && e.contains("more than 1048576 bytes, the limit"),
+            "{e}"
         );
     }
 
