@@ -391,6 +391,16 @@ fn mcap_topics(path: &Path, bytes: &[u8]) -> Result<Vec<(String, Channel)>> {
 /// storage takes (SQLite's default blob limit). Longer is a corrupt length.
 const MCAP_RECORD_LIMIT: usize = 1 << 30;
 
+/// How many times larger than its file (at least 64 KiB) an MCAP record may be: a record
+/// in a compressed chunk can be larger than the file, but no real bag compresses 1024 to 1,
+/// so a larger length or chunk size is corrupt, refused before its buffer is allocated.
+const MCAP_EXPANSION_LIMIT: usize = 1024;
+
+/// The longest record the MCAP file of `len` bytes may hold.
+fn mcap_record_limit(len: usize) -> usize {
+    MCAP_RECORD_LIMIT.min(len.max(64 << 10).saturating_mul(MCAP_EXPANSION_LIMIT))
+}
+
 /// A channel of an MCAP file: its topic, type and encoding.
 struct McapChannel {
     topic: String,
@@ -410,10 +420,19 @@ fn mcap_messages(
 ) -> Result<()> {
     use mcap::records::Record;
     use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
-    let corrupt =
-        |e: mcap::McapError| anyhow!("{}: truncated or corrupt MCAP: {e}", path.display());
+    let limit = mcap_record_limit(bytes.len());
+    let corrupt = |e: mcap::McapError| match e {
+        mcap::McapError::RecordTooLarge { len, .. } | mcap::McapError::ChunkTooLarge(len) => {
+            anyhow!(
+                "{}: truncated or corrupt MCAP: a record or chunk of {len} bytes, more than the limit of {limit} bytes for a file of {} bytes ({MCAP_EXPANSION_LIMIT} times its size, at least 64 KiB, at most 1 GiB)",
+                path.display(),
+                bytes.len()
+            )
+        }
+        e => anyhow!("{}: truncated or corrupt MCAP: {e}", path.display()),
+    };
     let mut reader = LinearReader::new_with_options(
-        LinearReaderOptions::default().with_record_length_limit(MCAP_RECORD_LIMIT),
+        LinearReaderOptions::default().with_record_length_limit(limit),
     );
     let mut rest = bytes;
     let mut schemas: BTreeMap<u16, String> = BTreeMap::new();
@@ -827,6 +846,66 @@ mod tests {
                 && e.contains("more than 100000 SQLite instructions"),
             "{e}"
         );
+    }
+
+    /// An MCAP file: its magic, a header, one chunk compressed with `compression` claiming
+    /// `uncompressed_size` and holding `records`, and nothing after (a file cut short).
+    fn crafted_mcap(compression: &str, uncompressed_size: u64, records: &[u8]) -> Vec<u8> {
+        let mut out = MCAP_MAGIC.to_vec();
+        let string = |out: &mut Vec<u8>, s: &str| {
+            out.extend((s.len() as u32).to_le_bytes());
+            out.extend(s.as_bytes());
+        };
+        let mut header = Vec::new();
+        string(&mut header, "ros2");
+        string(&mut header, "crafted");
+        out.push(0x01);
+        out.extend((header.len() as u64).to_le_bytes());
+        out.extend(header);
+        let mut chunk = Vec::new();
+        chunk.extend(0u64.to_le_bytes());
+        chunk.extend(0u64.to_le_bytes());
+        chunk.extend(uncompressed_size.to_le_bytes());
+        chunk.extend(0u32.to_le_bytes());
+        string(&mut chunk, compression);
+        chunk.extend((records.len() as u64).to_le_bytes());
+        chunk.extend(records);
+        out.push(0x06);
+        out.extend((chunk.len() as u64).to_le_bytes());
+        out.extend(chunk);
+        out
+    }
+
+    #[test]
+    fn crafted_mcap_lengths_are_refused_before_their_buffers_naming_the_limit() {
+        let path = Path::new("crafted.mcap");
+        let read = |bytes: &[u8]| {
+            let start = std::time::Instant::now();
+            let e = mcap_messages(path, bytes, |_, _, _| Ok(()))
+                .unwrap_err()
+                .to_string();
+            assert!(start.elapsed().as_secs() < 5, "{:?}", start.elapsed());
+            e
+        };
+        // A message record inside an uncompressed chunk that claims 1 GiB − 1 bytes.
+        let mut record = vec![0x05];
+        record.extend(((1u64 << 30) - 1).to_le_bytes());
+        let bytes = crafted_mcap("", 1 << 30, &record);
+        let e = read(&bytes);
+        assert!(
+            e.contains("crafted.mcap")
+                && e.contains("1073741823 bytes, more than the limit of 67108864 bytes"),
+            "{e}"
+        );
+        // A zstd chunk claiming 2⁶² bytes once decompressed.
+        let packed = zstd::encode_all(&[0u8; 64][..], 3).unwrap();
+        let bytes = crafted_mcap("zstd", 1 << 62, &packed);
+        let e = read(&bytes);
+        assert!(
+            e.contains("crafted.mcap") && e.contains("corrupt MCAP"),
+            "{e}"
+        );
+        assert_eq!(mcap_record_limit(9 << 20), 1 << 30);
     }
 
     #[test]
