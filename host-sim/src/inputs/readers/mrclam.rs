@@ -52,18 +52,22 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
     let (odometry, measurements, ground_truth) = std::thread::scope(|s| {
         let odometry = s.spawn(|| {
             let mut events = Vec::with_capacity(65_536);
+            let mut order = InOrder::new(&odo_path);
             read_table_with::<3>(&odo_path, |row| {
                 let [t, v, omega] = row.values;
+                order.check(row.line, t);
                 events.push(Event::new(t, EventKind::Velocity { v, omega }));
-            })
-            .map(|()| events)
+            })?;
+            order.result().map(|()| events)
         });
         let truth = s.spawn(|| {
             let mut poses = Vec::with_capacity(65_536);
             let mut far = None;
+            let mut order = InOrder::new(&gt_path);
             if gt_path.exists() {
                 read_table_with::<4>(&gt_path, |row| {
                     let [stamp, x, y, theta] = row.values;
+                    order.check(row.line, stamp);
                     if far.is_none() {
                         far = beyond(&gt_path, row.line, [("x", x), ("y", y)]).err();
                     }
@@ -73,6 +77,7 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
                     });
                 })?;
             }
+            order.result()?;
             far.map_or(Ok(poses), Err)
         });
         let measurements = read_table::<4>(&meas_path);
@@ -92,8 +97,11 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
     }
     events.reserve(measurements.len());
     let mut dropped = 0;
+    let mut order = InOrder::new(&meas_path);
     for row in &measurements {
         let [t, code, range, bearing] = row.values;
+        order.check(row.line, t);
+        order.result()?;
         let code = whole(&meas_path, row.line, code, "barcode")?;
         if range <= 0.0 {
             return Err(invalid(
@@ -187,6 +195,51 @@ fn whole(path: &Path, line: usize, v: f64, what: &str) -> Result<u32, ReadError>
     }
 }
 
+/// The time column of one of MRCLAM's files, checked row by row: the files are in time
+/// order (every file of the published datasets is), so a stamp that goes back is a
+/// damaged or edited file, refused with its line rather than sorted away.
+struct InOrder<'a> {
+    path: &'a Path,
+    /// The line and stamp of the last row.
+    last: Option<(usize, f64)>,
+    /// The first row whose stamp went back.
+    error: Option<super::text::ReadError>,
+}
+
+impl<'a> InOrder<'a> {
+    fn new(path: &'a Path) -> Self {
+        Self {
+            path,
+            last: None,
+            error: None,
+        }
+    }
+
+    /// Takes the row on `line` stamped `t` (s).
+    fn check(&mut self, line: usize, t: f64) {
+        if self.error.is_some() {
+            return;
+        }
+        if let Some((before, last)) = self.last
+            && t < last
+        {
+            self.error = Some(invalid(
+                self.path,
+                line,
+                format!(
+                    "time {t} s goes back before line {before}'s {last} s: MRCLAM's files are in time order"
+                ),
+            ));
+        }
+        self.last = Some((line, t));
+    }
+
+    /// The first stamp that went back, as an error.
+    fn result(&mut self) -> Result<(), super::text::ReadError> {
+        self.error.take().map_or(Ok(()), Err)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -225,6 +278,49 @@ mod tests {
         let e = read(far.path(), 1).unwrap_err().to_string();
         assert!(
             e.ends_with("Landmark_Groundtruth.dat:5: x = 3000000 m is beyond 100 km of the origin"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_stamp_going_back_in_any_file_is_refused_with_its_line() {
+        let landmark = "6\t3.0\t4.0\t0.01\t0.01";
+        // Equal stamps are in order.
+        let same = folder("10.0\t1.01\t2.0\t0.0", landmark);
+        assert_eq!(read(same.path(), 1).unwrap().ground_truth.len(), 2);
+        let back = folder("9.5\t1.01\t2.0\t0.0", landmark);
+        let e = read(back.path(), 1).unwrap_err().to_string();
+        assert!(
+            e.ends_with(
+                "Robot1_Groundtruth.dat:6: time 9.5 s goes back before line 5's 10 s: MRCLAM's files are in time order"
+            ),
+            "{e}"
+        );
+        let good = folder("10.1\t1.01\t2.0\t0.0", landmark);
+        let rewrite = |name: &str, rows: &str| {
+            std::fs::write(
+                good.path().join(name),
+                format!("# a\n# b\n# c\n# d\n{rows}"),
+            )
+            .unwrap();
+        };
+        rewrite(
+            "Robot1_Odometry.dat",
+            "10.0\t0.1\t0.0\n10.1\t0.1\t0.0\n10.05\t0.1\t0.0\n",
+        );
+        let e = read(good.path(), 1).unwrap_err().to_string();
+        assert!(
+            e.contains("Robot1_Odometry.dat:7: time 10.05 s goes back before line 6's 10.1 s"),
+            "{e}"
+        );
+        rewrite("Robot1_Odometry.dat", "10.0\t0.1\t0.0\n10.1\t0.1\t0.0\n");
+        rewrite(
+            "Robot1_Measurement.dat",
+            "10.05\t72\t2.0\t0.1\n10.01\t72\t2.0\t0.1\n",
+        );
+        let e = read(good.path(), 1).unwrap_err().to_string();
+        assert!(
+            e.contains("Robot1_Measurement.dat:6: time 10.01 s goes back before line 5's 10.05 s"),
             "{e}"
         );
     }
