@@ -439,9 +439,7 @@ fn free_bit(
 ) -> bool {
     let g = map.geometry();
     match below {
-        None => map
-            .log_odds(bx as i32, by as i32)
-            .is_some_and(|v| v < free_below),
+        None => map.is_free(bx as i32, by as i32, free_below),
         Some(b) => {
             let s = 1usize << (k - 1);
             let (bw, bh) = (g.width.div_ceil(s), g.height.div_ceil(s));

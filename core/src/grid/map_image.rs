@@ -29,7 +29,8 @@
 //! A section is a tag (`u32`), a length `n` (`u32`) and `n` bytes, padded with zeros to a
 //! multiple of 4. [`SECTION_OCCUPIED`] (the bitmap of [`super::occupancy_bytes`] bytes
 //! the particle filter scores against) is required; [`SECTION_MAX_POOL_LAYERS`] (the
-//! precomputed layers of the global search, in their own byte image) is optional; a
+//! precomputed layers of the global search, in their own byte image) and [`SECTION_FREE`]
+//! (the free-cell bitmap, from which those layers can be made) are optional; a
 //! reader skips tags it does not know, so later layers can be added without a new
 //! version. The log-odds cells themselves are not stored: scans are scored against the
 //! occupied bits only, and a 669 × 717 map (the Intel lab at 5 cm) takes 60 KB as a
@@ -49,6 +50,12 @@ pub const SECTION_OCCUPIED: u32 = 1;
 /// Section tag of the max-pooled layers of the global search (optional): a
 /// [`MaxPoolLayers`] byte image made from the same cells.
 pub const SECTION_MAX_POOL_LAYERS: u32 = 2;
+/// Section tag of the free-cell bitmap (optional): the bitmap layout of
+/// [`SECTION_OCCUPIED`], a bit set where the cell's log-odds was below the image's free
+/// threshold. With it the global search's layers can be made from the image alone
+/// ([`MapImage::view`] carries it; [`MaxPoolLayers::build`]), as a map drawn on the device
+/// (`microslam::slam::GraphSlam::write_map_image`) needs.
+pub const SECTION_FREE: u32 = 3;
 
 /// Levels of the max-pooled layers [`encode_map_image_with_layers`] writes by default: 5
 /// (blocks up to 32 × 32 cells). Each level costs a bitmap of the map's size: the Intel
@@ -56,7 +63,7 @@ pub const SECTION_MAX_POOL_LAYERS: u32 = 2;
 /// with the firmware's code fits the STM32F411's 512 KB of flash (6 levels would not).
 pub const DEFAULT_LAYER_LEVELS: u8 = 5;
 
-const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+static CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 const CRC_AT: usize = 36;
 
 /// Why a map image was refused.
@@ -131,6 +138,81 @@ fn f32_at(b: &[u8], at: usize) -> Option<f32> {
     u32_at(b, at).map(f32::from_bits)
 }
 
+/// The header of an image of `geometry` with `sections` sections of `payload` bytes in
+/// all, its CRC-32 field zero ([`ImageChecksum`] computes it as the sections are
+/// written). Refused with [`MapImageError::InvalidGeometry`] for a geometry an image
+/// cannot hold.
+pub fn encode_header(
+    geometry: &GridGeometry,
+    occupied_above: i8,
+    free_below: i8,
+    sections: u16,
+    payload: u32,
+) -> Result<[u8; MAP_IMAGE_HEADER_LEN], MapImageError> {
+    let (w, h) = (geometry.width, geometry.height);
+    let (Ok(w), Ok(h)) = (u32::try_from(w), u32::try_from(h)) else {
+        return Err(MapImageError::InvalidGeometry);
+    };
+    if !geometry.is_valid() {
+        return Err(MapImageError::InvalidGeometry);
+    }
+    let mut out = [0u8; MAP_IMAGE_HEADER_LEN];
+    let fields: [(usize, &[u8]); 12] = [
+        (0, &MAP_IMAGE_MAGIC),
+        (4, &MAP_IMAGE_VERSION.to_le_bytes()),
+        (6, &(MAP_IMAGE_HEADER_LEN as u16).to_le_bytes()),
+        (8, &w.to_le_bytes()),
+        (12, &h.to_le_bytes()),
+        (16, &geometry.resolution.to_le_bytes()),
+        (20, &geometry.origin_x.to_le_bytes()),
+        (24, &geometry.origin_y.to_le_bytes()),
+        (28, &occupied_above.to_le_bytes()),
+        (29, &free_below.to_le_bytes()),
+        (30, &sections.to_le_bytes()),
+        (32, &payload.to_le_bytes()),
+    ];
+    for (at, bytes) in fields {
+        if let Some(slot) = out.get_mut(at..at + bytes.len()) {
+            slot.copy_from_slice(bytes);
+        }
+    }
+    Ok(out)
+}
+
+/// The header of a section: its tag and the length of its body (before padding).
+pub fn section_header(tag: u32, len: u32) -> [u8; 8] {
+    let mut out = [0u8; 8];
+    out[..4].copy_from_slice(&tag.to_le_bytes());
+    out[4..].copy_from_slice(&len.to_le_bytes());
+    out
+}
+
+/// An image's CRC-32 computed while it is written: the header from
+/// [`encode_header`], then every byte after the header in order
+/// ([`ImageChecksum::update`]); [`ImageChecksum::finish`] puts it in the header.
+pub struct ImageChecksum {
+    digest: crc::Digest<'static, u32>,
+}
+
+impl ImageChecksum {
+    /// Starts with the header (its CRC field is not read).
+    pub fn new(header: &[u8; MAP_IMAGE_HEADER_LEN]) -> Self {
+        let mut digest = CRC32.digest();
+        digest.update(&header[..CRC_AT]);
+        Self { digest }
+    }
+
+    /// The next bytes after the header.
+    pub fn update(&mut self, bytes: &[u8]) {
+        self.digest.update(bytes);
+    }
+
+    /// Writes the CRC-32 into `header` (the one [`ImageChecksum::new`] started with).
+    pub fn finish(self, header: &mut [u8; MAP_IMAGE_HEADER_LEN]) {
+        header[CRC_AT..].copy_from_slice(&self.digest.finalize().to_le_bytes());
+    }
+}
+
 /// The CRC-32 of an image: header without its CRC field, then the sections.
 fn image_crc(bytes: &[u8]) -> Option<u32> {
     let mut digest = CRC32.digest();
@@ -188,7 +270,7 @@ impl<'a> MapImage<'a> {
         let occupied_above = i8::from_le_bytes([header[28]]);
         let free_below = i8::from_le_bytes([header[29]]);
         let sections = u16_at(header, 30).ok_or(MapImageError::Truncated)?;
-        let mut occupied = None;
+        let (mut occupied, mut free) = (None, None);
         let mut at = MAP_IMAGE_HEADER_LEN;
         for _ in 0..sections {
             let tag = u32_at(bytes, at).ok_or(MapImageError::BadSection)?;
@@ -207,13 +289,24 @@ impl<'a> MapImage<'a> {
                 }
                 occupied = Some(body);
             }
+            if tag == SECTION_FREE && free.is_none() {
+                if body.len() != bitmap_len {
+                    return Err(MapImageError::BitmapSizeMismatch);
+                }
+                free = Some(body);
+            }
         }
         if at > bytes.len() {
             return Err(MapImageError::BadSection);
         }
         let occupied = occupied.ok_or(MapImageError::MissingOccupancy)?;
-        let view = GridView::from_occupancy_bits(occupied, geometry, occupied_above)
+        let mut view = GridView::from_occupancy_bits(occupied, geometry, occupied_above)
             .map_err(|_| MapImageError::BitmapSizeMismatch)?;
+        if let Some(free) = free {
+            view = view
+                .with_free_bits(free)
+                .map_err(|_| MapImageError::BitmapSizeMismatch)?;
+        }
         Ok(Self {
             bytes,
             view,
@@ -228,7 +321,8 @@ impl<'a> MapImage<'a> {
     }
 
     /// The map the particle filter scores against: a view of the occupied-cell bitmap
-    /// ([`GridView::from_occupancy_bits`]).
+    /// ([`GridView::from_occupancy_bits`]), with the free-cell bitmap when the image has
+    /// one ([`GridView::with_free_bits`]).
     pub fn view(&self) -> GridView<'a> {
         self.view
     }
@@ -307,32 +401,19 @@ pub fn encode_map_image(
     let mut body = std::vec::Vec::new();
     for (tag, bytes) in &sections {
         let len = u32::try_from(bytes.len()).map_err(|_| MapImageError::BadSection)?;
-        body.extend_from_slice(&tag.to_le_bytes());
-        body.extend_from_slice(&len.to_le_bytes());
+        body.extend_from_slice(&section_header(*tag, len));
         body.extend_from_slice(bytes);
         body.resize(body.len().next_multiple_of(4), 0);
     }
-    let mut out = std::vec::Vec::with_capacity(MAP_IMAGE_HEADER_LEN + body.len());
-    out.extend_from_slice(&MAP_IMAGE_MAGIC);
-    out.extend_from_slice(&MAP_IMAGE_VERSION.to_le_bytes());
-    out.extend_from_slice(&(MAP_IMAGE_HEADER_LEN as u16).to_le_bytes());
-    out.extend_from_slice(&(w as u32).to_le_bytes());
-    out.extend_from_slice(&(h as u32).to_le_bytes());
-    for v in [geometry.resolution, geometry.origin_x, geometry.origin_y] {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
-    out.extend_from_slice(&occupied_above.to_le_bytes());
-    out.extend_from_slice(&free_below.to_le_bytes());
     let count = u16::try_from(sections.len()).map_err(|_| MapImageError::BadSection)?;
-    out.extend_from_slice(&count.to_le_bytes());
     let payload = u32::try_from(body.len()).map_err(|_| MapImageError::BadSection)?;
-    out.extend_from_slice(&payload.to_le_bytes());
-    out.extend_from_slice(&[0; 4]);
+    let mut header = encode_header(geometry, occupied_above, free_below, count, payload)?;
+    let mut crc = ImageChecksum::new(&header);
+    crc.update(&body);
+    crc.finish(&mut header);
+    let mut out = std::vec::Vec::with_capacity(MAP_IMAGE_HEADER_LEN + body.len());
+    out.extend_from_slice(&header);
     out.extend_from_slice(&body);
-    let crc = image_crc(&out).ok_or(MapImageError::Truncated)?;
-    if let Some(slot) = out.get_mut(CRC_AT..CRC_AT + 4) {
-        slot.copy_from_slice(&crc.to_le_bytes());
-    }
     Ok(out)
 }
 

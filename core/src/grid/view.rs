@@ -15,6 +15,8 @@ pub struct GridView<'a> {
     geometry: GridGeometry,
     occupied_above: i8,
     bits: Option<&'a [u8]>,
+    /// Free cells of a bitmap-only view (a map image's free section), for the layers.
+    free: Option<&'a [u8]>,
 }
 
 /// Widest window [`GridView::occupied_row_mask`] answers in one call, cells.
@@ -39,6 +41,7 @@ impl<'a> GridView<'a> {
             geometry,
             occupied_above,
             bits: None,
+            free: None,
         })
     }
 
@@ -84,6 +87,7 @@ impl<'a> GridView<'a> {
             geometry,
             occupied_above,
             bits: Some(bits),
+            free: None,
         })
     }
 
@@ -101,6 +105,47 @@ impl<'a> GridView<'a> {
         self.bits
     }
 
+    /// A bitmap-only view ([`GridView::from_occupancy_bits`]) with the bitmap of its free
+    /// cells (the same layout; bit set where the cell's log-odds was below the free
+    /// threshold the bitmap was made with), so that [`super::MaxPoolLayers::build`] can
+    /// make the global search's layers from the bitmaps alone (a map image with a free
+    /// section). Refused with [`GridError::SizeMismatch`] for a bitmap of another length
+    /// and on a view with cells (whose free cells are their log-odds).
+    pub fn with_free_bits(self, free: &'a [u8]) -> Result<Self, GridError> {
+        if !self.cells.is_empty()
+            || free.len() != super::occupancy_bytes(self.geometry.width, self.geometry.height)
+        {
+            return Err(GridError::SizeMismatch);
+        }
+        Ok(Self {
+            free: Some(free),
+            ..self
+        })
+    }
+
+    /// The free-cell bitmap of a bitmap-only view, when it has one.
+    #[inline]
+    pub fn free_bits(&self) -> Option<&'a [u8]> {
+        self.free
+    }
+
+    /// `true` when `(ix, iy)` is on the grid and known free: its log-odds below
+    /// `free_below` on a view with cells, its bit set on a view with a free bitmap (made
+    /// with its own threshold; `free_below` is then not read), never otherwise.
+    #[inline]
+    pub fn is_free(&self, ix: i32, iy: i32, free_below: i8) -> bool {
+        if !self.geometry.contains(ix, iy) {
+            return false;
+        }
+        if !self.cells.is_empty() {
+            return self.log_odds(ix, iy).is_some_and(|v| v < free_below);
+        }
+        let (x, y) = (ix as usize, iy as usize);
+        self.free
+            .and_then(|b| b.get(y * self.geometry.width.div_ceil(8) + x / 8))
+            .is_some_and(|b| b & (1 << (x % 8)) != 0)
+    }
+
     /// A view over cells whose length is known to be `width × height` (for
     /// [`super::OccupancyGrid::view`]); an invalid geometry only makes every point off-grid.
     pub(crate) fn from_trusted(
@@ -113,6 +158,7 @@ impl<'a> GridView<'a> {
             geometry,
             occupied_above,
             bits: None,
+            free: None,
         }
     }
 

@@ -131,6 +131,13 @@ impl<const NEAR: usize, const NEAR_BITS: usize, const FAR: usize, const FAR_BITS
         &self.near
     }
 
+    /// The near window's log-odds grid to draw in (a finished run's whole map, tile by
+    /// tile: `GraphSlam::write_map_image`); the local map is not usable for tracking after.
+    #[cfg(feature = "map-image")]
+    pub(crate) fn near_mut(&mut self) -> &mut OccupancyGrid<NEAR, NEAR, NEAR_BITS> {
+        &mut self.near
+    }
+
     /// The far bitmap.
     pub fn far(&self) -> &OccupancyBitmap<FAR, FAR, FAR_BITS> {
         &self.far

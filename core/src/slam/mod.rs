@@ -25,3 +25,5 @@ pub use graph_slam::{
     ClosureOutcome, GraphCounters, GraphSlam, GraphStep, MATCH_BYTES, MATCH_CELLS, MATCH_LEVELS,
     SlamError, WithKeyframes, workspace_bytes,
 };
+#[cfg(feature = "map-image")]
+pub use graph_slam::{MAX_MAP_CELLS, MapImageSummary};

@@ -182,3 +182,21 @@ pub fn position_rmse(est: &[Pose2<f32>], truth: &[Pose2<f32>]) -> f32 {
         .sum();
     (s / n as f32).sqrt()
 }
+
+/// Distance from `(x, y)` to the nearest of `walls` (segments `[x0, y0, x1, y1]`), metres.
+#[cfg(feature = "map-image")]
+pub fn distance_to_walls(walls: &[[f32; 4]], x: f32, y: f32) -> f32 {
+    walls
+        .iter()
+        .map(|&[x0, y0, x1, y1]| {
+            let (dx, dy) = (x1 - x0, y1 - y0);
+            let len2 = dx * dx + dy * dy;
+            let t = if len2 > 0.0 {
+                (((x - x0) * dx + (y - y0) * dy) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            libm::hypotf(x - (x0 + t * dx), y - (y0 + t * dy))
+        })
+        .fold(f32::INFINITY, f32::min)
+}

@@ -185,6 +185,7 @@ fn run_p<const N: usize, const BITMAP: usize, const P: usize>(
     run.cells = cells;
     run.geometry = geometry;
     let counters = slam.counters();
+    run.map_image = map_image(&mut slam, &store)?;
     if counters.keyframes_refused > 0 {
         // Every scan was still tracked; only the keyframes beyond the graph's size were
         // not kept, so the path after them closes no loops and is not in the map.
@@ -196,6 +197,26 @@ fn run_p<const N: usize, const BITMAP: usize, const P: usize>(
         );
     }
     Ok((run, counters.into()))
+}
+
+/// The map image the board writes at the end of the run
+/// ([`GraphSlam::write_map_image`]: every keyframe at its final graph pose, drawn tile by
+/// tile in the local map's near window, occupied and free bitmaps); `None` without a
+/// keyframe. Ends the run.
+pub fn map_image<const P: usize, S: KeyframeStorage>(
+    slam: &mut HostGraphSlam<P>,
+    store: &KeyframeStore<S>,
+) -> Result<Option<Vec<u8>>> {
+    let (_, len) = match slam.map_image_size(store) {
+        Ok(size) => size,
+        Err(microslam::slam::SlamError::NoKeyframes) => return Ok(None),
+        Err(e) => bail!("map image: {e}"),
+    };
+    let mut out = VecStorage::new(len);
+    let free_below = slam.config().grid.log_odds.free_below;
+    slam.write_map_image(store, &mut out, free_below)
+        .map_err(|e| anyhow!("map image: {e}"))?;
+    Ok(Some(out.0))
 }
 
 /// Every stored keyframe's scan written at its final graph pose into an `N × N` grid

@@ -73,6 +73,9 @@ pub struct GridRun {
     /// What the loop closure did (`None` without one). With one, [`GridRun::trajectory`]
     /// is the graph's: every scan at its keyframe's final pose.
     pub loop_closure: Option<GraphSummary>,
+    /// The map image the board writes at the end of a building-scale SLAM run
+    /// (`microslam::slam::GraphSlam::write_map_image`; `None` for other runs).
+    pub map_image: Option<Vec<u8>>,
 }
 
 /// What a localizer's lost detection saw over a run ([`microslam::pf::LocalizerStatus`]).
@@ -152,6 +155,7 @@ impl GridRun {
             snapshots: Vec::new(),
             localizer: None,
             loop_closure: None,
+            map_image: None,
         }
     }
 }

@@ -60,7 +60,8 @@ fn write_map_server(out: &Path, cells: &[i8], g: &GridGeometry, log_odds: &LogOd
 }
 
 /// Writes the outputs of a run into `out`: the map for `map_server` (`map.pgm`,
-/// `map.yaml`), `trajectory.tum`, `metrics.json` and, when `plots`, the picture
+/// `map.yaml`), the board's map image `map.bin` when the run made one (an earlier run's
+/// is removed otherwise), `trajectory.tum`, `metrics.json` and, when `plots`, the picture
 /// `map.png` (the map with the trajectory, and `truth` under it when given; without
 /// `plots`, an earlier run's `map.png` is removed).
 pub fn write_outputs(
@@ -73,6 +74,10 @@ pub fn write_outputs(
 ) -> Result<()> {
     super::create_folder(out)?;
     write_map_server(out, &run.cells, &run.geometry, &config.log_odds)?;
+    match &run.map_image {
+        Some(bytes) => super::write_file(&out.join("map.bin"), bytes)?,
+        None => super::remove_stale(&out.join("map.bin"))?,
+    }
     if plots {
         draw_map_picture(out, run, config, metrics, truth)?;
     } else {

@@ -153,7 +153,8 @@ pub(super) fn leaf_score(map: &GridView<'_>, cells: &[(i32, i32, u32)], x: i32, 
 
 /// `true` when the robot may stand somewhere in the level-`k` block at `(x, y)`.
 ///
-/// At level 0 that is a free cell. A map kept as its occupied-cell bitmap alone (a map
+/// At level 0 that is a free cell (its log-odds, or the free bitmap of a map image that
+/// has one). A map kept as its occupied-cell bitmap alone (a map
 /// image in flash: [`GridView::from_occupancy_bits`], no log-odds) cannot tell a free
 /// cell from an unknown one; there a candidate is a cell that is not occupied in a
 /// 2 × 2 block of level 1 holding a free cell, the finest free information the layers
@@ -166,8 +167,8 @@ pub(super) fn block_free(
     x: i32,
     y: i32,
 ) -> bool {
-    if k == 0 && !map.cells().is_empty() {
-        return map.log_odds(x, y).is_some_and(|v| v < layers.free_below());
+    if k == 0 && (!map.cells().is_empty() || map.free_bits().is_some()) {
+        return map.is_free(x, y, layers.free_below());
     }
     if k == 0 {
         return map.geometry().contains(x, y)

@@ -1,6 +1,8 @@
 //! [`GraphSlam`]: the particle filter on a [`LocalMap`], keyframes in a
 //! [`KeyframeStore`], and a [`PoseGraph`] over them that closes loops.
 
+#[cfg(feature = "map-image")]
+mod building_map;
 mod closure;
 mod estimator;
 mod stored;
@@ -16,6 +18,8 @@ use crate::geometry::Pose2;
 use crate::grid::{GridError, ScanIntegration, occupancy_bytes};
 use crate::pf::{ParticleFilter, PfError, ScanPoints};
 use crate::sensors::lidar::LidarScan;
+#[cfg(feature = "map-image")]
+pub use building_map::{MAX_MAP_CELLS, MapImageSummary};
 use core::fmt;
 pub use estimator::WithKeyframes;
 use workspace::Workspace;
@@ -42,6 +46,10 @@ pub enum SlamError {
     Store(StoreError),
     /// The pose graph refused a change.
     Graph(GraphError),
+    /// No keyframe to draw a map from.
+    NoKeyframes,
+    /// The map would be wider or taller than a map image holds.
+    MapTooLarge,
 }
 
 impl fmt::Display for SlamError {
@@ -52,6 +60,8 @@ impl fmt::Display for SlamError {
             Self::Map(e) => write!(f, "local map: {e}"),
             Self::Store(e) => write!(f, "keyframe store: {e}"),
             Self::Graph(e) => write!(f, "pose graph: {e}"),
+            Self::NoKeyframes => f.write_str("no keyframe to draw a map from"),
+            Self::MapTooLarge => f.write_str("the map is larger than a map image holds"),
         }
     }
 }

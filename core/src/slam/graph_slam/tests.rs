@@ -14,7 +14,7 @@ const NODES: usize = 256;
 const LOOPS: usize = 64;
 /// 32 particles, 90 beams; a near window of 3.2 m and a far bitmap of 8 m: the 68 m ring
 /// is far larger than what the filter's map holds.
-type Slam = GraphSlam<
+pub(super) type Slam = GraphSlam<
     32,
     90,
     NEAR,
@@ -25,15 +25,23 @@ type Slam = GraphSlam<
     LOOPS,
     { scratch_len(NODES, LOOPS) },
 >;
-type Store = KeyframeStore<RamStorage<{ 256 * 1024 }>>;
+pub(super) type Store = KeyframeStore<RamStorage<{ 256 * 1024 }>>;
 
 fn store() -> Box<Store> {
     Box::new(KeyframeStore::create(RamStorage::new(), &LIDAR_270, 2, 90).expect("an empty store"))
 }
 
-/// Runs the slam over a drive; the graph's trajectory (every scan at its keyframe's final
-/// pose ⊕ the filter's motion since) and the run's counters.
-fn run(config: GraphSlamConfig, seed: u64) -> (Vec<Pose2<f32>>, Vec<Pose2<f32>>, GraphCounters) {
+/// A finished run over the ring: the estimator, its store, each scan's keyframe and
+/// motion from it, and the true poses.
+pub(super) struct Run {
+    pub(super) slam: Box<Slam>,
+    pub(super) store: Box<Store>,
+    offsets: Vec<(u16, Pose2<f32>)>,
+    pub(super) truth: Vec<Pose2<f32>>,
+}
+
+/// Runs the slam over two laps of the ring (filter seed and simulation `seed`).
+pub(super) fn drive_ring(config: GraphSlamConfig, seed: u64) -> Run {
     let walls = ring_corridor();
     let d = drive(
         &walls,
@@ -59,6 +67,23 @@ fn run(config: GraphSlamConfig, seed: u64) -> (Vec<Pose2<f32>>, Vec<Pose2<f32>>,
             .expect("a keyframe from the first scan");
         offsets.push((node, at.between(&slam.filter_pose())));
     }
+    Run {
+        slam,
+        store,
+        offsets,
+        truth: d.truth,
+    }
+}
+
+/// Runs the slam over a drive; the graph's trajectory (every scan at its keyframe's final
+/// pose ⊕ the filter's motion since) and the run's counters.
+fn run(config: GraphSlamConfig, seed: u64) -> (Vec<Pose2<f32>>, Vec<Pose2<f32>>, GraphCounters) {
+    let Run {
+        slam,
+        store,
+        offsets,
+        truth,
+    } = drive_ring(config, seed);
     assert_eq!(
         store.len() as usize,
         slam.graph().len(),
@@ -74,10 +99,10 @@ fn run(config: GraphSlamConfig, seed: u64) -> (Vec<Pose2<f32>>, Vec<Pose2<f32>>,
                 .compose(motion)
         })
         .collect();
-    (est, d.truth, slam.counters())
+    (est, truth, slam.counters())
 }
 
-fn config() -> GraphSlamConfig {
+pub(super) fn config() -> GraphSlamConfig {
     GraphSlamConfig {
         grid: crate::pf::GridPfConfig {
             beam_decimation: 2,
