@@ -139,6 +139,11 @@ pub const SLAM_CONFIG: GraphSlamConfig = GraphSlamConfig::MICROCONTROLLER;
 /// [`SLAM_NODES`]).
 pub const SLAM_KEYFRAME_BYTES: u32 = 256 * 1024;
 
+/// Bytes of flash for the map image the [`Slam`] writes at the end of a run
+/// (`GraphSlam::write_map_image`, feature `map-image`: two bitmaps of the map's whole tiles):
+/// maps up to 1 024 × 1 024 cells (51.2 m square at 5 cm); the Intel lab's takes 102 456.
+pub const SLAM_MAP_BYTES: u32 = 256 * 1024;
+
 /// [`Slam`] with the storage `S` of its keyframes, as a grid estimator
 /// ([`crate::pf::GridEstimator`]): what a wire session drives.
 pub type SlamEstimator<'a, S> = crate::slam::WithKeyframes<

@@ -18,17 +18,39 @@ impl SramFlash {
     /// Erase sector, bytes.
     pub const SECTOR: usize = 4096;
 
-    /// The stand-in, `len` bytes (at most 2 MB), handed out once; `None` after.
+    /// Where the second stand-in starts ([`SramFlash::take_map`]): 2 MB into QEMU's SRAM.
+    pub const MAP_BASE: usize = 0x2020_0000;
+
+    /// The stand-in for the keyframes, `len` bytes (at most 1 MB: it ends where the
+    /// map's begins), handed out once; `None` after.
     pub fn take(len: u32) -> Option<Self> {
         static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+        Self::take_at(Self::BASE, len, 1 << 20, &TAKEN)
+    }
+
+    /// A second stand-in from [`SramFlash::MAP_BASE`], for the map image the SLAM writes
+    /// at the end of a run: `len` bytes (at most 2 MB), handed out once; `None` after.
+    pub fn take_map(len: u32) -> Option<Self> {
+        static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+        Self::take_at(Self::MAP_BASE, len, 2 << 20, &TAKEN)
+    }
+
+    fn take_at(
+        base: usize,
+        len: u32,
+        max: usize,
+        taken: &core::sync::atomic::AtomicBool,
+    ) -> Option<Self> {
         let len = len as usize;
-        if len > 2 << 20 || TAKEN.swap(true, core::sync::atomic::Ordering::AcqRel) {
+        if len > max || taken.swap(true, core::sync::atomic::Ordering::AcqRel) {
             return None;
         }
         // SAFETY: QEMU's mps2-an386 maps SRAM at 0x2000_0000..0x2040_0000; nothing the
-        // linker places reaches BASE (RAM ends at 0x2002_0000), `len` ≤ 2 MB keeps the
-        // slice inside the SRAM, and TAKEN hands it out once, so this is the only reference.
-        let bytes = unsafe { core::slice::from_raw_parts_mut(Self::BASE as *mut u8, len) };
+        // linker places reaches BASE (RAM ends at 0x2002_0000); the keyframes' region
+        // (BASE, at most 1 MB) ends where the map's (MAP_BASE, at most 2 MB) begins, which
+        // ends at the SRAM's end; each flag hands its region out once, so this is the only
+        // reference to these bytes.
+        let bytes = unsafe { core::slice::from_raw_parts_mut(base as *mut u8, len) };
         Some(Self { bytes })
     }
 }

@@ -155,7 +155,7 @@ mod grid {
 mod grid {
     use super::*;
     use firmware_example::config::{
-        SLAM_CONFIG, SLAM_KEYFRAME_BYTES, SLAM_NODES, Slam, SlamEstimator,
+        SLAM_CONFIG, SLAM_KEYFRAME_BYTES, SLAM_MAP_BYTES, SLAM_NODES, Slam, SlamEstimator,
     };
     use firmware_example::flash::SramFlash;
     use microslam::geometry::Pose2;
@@ -166,7 +166,7 @@ mod grid {
     /// graph's unit noise, handed out once.
     static SLAM: ConstStaticCell<Slam> = ConstStaticCell::new(Slam::zeroed());
 
-    /// Where its keyframes go: the flash stand-in.
+    /// Where its keyframes and its map image go: the flash stand-ins.
     type Storage = NorFlashStorage<SramFlash>;
 
     /// The SLAM with its keyframe storage, as the session's grid estimator.
@@ -183,12 +183,22 @@ mod grid {
             defmt::error!("keyframe storage refused");
             board::halt(4)
         };
+        let Some(map_flash) = SramFlash::take_map(SLAM_MAP_BYTES) else {
+            defmt::error!("map flash stand-in taken");
+            board::halt(4)
+        };
+        let Ok(map_storage) = Storage::new(map_flash, 0, SLAM_MAP_BYTES) else {
+            defmt::error!("map storage refused");
+            board::halt(4)
+        };
         let Ok(slam) =
             SlamEstimator::new(SLAM.take(), storage, SLAM_CONFIG, Pose2::new(0.0, 0.0, 0.0))
         else {
             defmt::error!("building-scale SLAM configuration invalid");
             board::halt(4)
         };
+        // `SaveMap` writes the run's map image here, `ReadMap` reads it back.
+        let slam = slam.with_map_storage(map_storage);
         defmt::info!(
             "building-scale grid SLAM: {} keyframes, {} bytes of keyframe flash",
             SLAM_NODES,

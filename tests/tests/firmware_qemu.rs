@@ -673,10 +673,17 @@ fn building_slam_firmware_in_qemu_equals_host_bit_for_bit_on_intel() {
         microslam::geometry::Pose2::IDENTITY,
         EstimatorKind::Grid,
     );
-    let bytes = encode_all(&messages);
-    let host = host_slam_replies(&bytes).expect("host reference");
+    // The run, then SaveMap and the map image read back chunk by chunk.
+    let host = host_slam_replies(&messages, true).expect("host reference");
+    let bytes = host.bytes.clone();
     let expected = host.replies;
-    assert_eq!(expected.len(), messages.len(), "one reply per message");
+    let image = host.map_image.expect("the run's map image");
+    let map = microslam::grid::MapImage::parse(&image).expect("a valid map image");
+    assert_eq!(
+        expected.len(),
+        messages.len() + 1 + image.len().div_ceil(microslam::wire::MAP_CHUNK_BYTES),
+        "one reply per message"
+    );
     let applied = last_chunks
         .iter()
         .filter(|&&i| {
@@ -690,6 +697,18 @@ fn building_slam_firmware_in_qemu_equals_host_bit_for_bit_on_intel() {
     assert_eq!(c.keyframes_refused, 0, "{c:?}");
 
     let run = run_equal_to_host(&elf, bytes, &expected, Duration::from_secs(900));
+    // The device's map image, sent back over the link, is the host's bit for bit (as
+    // every reply is): what the localizer firmware is flashed with.
+    let device_map = host_sim::drivers::hil_slam::map_from_replies(&run.replies)
+        .expect("chunks in order")
+        .expect("the device's map image");
+    assert_eq!(device_map, image);
+    println!(
+        "device map image: {} × {} cells, {} bytes",
+        map.geometry().width,
+        map.geometry().height,
+        image.len()
+    );
     println!(
         "building slam: {} scans, {} frames → {} replies in {:.2} s; {} keyframes, {} of {} \
          loop closures accepted",
@@ -718,12 +737,14 @@ fn building_slam_firmware_in_qemu_equals_host_bit_for_bit_on_intel() {
 #[test]
 #[ignore = "needs qemu-system-arm and the building-slam ELF: run by .ci/firmware.sh"]
 fn building_slam_firmware_refuses_landmarks_beyond_its_small_ekf_like_the_host() {
-    use host_sim::drivers::hil_slam::host_slam_replies;
+    use host_sim::drivers::hil_slam::host_slam_session;
     use microslam_replay_tests::firmware::slam_elf;
     let elf = built(slam_elf());
     let messages = synthetic_drive();
     let (bytes, noise) = with_line_noise(&encode_all(&messages), 97);
-    let expected = host_slam_replies(&bytes).expect("host reference").replies;
+    let expected = host_slam_session(bytes.clone(), None)
+        .expect("host reference")
+        .replies;
     assert_eq!(expected.len(), messages.len(), "one reply per message");
     let count = |f: &dyn Fn(StepResult) -> bool| {
         expected

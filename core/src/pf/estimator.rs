@@ -33,6 +33,28 @@ pub trait GridEstimator {
     /// Covariance of the particle cloud, upper triangle `[xx, xy, xθ, yy, yθ, θθ]`
     /// ([`crate::pf::ParticleFilter::pose_covariance`]).
     fn pose_covariance(&self) -> [f32; 6];
+    /// Ends a SLAM run and writes its whole map where the estimator keeps it (a map image
+    /// in flash: `microslam::slam::GraphSlam::write_map_image`): the image's length and
+    /// CRC-32, or why not. `None` (the default): this estimator keeps no map of its own.
+    fn save_map(&mut self) -> Option<Result<SavedMap, PfError>> {
+        None
+    }
+    /// Reads the saved map image's bytes from `offset` into `out`: how many (fewer at
+    /// its end, 0 past it). `None` (the default) when no map was saved.
+    fn read_map(&self, offset: u32, out: &mut [u8]) -> Option<usize> {
+        let _ = (offset, out);
+        None
+    }
+}
+
+/// A map image an estimator wrote ([`GridEstimator::save_map`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SavedMap {
+    /// Length of the image, bytes.
+    pub bytes: u32,
+    /// Its CRC-32 (`microslam::grid::MapImage::checksum`).
+    pub checksum: u32,
 }
 
 /// The methods both filters forward to their inherent methods of the same name (or to

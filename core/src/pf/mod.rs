@@ -36,7 +36,7 @@ pub mod resampling;
 mod slam;
 
 pub use correlation::{ScanPoint, ScanPoints, ShiftScore};
-pub use estimator::GridEstimator;
+pub use estimator::{GridEstimator, SavedMap};
 pub use filter::{ParticleFilter, UpdateReport};
 pub use localizer::{
     GridLocalizer, LocalizerState, LocalizerStatus, LostDetection, MAX_HYPOTHESES,

@@ -98,6 +98,55 @@ pub enum Command {
     /// [`crate::pf::RelocalizationConfig::search_scans`] scans (refused with
     /// [`ToHost::Refused`] unless the localizer is active).
     Relocalize,
+    /// End the grid SLAM's run and write its whole map into the device's flash as a map
+    /// image (`microslam::slam::GraphSlam::write_map_image`), answered with
+    /// [`ToHost::MapSaved`]. Refused unless the grid estimator is active and keeps a map
+    /// ([`Refusal::NoMapStorage`]), or when the write fails ([`Refusal::MapNotWritten`]);
+    /// the run is over once the drawing started (reset the estimator to map again).
+    /// Since protocol 4.
+    SaveMap,
+    /// Answer with [`ToHost::MapChunk`]: [`MAP_CHUNK_BYTES`] bytes of the saved map image
+    /// from `offset` (fewer at its end). Refused with [`Refusal::NoSavedMap`] before a
+    /// [`Command::SaveMap`] succeeded. Since protocol 4.
+    ReadMap {
+        /// Byte offset into the image.
+        offset: u32,
+    },
+}
+
+/// Bytes of the map image a [`ToHost::MapChunk`] carries at most.
+pub const MAP_CHUNK_BYTES: usize = 64;
+
+/// The [`MAP_CHUNK_BYTES`] bytes of a [`ToHost::MapChunk`], on the wire as a byte
+/// string (postcard: a length, then the raw bytes, copied at once: serde's arrays stop at
+/// 32 elements, and element-wise code unrolls into kilobytes of a firmware's flash). A
+/// string of another length is refused when it is read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MapBytes(pub [u8; MAP_CHUNK_BYTES]);
+
+impl Serialize for MapBytes {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_bytes(&self.0)
+    }
+}
+
+impl<'de> Deserialize<'de> for MapBytes {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Bytes;
+        impl serde::de::Visitor<'_> for Bytes {
+            type Value = MapBytes;
+            fn expecting(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+                write!(f, "{MAP_CHUNK_BYTES} bytes")
+            }
+            fn visit_bytes<E: serde::de::Error>(self, v: &[u8]) -> Result<MapBytes, E> {
+                v.try_into()
+                    .map(MapBytes)
+                    .map_err(|_| E::invalid_length(v.len(), &self))
+            }
+        }
+        deserializer.deserialize_bytes(Bytes)
+    }
 }
 
 /// The EKF's settings on the wire: [`EkfConfig<f32>`] field by field (see its fields for
@@ -471,6 +520,14 @@ pub enum Refusal {
         /// Position of the value in [`EkfSettings::FIELD_NAMES`].
         field: u8,
     },
+    /// [`Command::SaveMap`]: the active estimator keeps no map of its own (not the
+    /// grid SLAM, or a firmware without flash for it). Since protocol 4.
+    NoMapStorage,
+    /// [`Command::SaveMap`]: writing the map failed (no keyframe yet, a storage error, a
+    /// map larger than its flash). Since protocol 4.
+    MapNotWritten,
+    /// [`Command::ReadMap`] before a map was saved. Since protocol 4.
+    NoSavedMap,
 }
 
 impl core::fmt::Display for Refusal {
@@ -486,6 +543,9 @@ impl core::fmt::Display for Refusal {
                     None => write!(f, "EKF setting number {field} is out of its range"),
                 }
             }
+            Self::NoMapStorage => f.write_str("the active estimator keeps no map to save"),
+            Self::MapNotWritten => f.write_str("writing the map into flash failed"),
+            Self::NoSavedMap => f.write_str("no map has been saved"),
         }
     }
 }
@@ -494,7 +554,7 @@ impl core::fmt::Display for Refusal {
 /// message of either direction changes. [`ToHost::Status`] keeps its variant index (1)
 /// and its first two fields (`seq`, `protocol`) in every version, so a host can always
 /// tell which version a device speaks.
-pub const PROTOCOL_VERSION: u16 = 3;
+pub const PROTOCOL_VERSION: u16 = 4;
 
 /// Messages from the device to the host.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -535,5 +595,26 @@ pub enum ToHost {
         reason: Refusal,
         /// The estimator still active.
         estimator: EstimatorKind,
+    },
+    /// The answer to [`Command::SaveMap`]: the map image written (since protocol 4).
+    MapSaved {
+        /// Sequence number of the command.
+        seq: u32,
+        /// Length of the image, bytes.
+        bytes: u32,
+        /// Its CRC-32 (`microslam::grid::MapImage::checksum`).
+        checksum: u32,
+    },
+    /// The answer to [`Command::ReadMap`]: `len` bytes of the saved map image from
+    /// `offset`, in `bytes` (row by row of 32; the rest zero). Since protocol 4.
+    MapChunk {
+        /// Sequence number of the command.
+        seq: u32,
+        /// Byte offset into the image.
+        offset: u32,
+        /// Bytes that belong to the image (0 past its end).
+        len: u8,
+        /// The bytes (the rest zero).
+        bytes: MapBytes,
     },
 }

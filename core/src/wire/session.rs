@@ -440,6 +440,47 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
                     };
                 }
             }
+            Command::SaveMap => {
+                let refusal = match (self.active, self.grid.as_mut()) {
+                    (EstimatorKind::Grid, Some(grid)) => match grid.save_map() {
+                        Some(Ok(saved)) => {
+                            return ToHost::MapSaved {
+                                seq,
+                                bytes: saved.bytes,
+                                checksum: saved.checksum,
+                            };
+                        }
+                        Some(Err(_)) => Refusal::MapNotWritten,
+                        None => Refusal::NoMapStorage,
+                    },
+                    _ => Refusal::NoMapStorage,
+                };
+                return ToHost::Refused {
+                    seq,
+                    reason: refusal,
+                    estimator: self.active,
+                };
+            }
+            Command::ReadMap { offset } => {
+                let mut bytes = super::MapBytes([0; super::MAP_CHUNK_BYTES]);
+                let read = self
+                    .grid
+                    .as_ref()
+                    .and_then(|grid| grid.read_map(offset, &mut bytes.0));
+                return match read {
+                    Some(len) => ToHost::MapChunk {
+                        seq,
+                        offset,
+                        len: u8::try_from(len).unwrap_or(u8::MAX),
+                        bytes,
+                    },
+                    None => ToHost::Refused {
+                        seq,
+                        reason: Refusal::NoSavedMap,
+                        estimator: self.active,
+                    },
+                };
+            }
             Command::ReportStatus => {}
             Command::ConfigureEkf(settings) => {
                 if let Some(field) = settings.invalid_field() {
@@ -616,6 +657,42 @@ mod tests {
         }]);
         assert_eq!(reset.iter().filter_map(|&b| named.receive(b)).count(), 1);
         assert_eq!(map_of(&mut named), Some(0x1234_5678));
+    }
+
+    #[test]
+    fn a_map_is_saved_and_read_only_where_there_is_one() {
+        let mut ekf =
+            EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+        let mut session = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+        let replies: std::vec::Vec<ToHost> = frames(&[
+            ToDevice::Command {
+                seq: 1,
+                command: Command::SaveMap,
+            },
+            ToDevice::Command {
+                seq: 2,
+                command: Command::ReadMap { offset: 0 },
+            },
+        ])
+        .into_iter()
+        .filter_map(|b| session.receive(b))
+        .collect();
+        // The EKF keeps no map image; nothing was saved to read.
+        assert_eq!(
+            replies,
+            [
+                ToHost::Refused {
+                    seq: 1,
+                    reason: Refusal::NoMapStorage,
+                    estimator: EstimatorKind::Ekf,
+                },
+                ToHost::Refused {
+                    seq: 2,
+                    reason: Refusal::NoSavedMap,
+                    estimator: EstimatorKind::Ekf,
+                },
+            ]
+        );
     }
 
     #[test]

@@ -82,6 +82,14 @@ fn samples() -> std::vec::Vec<ToDevice> {
             seq: u32::MAX,
             command: Command::ReportStatus,
         },
+        ToDevice::Command {
+            seq: 9,
+            command: Command::SaveMap,
+        },
+        ToDevice::Command {
+            seq: 10,
+            command: Command::ReadMap { offset: u32::MAX },
+        },
     ]
 }
 
@@ -193,6 +201,19 @@ fn largest_messages_fit_the_declared_limits() {
     let mut got = None;
     dec.feed::<ToHost>(&frame_of(&worst_localization), |r| got = Some(r));
     assert_eq!(got, Some(Ok(worst_localization)));
+    let worst_chunk = ToHost::MapChunk {
+        seq: u32::MAX,
+        offset: u32::MAX,
+        len: u8::MAX,
+        bytes: MapBytes([u8::MAX; MAP_CHUNK_BYTES]),
+    };
+    let payload = body_of(&worst_chunk);
+    // 1 tag + 5 + 5 varint bytes + 1 + a 1-byte length and 64 raw bytes.
+    assert_eq!(payload.len(), 77);
+    assert!(frame_of(&worst_chunk).len() <= MAX_FRAME_LEN);
+    let mut got = None;
+    dec.feed::<ToHost>(&frame_of(&worst_chunk), |r| got = Some(r));
+    assert_eq!(got, Some(Ok(worst_chunk)));
 }
 
 /// A host reads the version of any device from its status: the variant index and the

@@ -4,9 +4,9 @@
 //! front scan of the log is streamed (its odometry increment, then its chunks); every
 //! reply is compared bit for bit with the host running the firmware's session on the
 //! same bytes. Writes `hil.json`, `firmware.tum` (the device's estimate after each scan)
-//! and `host-map/` (PGM + YAML + PNG: the map of the host reference's keyframes at their
-//! final graph poses — the host's copy; the device keeps its keyframes in flash and sends
-//! no map). The device's trajectory is scored with the relation error when a relations
+//! and `device-map/` (`map.bin`, PGM + YAML + PNG: the map image the device writes into
+//! its flash at the end of the run, `SaveMap`, and sends back chunk by chunk, `ReadMap`;
+//! bit-identical to the host's, as every reply is). The device's trajectory is scored with the relation error when a relations
 //! file is found, and against `--reference` (ATE, with the number of poses matched).
 
 use std::path::Path;
@@ -17,7 +17,7 @@ use microslam::geometry::Pose2;
 use microslam::wire::{EstimatorKind, ToHost};
 use serde::Serialize;
 
-use crate::drivers::hil::{Device, Expected, compare, encode_all};
+use crate::drivers::hil::{Device, Expected, compare};
 use crate::drivers::hil_localizer::lidar_messages;
 use crate::drivers::hil_slam::host_slam_replies;
 use crate::inputs::readers::carmen::{LaserMessage, front_scans, read_log, resolve_log};
@@ -128,14 +128,15 @@ pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
         scans.truncate(n);
     }
     let (messages, last_chunks) = lidar_messages(&scans, Pose2::IDENTITY, EstimatorKind::Grid);
-    let bytes = encode_all(&messages);
-    let host = host_slam_replies(&bytes)?;
+    let host = host_slam_replies(&messages, true)?;
+    let bytes = host.bytes.clone();
     if !quiet {
         println!(
-            "{}: {} scans → {} frames ({} bytes), building-scale grid SLAM",
+            "{}: {} scans → {} frames ({} bytes, the map read back included), building-scale \
+             grid SLAM",
             path.display(),
             scans.len(),
-            messages.len(),
+            host.replies.len(),
             bytes.len(),
         );
     }
@@ -144,7 +145,7 @@ pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
         Expected::host(&host.replies),
         Duration::from_secs(args.timeout_s),
     )?;
-    let comparison = compare(messages.len(), &run, &host.replies);
+    let comparison = compare(host.replies.len(), &run, &host.replies);
     let traj = trajectory(&run.replies, &scans, &last_chunks);
     let relation_error = match crate::metrics::relations::find_relations(&path, None) {
         Ok(r) => {
@@ -169,25 +170,25 @@ pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
         None => None,
     };
     crate::output::create_folder(args.out)?;
-    let map = match &host.map {
-        Some((cells, geometry)) => {
-            let dir = args.out.join("host-map");
+    let map = match crate::drivers::hil_slam::map_from_replies(&run.replies)? {
+        Some(image) => {
+            let dir = args.out.join("device-map");
             crate::output::create_folder(&dir)?;
             let est: Vec<(f64, Pose2<f32>)> = traj
                 .iter()
                 .map(|&(t, [x, y, th])| (t, Pose2::new(x as f32, y as f32, th as f32)))
                 .collect();
-            crate::output::grid_map::write_map(
+            crate::output::grid_map::write_map_image(
                 &dir,
-                cells,
-                geometry,
+                &image,
                 &microslam::profile::SLAM_CONFIG.grid.log_odds,
                 &est,
             )?;
             Some(format!(
-                "{}: the host reference's copy (its keyframes at their final graph poses; the \
-                 device's run is bit-identical to it, but the device sends no map)",
-                dir.join("map.yaml").display()
+                "{}: the map image the device wrote into its flash at the end of the run and \
+                 sent back ({} bytes; PGM + YAML beside it)",
+                dir.join("map.bin").display(),
+                image.len()
             ))
         }
         None => None,
@@ -263,7 +264,7 @@ pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
                 format!(
                     "the first difference is the reply to message {i} of {}: is the firmware \
                      built with --features building-slam?",
-                    messages.len()
+                    host.replies.len()
                 )
             },
         );

@@ -1,40 +1,76 @@
 //! The firmware's building-scale grid SLAM in the loop (a firmware built with the
 //! feature `building-slam`): the host reference the device must equal bit for bit
 //! ([`host_slam_replies`]: the firmware's [`Session`] with the small EKF and
-//! [`profile::Slam`] as its grid estimator, keyframes in memory), and the map of that
-//! reference's keyframes at their final graph poses.
+//! [`profile::Slam`] as its grid estimator, keyframes and map image in memory), and the
+//! commands that end the run and read the device's map image back over the link
+//! ([`Command::SaveMap`], [`Command::ReadMap`]).
 
-use anyhow::{Result, anyhow};
+use anyhow::{Result, anyhow, bail};
 use microslam::geometry::Pose2;
-use microslam::grid::GridGeometry;
 use microslam::profile;
 use microslam::slam::{GraphCounters, GraphSlam};
-use microslam::wire::{Session, ToHost};
+use microslam::wire::{Command, MAP_CHUNK_BYTES, Session, ToDevice, ToHost};
 
-use super::graph_slam::{VecStorage, draw_map};
-
-/// Cells along each edge of the grid the host draws the reference's map in (51.2 m at
-/// 5 cm, centred on the start).
-pub const MAP_CELLS: usize = crate::domain::grid::GRID_CELLS;
+use super::graph_slam::VecStorage;
+use super::hil::encode_all;
 
 /// What the host reference computed.
 pub struct HostSlam {
+    /// The bytes to send the device: the messages given, then (with `save_map`)
+    /// [`Command::SaveMap`] and a [`Command::ReadMap`] for every chunk of the image.
+    pub bytes: Vec<u8>,
     /// Its replies, one per message.
     pub replies: Vec<ToHost>,
-    /// Its keyframes' scans at their final graph poses (`None` when no scan made a
-    /// keyframe), drawn on a [`MAP_CELLS`]² grid centred on the start.
-    pub map: Option<(Vec<i8>, GridGeometry)>,
+    /// The map image the run saved, read back through the session (`None` without
+    /// `save_map`).
+    pub map_image: Option<Vec<u8>>,
     /// The SLAM's counters at the end.
     pub counters: GraphCounters,
 }
 
+/// The map image of a run's [`ToHost::MapChunk`] replies, in the order they came
+/// (`None` without any); an error when a chunk is missing or out of place.
+pub fn map_from_replies(replies: &[ToHost]) -> Result<Option<Vec<u8>>> {
+    let mut image = Vec::new();
+    for r in replies {
+        if let ToHost::MapChunk {
+            offset, len, bytes, ..
+        } = r
+        {
+            if *offset as usize != image.len() {
+                bail!(
+                    "map chunk at byte {offset} where byte {} was expected",
+                    image.len()
+                );
+            }
+            let len = usize::from(*len).min(MAP_CHUNK_BYTES);
+            image.extend_from_slice(&bytes.0[..len]);
+        }
+    }
+    Ok((!image.is_empty()).then_some(image))
+}
+
 /// The replies of the host reference: the building-scale SLAM firmware's [`Session`]
 /// ([`profile::SlamEkf`], [`profile::SlamEstimator`] with [`profile::SLAM_CONFIG`]), fed
-/// the same bytes. Its keyframes go to [`profile::SLAM_KEYFRAME_BYTES`] of memory (the
+/// `messages`. Its keyframes go to [`profile::SLAM_KEYFRAME_BYTES`] of memory (the
 /// device's flash stand-in programs 4-byte words, the host's bytes, so the slots are laid
 /// out differently; the keyframes read back are the same, and both hold more than the
-/// graph's [`profile::SLAM_NODES`]).
-pub fn host_slam_replies(bytes: &[u8]) -> Result<HostSlam> {
+/// graph's [`profile::SLAM_NODES`]). With `save_map`, the run is then ended with
+/// [`Command::SaveMap`] and its image read back chunk by chunk ([`HostSlam::bytes`] holds
+/// every message sent).
+pub fn host_slam_replies(messages: &[ToDevice], save_map: bool) -> Result<HostSlam> {
+    let next_seq = messages
+        .iter()
+        .map(|m| m.seq().wrapping_add(1))
+        .max()
+        .unwrap_or(0);
+    host_slam_session(encode_all(messages), save_map.then_some(next_seq))
+}
+
+/// [`host_slam_replies`] for a byte stream as given (e.g. with line noise): the replies
+/// to `bytes`, then, with `save_map_seq`, the map saved and read back with commands
+/// numbered from it.
+pub fn host_slam_session(bytes: Vec<u8>, save_map_seq: Option<u32>) -> Result<HostSlam> {
     let mut ekf = Box::new(profile::SlamEkf::new(profile::EKF_CONFIG));
     let mut slam: Box<profile::Slam> = Box::new(GraphSlam::zeroed());
     let storage = VecStorage::new(profile::SLAM_KEYFRAME_BYTES as usize);
@@ -44,28 +80,46 @@ pub fn host_slam_replies(bytes: &[u8]) -> Result<HostSlam> {
         profile::SLAM_CONFIG,
         Pose2::new(0.0, 0.0, 0.0),
     )
-    .map_err(|e| anyhow!("building-scale SLAM: {e}"))?;
-    let replies = {
+    .map_err(|e| anyhow!("building-scale SLAM: {e}"))?
+    .with_map_storage(VecStorage::new(profile::SLAM_MAP_BYTES as usize));
+    let mut bytes = bytes;
+    let mut replies: Vec<ToHost>;
+    {
         let mut session = Session::<_, _, { profile::SLAM_EKF_LANDMARKS }>::with_grid(
             &mut ekf,
             profile::EKF_CONFIG,
             &mut estimator,
             profile::GRID_SETUP,
         );
-        bytes.iter().filter_map(|&b| session.receive(b)).collect()
-    };
-    let map = match estimator.store() {
-        Some(store) if !store.is_empty() => Some(draw_map::<
-            MAP_CELLS,
-            0,
-            { profile::GRID_PARTICLES },
-            _,
-        >(estimator.slam(), store, None)?),
-        _ => None,
-    };
+        replies = bytes.iter().filter_map(|&b| session.receive(b)).collect();
+        if let Some(mut seq) = save_map_seq {
+            let save = encode_all(&[ToDevice::Command {
+                seq,
+                command: Command::SaveMap,
+            }]);
+            seq = seq.wrapping_add(1);
+            replies.extend(save.iter().filter_map(|&b| session.receive(b)));
+            bytes.extend_from_slice(&save);
+            if let Some(ToHost::MapSaved { bytes: len, .. }) = replies.last() {
+                let reads: Vec<ToDevice> = (0..*len)
+                    .step_by(MAP_CHUNK_BYTES)
+                    .enumerate()
+                    .map(|(k, offset)| ToDevice::Command {
+                        seq: seq.wrapping_add(k as u32),
+                        command: Command::ReadMap { offset },
+                    })
+                    .collect();
+                let read = encode_all(&reads);
+                replies.extend(read.iter().filter_map(|&b| session.receive(b)));
+                bytes.extend_from_slice(&read);
+            }
+        }
+    }
+    let map_image = map_from_replies(&replies)?;
     Ok(HostSlam {
+        bytes,
         replies,
-        map,
+        map_image,
         counters: estimator.slam().counters(),
     })
 }
@@ -126,8 +180,8 @@ mod tests {
         let refs: Vec<&LaserMessage> = scans.iter().collect();
         let (messages, last_chunks) = lidar_messages(&refs, Pose2::IDENTITY, EstimatorKind::Grid);
         let bytes = encode_all(&messages);
-        let host = host_slam_replies(&bytes).expect("the reference runs");
-        assert_eq!(host.replies.len(), messages.len());
+        let host = host_slam_replies(&messages, true).expect("the reference runs");
+        assert_eq!(&host.bytes[..bytes.len()], &bytes[..]);
         // Every scan's last chunk is answered with the SLAM's step, applied, in grid mode.
         let mut last = None;
         for (k, &i) in last_chunks.iter().enumerate() {
@@ -148,15 +202,31 @@ mod tests {
             f64::from(y) - (truth[1] - scans[0].pose[1]),
         );
         assert!(dx.hypot(dy) < 0.15, "{x} {y} vs {truth:?}");
-        // Keyframes every 0.5 m of the 3 m drive, and a map drawn of them.
+        // Keyframes every 0.5 m of the 3 m drive, and the map image saved at the end,
+        // read back through the session: one tile of 128 cells (6.4 m) a side covers the
+        // 6 m × 4 m room.
         assert!(host.counters.keyframes >= 5, "{:?}", host.counters);
-        let (cells, _) = host.map.as_ref().expect("a map");
-        assert!(cells.iter().any(|&c| c > 0));
+        let image = host.map_image.as_ref().expect("a map image");
+        let map = microslam::grid::MapImage::parse(image).expect("a valid image");
+        assert_eq!((map.geometry().width, map.geometry().height), (128, 128));
+        let saved = host.replies.iter().find_map(|r| match r {
+            ToHost::MapSaved {
+                bytes, checksum, ..
+            } => Some((*bytes, *checksum)),
+            _ => None,
+        });
+        assert_eq!(saved, Some((image.len() as u32, map.checksum())));
+        let occupied = map
+            .occupied_bits()
+            .iter()
+            .map(|b| b.count_ones())
+            .sum::<u32>();
+        assert!(occupied > 100, "{occupied}");
         // The same bytes give the same replies (what the device is held to), and the
         // 12.8 m GridSlam firmware's reference does not: the two are told apart.
-        let again = host_slam_replies(&bytes).expect("the reference runs");
+        let again = host_slam_replies(&messages, true).expect("the reference runs");
         assert_eq!(again.replies, host.replies);
         let small = host_replies(&bytes);
-        assert_ne!(small, host.replies);
+        assert_ne!(small[..messages.len()], host.replies[..messages.len()]);
     }
 }

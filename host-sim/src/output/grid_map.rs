@@ -33,6 +33,37 @@ pub fn write_map(
     )
 }
 
+/// Writes a map image (`microslam::grid::map_image`, e.g. the one a board saved) as
+/// `map.bin` (its bytes) and, for `map_server` and the eye, `map.pgm`, `map.yaml` and
+/// `map.png` ([`write_map`]) of its three states: occupied, free (where the image has a
+/// free bitmap) and unknown. An image that does not parse is an error naming `out`.
+pub fn write_map_image(
+    out: &Path,
+    image: &[u8],
+    log_odds: &LogOdds,
+    traj: &[(f64, Pose2<f32>)],
+) -> Result<()> {
+    let map = microslam::grid::MapImage::parse(image)
+        .map_err(|e| anyhow::anyhow!("{}: map image: {e}", out.display()))?;
+    let g = *map.geometry();
+    let view = map.view();
+    let free_below = map.free_below();
+    let mut cells = Vec::with_capacity(g.width * g.height);
+    for y in 0..g.height as i32 {
+        for x in 0..g.width as i32 {
+            cells.push(if view.is_occupied(x, y) {
+                i8::MAX
+            } else if view.is_free(x, y, free_below) {
+                i8::MIN + 1
+            } else {
+                0
+            });
+        }
+    }
+    super::write_file(&out.join("map.bin"), image)?;
+    write_map(out, &cells, &g, log_odds, traj)
+}
+
 /// Writes `map.pgm` and `map.yaml` (ROS `map_server`), cropped to the known area.
 fn write_map_server(out: &Path, cells: &[i8], g: &GridGeometry, log_odds: &LogOdds) -> Result<()> {
     let CellBox { x0, y0, x1, y1 } = CellBox::known(cells, g, 10);

@@ -57,6 +57,11 @@ pub struct WithKeyframes<
     slam: &'a mut GraphSlam<P, B, NEAR, NEAR_BITS, FAR, FAR_BITS, NODES, LOOPS, SCRATCH>,
     keyframes: Keyframes<S>,
     last_error: Option<SlamError>,
+    /// Where the run's map image goes ([`WithKeyframes::with_map_storage`]).
+    map: Option<S>,
+    /// The image last written there, when it is whole (feature `map-image`).
+    #[cfg_attr(not(feature = "map-image"), allow(dead_code))]
+    saved: Option<crate::pf::SavedMap>,
 }
 
 impl<
@@ -86,7 +91,25 @@ impl<
             slam,
             keyframes: Keyframes::Waiting(storage),
             last_error: None,
+            map: None,
+            saved: None,
         })
+    }
+
+    /// The same estimator with `storage` for the map image
+    /// [`GridEstimator::save_map`] writes at the end of a run (a flash region of its own:
+    /// `GraphSlam::map_image_size` bytes, feature `map-image`; 102 456 for the Intel lab).
+    pub fn with_map_storage(self, storage: S) -> Self {
+        Self {
+            map: Some(storage),
+            saved: None,
+            ..self
+        }
+    }
+
+    /// The storage of the map image, when one was given.
+    pub fn map_storage(&self) -> Option<&S> {
+        self.map.as_ref()
     }
 
     /// The SLAM.
@@ -255,5 +278,54 @@ impl<
 
     fn pose_covariance(&self) -> [f32; 6] {
         self.slam.filter().map_or([0.0; 6], |f| f.pose_covariance())
+    }
+
+    /// [`GraphSlam::write_map_image`] of the run into the map storage, with the
+    /// localizer's free threshold ([`crate::grid::LogOdds::free_below`] of the settings);
+    /// `None` without a map storage. Refused with [`PfError::Slam`] (the cause in
+    /// [`WithKeyframes::last_error`]) before the first scan or when the write fails; the
+    /// run is over either way once the drawing started ([`GraphSlam::write_map_image`]).
+    #[cfg(feature = "map-image")]
+    fn save_map(&mut self) -> Option<Result<crate::pf::SavedMap, PfError>> {
+        let out = self.map.as_mut()?;
+        self.saved = None;
+        let Keyframes::Open { store, .. } = &self.keyframes else {
+            self.last_error = Some(SlamError::NoKeyframes);
+            return Some(Err(PfError::Slam));
+        };
+        let free_below = self.slam.config().grid.log_odds.free_below;
+        let written = self
+            .slam
+            .write_map_image(store, out, free_below)
+            .and_then(|summary| {
+                let mut header = [0u8; crate::grid::map_image::MAP_IMAGE_HEADER_LEN];
+                out.read(0, &mut header)?;
+                let checksum = u32::from_le_bytes([header[36], header[37], header[38], header[39]]);
+                Ok(crate::pf::SavedMap {
+                    bytes: u32::try_from(summary.bytes).unwrap_or(u32::MAX),
+                    checksum,
+                })
+            });
+        Some(match written {
+            Ok(saved) => {
+                self.last_error = None;
+                self.saved = Some(saved);
+                Ok(saved)
+            }
+            Err(e) => {
+                self.last_error = Some(e);
+                Err(PfError::Slam)
+            }
+        })
+    }
+
+    #[cfg(feature = "map-image")]
+    fn read_map(&self, offset: u32, out: &mut [u8]) -> Option<usize> {
+        let saved = self.saved?;
+        let storage = self.map.as_ref()?;
+        let len = (saved.bytes.saturating_sub(offset) as usize).min(out.len());
+        let part = out.get_mut(..len)?;
+        storage.read(offset as usize, part).ok()?;
+        Some(len)
     }
 }
