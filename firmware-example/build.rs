@@ -10,7 +10,16 @@
 //! 0 for none). `$OUT_DIR/map_rows.rs` holds the length of the map bitmap's rows
 //! (`⌈width / 8⌉` bytes, 0 without a map), so that the localizer's shift search is
 //! compiled for it (`GridLocalizer::with_bitmap_row_bytes`).
-use microslam::grid::map_image::{DEFAULT_LAYER_LEVELS, encode_map_image_with_layers};
+//!
+//! `MICROSLAM_MAP` may also name a map image (a file starting with `MSMP`): the map a
+//! board wrote at the end of its SLAM run and sent back (`host-sim hil` writes it as
+//! `device-map/map.bin`, `host-sim replay --loop-closure` as `map.bin`). Its bitmaps are
+//! embedded as they are, with the layers made from them
+//! (`microslam::grid::map_image::with_layers`).
+use microslam::grid::MapImage;
+use microslam::grid::map_image::{
+    DEFAULT_LAYER_LEVELS, MAP_IMAGE_MAGIC, encode_map_image_with_layers, with_layers,
+};
 use microslam::grid::ros_map::RosMap;
 use microslam::pf::GridPfConfig;
 use std::{env, fs, path::PathBuf};
@@ -47,6 +56,20 @@ fn embed_map(out: &std::path::Path) {
         Some(yaml) => {
             let yaml = PathBuf::from(yaml);
             println!("cargo:rerun-if-changed={}", yaml.display());
+            println!("cargo:rerun-if-env-changed=MICROSLAM_MAP_LEVELS");
+            let levels = env::var("MICROSLAM_MAP_LEVELS").map_or(DEFAULT_LAYER_LEVELS, |v| {
+                v.parse()
+                    .unwrap_or_else(|_| panic!("MICROSLAM_MAP_LEVELS={v}: not a number 0..=8"))
+            });
+            let bytes = fs::read(&yaml)
+                .unwrap_or_else(|e| panic!("MICROSLAM_MAP: {}: {e}", yaml.display()));
+            if bytes.starts_with(&MAP_IMAGE_MAGIC) {
+                let (image, rows) = board_map(&yaml, &bytes, levels);
+                row_bytes = rows;
+                fs::write(out.join("map.bin"), image).expect("write map.bin");
+                write_rows(out, row_bytes);
+                return;
+            }
             let map = RosMap::read(&yaml, &MAP_CONFIG.log_odds)
                 .unwrap_or_else(|e| panic!("MICROSLAM_MAP: {e}"));
             if (map.geometry.resolution - MAP_CONFIG.resolution).abs() > 1e-6 {
@@ -59,11 +82,6 @@ fn embed_map(out: &std::path::Path) {
             }
             // Levels of the global search's layers: MICROSLAM_MAP_LEVELS, default 5 (0: no
             // layers, no global search; the map alone).
-            println!("cargo:rerun-if-env-changed=MICROSLAM_MAP_LEVELS");
-            let levels = env::var("MICROSLAM_MAP_LEVELS").map_or(DEFAULT_LAYER_LEVELS, |v| {
-                v.parse()
-                    .unwrap_or_else(|_| panic!("MICROSLAM_MAP_LEVELS={v}: not a number 0..=8"))
-            });
             let log_odds = MAP_CONFIG.log_odds;
             let image = encode_map_image_with_layers(
                 &map.cells,
@@ -87,6 +105,48 @@ fn embed_map(out: &std::path::Path) {
         }
     };
     fs::write(out.join("map.bin"), image).expect("write map.bin");
+    write_rows(out, row_bytes);
+}
+
+/// A board's map image, checked against the localizer's settings, with `levels` levels
+/// of layers (0: as it is); and the length of its bitmap's rows.
+fn board_map(path: &std::path::Path, bytes: &[u8], levels: u8) -> (Vec<u8>, usize) {
+    let map =
+        MapImage::parse(bytes).unwrap_or_else(|e| panic!("MICROSLAM_MAP: {}: {e}", path.display()));
+    let g = *map.geometry();
+    if (g.resolution - MAP_CONFIG.resolution).abs() > 1e-6
+        || map.view().occupied_above() != MAP_CONFIG.log_odds.occupied_above
+    {
+        panic!(
+            "MICROSLAM_MAP: {}: resolution {} m and occupied threshold {}, the localizer runs \
+             at {} m and {}",
+            path.display(),
+            g.resolution,
+            map.view().occupied_above(),
+            MAP_CONFIG.resolution,
+            MAP_CONFIG.log_odds.occupied_above
+        );
+    }
+    let image = if levels == 0 {
+        bytes.to_vec()
+    } else {
+        with_layers(bytes, levels)
+            .unwrap_or_else(|e| panic!("MICROSLAM_MAP: {}: {e}", path.display()))
+    };
+    println!("cargo:rustc-cfg=microslam_map");
+    println!(
+        "cargo:warning=map image {} embedded: {} x {} cells, {} layer levels, {} bytes",
+        path.display(),
+        g.width,
+        g.height,
+        levels,
+        image.len()
+    );
+    (image, g.width.div_ceil(8))
+}
+
+/// `$OUT_DIR/map_rows.rs`: the length of the embedded bitmap's rows.
+fn write_rows(out: &std::path::Path, row_bytes: usize) {
     let rows = format!(
         "/// Bytes of a row of the embedded map's occupied-cell bitmap (0: no map).\n\
          pub const MAP_ROW_BYTES: usize = {row_bytes};\n"

@@ -398,23 +398,7 @@ pub fn encode_map_image(
         .map_err(|_| MapImageError::BitmapSizeMismatch)?;
     let mut sections: std::vec::Vec<(u32, &[u8])> = std::vec![(SECTION_OCCUPIED, &occupied[..])];
     sections.extend_from_slice(extra);
-    let mut body = std::vec::Vec::new();
-    for (tag, bytes) in &sections {
-        let len = u32::try_from(bytes.len()).map_err(|_| MapImageError::BadSection)?;
-        body.extend_from_slice(&section_header(*tag, len));
-        body.extend_from_slice(bytes);
-        body.resize(body.len().next_multiple_of(4), 0);
-    }
-    let count = u16::try_from(sections.len()).map_err(|_| MapImageError::BadSection)?;
-    let payload = u32::try_from(body.len()).map_err(|_| MapImageError::BadSection)?;
-    let mut header = encode_header(geometry, occupied_above, free_below, count, payload)?;
-    let mut crc = ImageChecksum::new(&header);
-    crc.update(&body);
-    crc.finish(&mut header);
-    let mut out = std::vec::Vec::with_capacity(MAP_IMAGE_HEADER_LEN + body.len());
-    out.extend_from_slice(&header);
-    out.extend_from_slice(&body);
-    Ok(out)
+    encode_sections(geometry, occupied_above, free_below, &sections)
 }
 
 /// [`encode_map_image`] with the max-pooled layers of the global search
@@ -449,6 +433,58 @@ pub fn encode_map_image_with_layers(
     )
 }
 
+/// A map image (e.g. the one a board saved at the end of its SLAM run, which carries an
+/// occupied and a free bitmap but no layers) with the max-pooled layers of the global
+/// search made from it (`levels` levels, [`MaxPoolLayers::build`] on
+/// [`MapImage::view`]), replacing any it had: what the localizer firmware embeds. Refused
+/// as [`MapImage::parse`] refuses, or with [`MapImageError::BadLayers`] when the layers
+/// cannot be made (`levels` outside `1..=8`).
+#[cfg(feature = "std")]
+pub fn with_layers(image: &[u8], levels: u8) -> Result<std::vec::Vec<u8>, MapImageError> {
+    let map = MapImage::parse(image)?;
+    let view = map.view();
+    let g = *map.geometry();
+    let len =
+        MaxPoolLayers::bytes_for(g.width, g.height, levels).ok_or(MapImageError::BadLayers)?;
+    let mut layers = std::vec![0u8; len];
+    MaxPoolLayers::build(&view, map.free_below(), levels, &mut layers)
+        .map_err(|_| MapImageError::BadLayers)?;
+    let mut sections: std::vec::Vec<(u32, &[u8])> = std::vec::Vec::new();
+    sections.push((SECTION_OCCUPIED, map.occupied_bits()));
+    if let Some(free) = view.free_bits() {
+        sections.push((SECTION_FREE, free));
+    }
+    sections.push((SECTION_MAX_POOL_LAYERS, &layers));
+    encode_sections(&g, view.occupied_above(), map.free_below(), &sections)
+}
+
+/// An image of `sections` `(tag, body)` in order, each padded to 4 bytes.
+#[cfg(feature = "std")]
+fn encode_sections(
+    geometry: &GridGeometry,
+    occupied_above: i8,
+    free_below: i8,
+    sections: &[(u32, &[u8])],
+) -> Result<std::vec::Vec<u8>, MapImageError> {
+    let mut body = std::vec::Vec::new();
+    for (tag, bytes) in sections {
+        let len = u32::try_from(bytes.len()).map_err(|_| MapImageError::BadSection)?;
+        body.extend_from_slice(&section_header(*tag, len));
+        body.extend_from_slice(bytes);
+        body.resize(body.len().next_multiple_of(4), 0);
+    }
+    let count = u16::try_from(sections.len()).map_err(|_| MapImageError::BadSection)?;
+    let payload = u32::try_from(body.len()).map_err(|_| MapImageError::BadSection)?;
+    let mut header = encode_header(geometry, occupied_above, free_below, count, payload)?;
+    let mut crc = ImageChecksum::new(&header);
+    crc.update(&body);
+    crc.finish(&mut header);
+    let mut out = std::vec::Vec::with_capacity(MAP_IMAGE_HEADER_LEN + body.len());
+    out.extend_from_slice(&header);
+    out.extend_from_slice(&body);
+    Ok(out)
+}
+
 #[cfg(all(test, feature = "std"))]
 mod tests {
     use super::*;
@@ -465,6 +501,35 @@ mod tests {
             .map(|i| ((i * 41 + 7) % 81) as i8 - 40)
             .collect();
         (cells, g)
+    }
+
+    #[test]
+    fn layers_added_to_an_image_of_bitmaps_equal_those_of_its_cells() {
+        let (cells, g) = sample();
+        let mut free = std::vec![0u8; occupancy_bytes(g.width, g.height)];
+        for (i, &c) in cells.iter().enumerate() {
+            if c < -20 {
+                free[(i / g.width) * g.width.div_ceil(8) + (i % g.width) / 8] |=
+                    1 << (i % g.width % 8);
+            }
+        }
+        let bitmaps = encode_map_image(&cells, &g, 20, -20, &[(SECTION_FREE, &free)]).unwrap();
+        let added = with_layers(&bitmaps, 2).unwrap();
+        let from_cells = encode_map_image_with_layers(&cells, &g, 20, -20, 2).unwrap();
+        let (a, b) = (
+            MapImage::parse(&added).unwrap(),
+            MapImage::parse(&from_cells).unwrap(),
+        );
+        assert_eq!(
+            a.section(SECTION_MAX_POOL_LAYERS),
+            b.section(SECTION_MAX_POOL_LAYERS)
+        );
+        assert_eq!(a.section(SECTION_FREE), Some(&free[..]));
+        assert_eq!(with_layers(&bitmaps, 0), Err(MapImageError::BadLayers));
+        assert_eq!(
+            with_layers(&bitmaps[..10], 2).err(),
+            Some(MapImageError::Truncated)
+        );
     }
 
     #[test]

@@ -27,9 +27,21 @@ pub fn map_image_of(yaml: &Path) -> Result<Vec<u8>> {
     map_image_with_levels(yaml, DEFAULT_LAYER_LEVELS)
 }
 
-/// The map image of `yaml` with `levels` levels of max-pooled layers (0: none).
+/// The map image of `yaml` with `levels` levels of max-pooled layers (0: none); `yaml`
+/// may be a map image itself (a board's `map.bin`), which gets the layers as the
+/// firmware's build script gives them (`microslam::grid::map_image::with_layers`).
 pub fn map_image_with_levels(yaml: &Path, levels: u8) -> Result<Vec<u8>> {
     let config = profile::LOCALIZER_CONFIG;
+    let bytes = std::fs::read(yaml).map_err(|e| anyhow::anyhow!("{}: {e}", yaml.display()))?;
+    if bytes.starts_with(&microslam::grid::map_image::MAP_IMAGE_MAGIC) {
+        if levels == 0 {
+            microslam::grid::MapImage::parse(&bytes)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", yaml.display()))?;
+            return Ok(bytes);
+        }
+        return microslam::grid::map_image::with_layers(&bytes, levels)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", yaml.display()));
+    }
     let map = RosMap::read(yaml, &config.log_odds)?;
     if (map.geometry.resolution - config.resolution).abs() > 1e-6 {
         bail!(
