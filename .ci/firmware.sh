@@ -170,6 +170,11 @@ awk '/^ekf /{
         printf "%-40s %s\n", pre "_steps_over_10m", g["over_10m"];
     }
     /^slam_bytes=/{ split($0, kv, "="); printf "%-40s %s\n", "slam_estimator_bytes", kv[2] }
+    /^slam_map /{
+        for (i = 2; i <= NF; i++) { split($i, kv, "="); m[kv[1]] = kv[2] }
+        printf "%-40s %s\n", "slam_map_image_instructions", m["instructions"];
+        printf "%-40s %s\n", "slam_map_image_bytes", m["bytes"];
+    }
     /^relocalize_budget(_b45)? /{
         for (i = 2; i <= NF; i++) { split($i, kv, "="); f[kv[1]] = kv[2] }
         printf "%-40s %s\n", $1 "_" f["cells"] "x" f["cells"] "_instructions", f["instructions"];

@@ -8,7 +8,9 @@
 //! over the old keyframes, the graph solved) with the graph at its largest. The odometry
 //! turns 1 % too much, so that the loops have something to close. The keyframes go to a
 //! NOR flash stand-in ([`firmware_example::flash::SramFlash`]) in QEMU's SRAM beyond the
-//! board's 128 KB, through the same `NorFlashStorage` a board's flash uses.
+//! board's 128 KB, through the same `NorFlashStorage` a board's flash uses. At the end the
+//! run's map image is drawn into a second stand-in (`GraphSlam::write_map_image`, what
+//! the firmware's `SaveMap` does) and its instructions reported (`slam_map …`).
 //!
 //! Prints `slam …` lines on UART0 and exits through semihosting.
 #![no_std]
@@ -33,6 +35,9 @@ static SLAM: ConstStaticCell<Slam> = ConstStaticCell::new(Slam::zeroed());
 /// Bytes of the keyframe store (the board profile's: the STM32F411's two 128 KB flash
 /// sectors 6 and 7).
 const STORE_BYTES: u32 = firmware_example::config::SLAM_KEYFRAME_BYTES;
+
+/// Bytes of the map image's flash region (the board profile's).
+const MAP_BYTES: u32 = firmware_example::config::SLAM_MAP_BYTES;
 
 /// The odometry's heading error, as a fraction of each turn.
 const TURN_SCALE_ERROR: f32 = 0.01;
@@ -154,6 +159,33 @@ fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
         (libm::hypotf(est.x - truth.x, est.y - truth.y) * 1000.0) as u32
     )?;
     writeln!(out, "slam_bytes={}", core::mem::size_of::<Slam>())?;
+    // The end of the run: the whole map drawn into a map image in a second flash region
+    // (what `SaveMap` does on the SLAM firmware), with its graph full.
+    let Some(map_flash) = SramFlash::take_map(MAP_BYTES) else {
+        return writeln!(out, "error slam map flash stand-in");
+    };
+    let Ok(mut map_storage) = NorFlashStorage::new(map_flash, 0, MAP_BYTES) else {
+        return writeln!(out, "error slam map storage");
+    };
+    let free_below = SLAM_CONFIG.grid.log_odds.free_below;
+    let mut written = None;
+    let n = ticks.instructions_long(|| {
+        written = Some(slam.write_map_image(&store, &mut map_storage, free_below));
+    });
+    let Some(Ok(summary)) = written else {
+        return writeln!(out, "error slam map image");
+    };
+    writeln!(
+        out,
+        "slam_map cells={}x{} tiles={} keyframes={} scans_drawn={} bytes={} instructions={}",
+        summary.geometry.width,
+        summary.geometry.height,
+        summary.tiles,
+        summary.keyframes,
+        summary.scans_drawn,
+        summary.bytes,
+        n
+    )?;
     firmware_example::cost::report_end(out)
 }
 

@@ -68,6 +68,18 @@ impl CmsdkUart {
         self.sleep = true;
     }
 
+    /// Undoes [`CmsdkUart::sleep_while_idle`] for a program that needs exceptions (the
+    /// cost probes: SysTick's counts the counter's wraps): the RX interrupt is masked in
+    /// the NVIC and disabled in the UART, then PRIMASK is cleared. Reads spin again.
+    pub fn spin_while_idle(&mut self) {
+        cortex_m::peripheral::NVIC::mask(Uart0Rx);
+        self.write_reg(CTRL, CTRL_TX_RX_ENABLE);
+        self.sleep = false;
+        // SAFETY: no interrupt is unmasked in the NVIC (the UART's was masked above), so
+        // clearing PRIMASK lets only the core's exceptions (SysTick) run their handlers.
+        unsafe { cortex_m::interrupt::enable() };
+    }
+
     fn wait_for_rx(&self) {
         while !self.rx_ready() {
             if self.sleep {
