@@ -47,3 +47,21 @@ pub fn write(recording: &Recording, out: &mut impl std::io::Write) -> std::io::R
     }
     Ok(left_out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::inputs::readers::landmarks::{parse, tests::GOOD};
+    use std::path::Path;
+
+    #[test]
+    fn written_and_read_back_is_the_same_recording() {
+        let r = parse(Path::new("log.txt"), GOOD).unwrap();
+        let mut text = Vec::new();
+        assert_eq!(write(&r, &mut text).unwrap(), 0);
+        let back = parse(Path::new("back.txt"), std::str::from_utf8(&text).unwrap()).unwrap();
+        assert_eq!(back.events, r.events);
+        assert_eq!(back.ground_truth, r.ground_truth);
+        assert_eq!(back.landmarks, r.landmarks);
+    }
+}
