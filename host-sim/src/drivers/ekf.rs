@@ -236,7 +236,7 @@ pub fn dead_reckoning_with(
             }
             EventKind::Ackermann { v, steering } => {
                 let omega = vehicle.and_then(|car| car.turn_rate(v, steering));
-                if let Some(omega) = omega.filter(|_| v.abs() <= max_speed) {
+                if let Some(omega) = omega.filter(|w| v.abs() <= max_speed && w.abs() <= max_turn) {
                     velocity = (v, omega);
                 }
                 out.push((e.stamp, pose));

@@ -51,10 +51,8 @@ pub fn read(path: &Path) -> Result<Recording, ReadError> {
         source,
     })?;
     let text = String::from_utf8(text).map_err(|e| {
-        let line = 1 + e.as_bytes()[..e.utf8_error().valid_up_to()]
-            .iter()
-            .filter(|&&b| b == b'\n')
-            .count();
+        let valid = e.as_bytes().get(..e.utf8_error().valid_up_to());
+        let line = 1 + valid.unwrap_or(&[]).iter().filter(|&&b| b == b'\n').count();
         invalid(path, line, "not UTF-8 text".to_owned())
     })?;
     parse(path, &text)
@@ -84,8 +82,8 @@ impl Fields<'_> {
         let text = self.values.get(i).copied().unwrap_or("");
         match text.parse::<f64>() {
             Ok(v) if v.is_finite() => Ok(v),
-            Ok(_) => Err(self.error(i, format_args!("`{text}` is not finite"))),
-            Err(_) => Err(self.error(i, format_args!("`{text}` is not a number"))),
+            Ok(_) => Err(self.error(i, format_args!("`{}` is not finite", shown(text)))),
+            Err(_) => Err(self.error(i, format_args!("`{}` is not a number", shown(text)))),
         }
     }
 
@@ -102,12 +100,22 @@ impl Fields<'_> {
     fn id(&self, i: usize) -> Result<u32, ReadError> {
         let text = self.values.get(i).copied().unwrap_or("");
         text.parse::<u32>().map_err(|_| {
+            let text = shown(text);
             self.error(
                 i,
                 format_args!("`{text}` is not a landmark id (a whole number 0 to 4294967295)"),
             )
         })
     }
+}
+
+/// At most the first 40 characters of a field, for an error message (a field of a
+/// corrupt file may be megabytes long).
+fn shown(text: &str) -> &str {
+    text.char_indices()
+        .nth(40)
+        .and_then(|(end, _)| text.get(..end))
+        .unwrap_or(text)
 }
 
 /// The stamps of one record type, checked line by line.
@@ -410,6 +418,20 @@ pub(crate) mod tests {
             assert!(e.contains(expected), "{extra:?}: {e}");
         }
         assert!(parsed(base).is_ok());
+    }
+
+    /// A long number is read whole; a long bad field is shown cut to 40 characters.
+    #[test]
+    fn long_fields_are_read_whole_and_shown_short() {
+        let long = format!("1.{}", "0".repeat(60));
+        let r = parsed(&format!("velocity {long} 0.5 0\nsighting 1 2 0.1 7\n")).unwrap();
+        assert_eq!(r.events[0].stamp, 1.0);
+        let junk = "x".repeat(1000);
+        let e = parsed(&format!("velocity 1 {junk} 0\n")).unwrap_err();
+        assert!(
+            e.ends_with(&format!("`{}` is not a number", "x".repeat(40))),
+            "{e}"
+        );
     }
 
     #[test]
