@@ -459,6 +459,11 @@ pub struct SimArgs {
     /// Record the runs into this MCAP file (topics under /ekf, /grid_slam, /grid_localize).
     #[arg(long)]
     pub mcap: Option<PathBuf>,
+    /// Drive the landmark field with a car (speed and steering, `[vehicle]` of the
+    /// settings) whose sensor sits `[scenario] car_sensor_ahead_m` ahead of the rear axle,
+    /// instead of the differential-drive robot.
+    #[arg(long)]
+    pub car: bool,
 }
 
 /// Options of `host-sim hil`.
@@ -652,6 +657,7 @@ impl From<&SimArgs> for SimOptions {
             grid_config: a.grid_config.clone(),
             global: (&a.global).into(),
             mcap: a.mcap.clone(),
+            car: a.car,
         }
     }
 }

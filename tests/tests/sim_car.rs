@@ -3,7 +3,7 @@
 //! model with a sensor 0.3 m ahead of the rear axle. Its EKF-SLAM ATE must be within 2×
 //! the differential-drive robot's, with known and with hidden ids (JCBB).
 
-use host_sim::domain::config::{Settings, VehicleSettings};
+use host_sim::domain::config::Settings;
 use host_sim::domain::{AssociationMode, Precision};
 use host_sim::inputs::sim::{simulate, simulate_car};
 use host_sim::metrics::evaluate;
@@ -18,20 +18,20 @@ fn ate(
     evaluate(recording, &run).ate_rmse_m.se2.expect("ATE(se2)")
 }
 
-/// An RC-car-sized vehicle: wheelbase 0.3 m; its speed noise the robot's
-/// (`configs/sim.toml`: 0.01 + 0.05 |v| m/s) and a steering noise of 0.02 rad, which at
-/// the scenario's 0.4 m/s is a turn-rate noise of 0.4 · 0.02 / 0.3 = 0.027 rad/s, about
-/// the robot's (0.01 + 0.05 |ω| + 0.02 |v| ≈ 0.025 rad/s).
+/// The settings of `host-sim sim --car`: the built-in car of `configs/sim.toml`
+/// (`[vehicle]`: wheelbase 0.3 m, the robot's speed noise, 0.02 rad of steering noise —
+/// about the robot's turn-rate noise at the scenario's speed) with its sensor
+/// `car_sensor_ahead_m` (0.3 m) ahead of the rear axle.
 fn car(mut settings: Settings) -> Settings {
-    settings.vehicle = Some(VehicleSettings {
-        wheelbase_m: 0.3,
-        max_steering_rad: 0.6,
-        speed_std: 0.01,
-        speed_std_per_mps: 0.05,
-        steering_std: 0.02,
-        steering_std_per_mps: 0.0,
-    });
-    settings.sighting.mount = [0.3, 0.0, 0.0];
+    let vehicle = settings.vehicle.clone().expect("sim.toml has a [vehicle]");
+    assert_eq!(vehicle.wheelbase_m, 0.3);
+    let ahead = settings
+        .scenario
+        .as_ref()
+        .expect("[scenario]")
+        .car_sensor_ahead_m;
+    assert_eq!(ahead, 0.3);
+    settings.sighting.mount = [ahead, 0.0, 0.0];
     settings
 }
 

@@ -638,6 +638,9 @@ pub struct Scenario {
     pub wobble_period_s: f64,
     pub fov_deg: f64,
     pub max_range_m: f64,
+    /// `host-sim sim --car`: the car's sensor this far ahead of its rear axle, m.
+    #[serde(default)]
+    pub car_sensor_ahead_m: f64,
 }
 
 #[cfg(test)]
