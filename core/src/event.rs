@@ -54,6 +54,16 @@ pub enum EventKind<T: nalgebra::Scalar> {
     /// Wheel odometry reported as a pose increment `(dx, dy, dθ)` in the previous robot
     /// frame, covering the time since the previous increment.
     Increment(Pose2<T>),
+    /// A car's odometry: the speed of its rear-axle centre and its front steering angle,
+    /// held until the next odometry sample like [`EventKind::Velocity`]; moved through the
+    /// bicycle model of [`crate::motion::Ackermann`] (the wheelbase is the vehicle's
+    /// setting, not part of the event).
+    Ackermann {
+        /// Speed of the rear-axle centre, m/s (negative when reversing).
+        v: T,
+        /// Front steering angle, rad, counter-clockwise (left) positive.
+        steering: T,
+    },
     /// Yaw rate of an IMU's gyroscope, rad/s, counter-clockwise positive.
     YawRate(T),
     /// A range-bearing sighting of a point landmark.

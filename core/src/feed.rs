@@ -9,7 +9,9 @@
 //!   velocity held since the last [`EventKind::Velocity`] sample (`dt` computed in `f64`
 //!   from the stamps, capped at `max_gap` seconds so that a pause in a recording does not
 //!   become one long drive);
-//! - [`EventKind::Velocity`] is held (it describes the motion *after* its stamp);
+//! - [`EventKind::Velocity`] is held (it describes the motion *after* its stamp), and so is
+//!   a car's [`EventKind::Ackermann`] (speed and steering, moved through the feed's
+//!   vehicle, [`EventFeed::with_vehicle`]); each replaces the other;
 //!   [`EventKind::Increment`] is applied at once;
 //! - a sighting is handed back as [`Fed::Sighting`] for the caller's data association
 //!   ([`observe_known_sighting`] for known ids, or ICNN / JCBB from
@@ -63,6 +65,7 @@ use crate::ekf::EkfSlam;
 use crate::error::EkfError;
 use crate::event::{Event, EventKind, Identity, Sighting};
 use crate::geometry::Pose2;
+use crate::motion::Ackermann;
 use crate::pf::{GridLocalizer, GridSlam, PfError};
 use crate::scalar::Real;
 
@@ -76,6 +79,21 @@ pub trait Predictor<T: Real> {
 
     /// Moves by `(dx, dy, dθ)` in the previous robot frame.
     fn predict_increment(&mut self, increment: &Pose2<T>) -> Result<(), Self::Error>;
+
+    /// Moves a car with speed `v` and steering angle `steering` held for `dt` seconds.
+    /// By default the same arc as velocities `(v, v tan φ / L)`; the EKF overrides it with
+    /// the steering's own noise ([`EkfSlam::predict_ackermann`]). [`EventFeed`] checks the
+    /// steering against `car.max_steering` before calling.
+    fn predict_ackermann(
+        &mut self,
+        car: &Ackermann<T>,
+        v: T,
+        steering: T,
+        dt: T,
+    ) -> Result<(), Self::Error> {
+        let omega = car.turn_rate(v, steering).unwrap_or(T::ZERO);
+        self.predict_velocity(v, omega, dt)
+    }
 }
 
 impl<T: Real, const N: usize, const P: usize> Predictor<T> for EkfSlam<T, N, P> {
@@ -87,6 +105,16 @@ impl<T: Real, const N: usize, const P: usize> Predictor<T> for EkfSlam<T, N, P> 
 
     fn predict_increment(&mut self, increment: &Pose2<T>) -> Result<(), EkfError> {
         EkfSlam::predict_increment(self, increment)
+    }
+
+    fn predict_ackermann(
+        &mut self,
+        car: &Ackermann<T>,
+        v: T,
+        steering: T,
+        dt: T,
+    ) -> Result<(), EkfError> {
+        EkfSlam::predict_ackermann(self, car, v, steering, dt)
     }
 }
 
@@ -122,8 +150,12 @@ impl<const P: usize, const B: usize> Predictor<f32> for GridLocalizer<'_, P, B> 
 pub enum FeedError<E> {
     /// The event's stamp is NaN or infinite.
     NonFiniteStamp,
-    /// A velocity or increment with a NaN or infinite component.
+    /// A velocity, increment or car sample with a NaN or infinite component, or a car's
+    /// steering angle beyond its vehicle's `max_steering`.
     NonFiniteOdometry,
+    /// A car's sample ([`EventKind::Ackermann`]) reached a feed without a vehicle
+    /// ([`EventFeed::with_vehicle`]).
+    NoVehicle,
     /// The estimator refused the step.
     Estimator(E),
 }
@@ -139,6 +171,7 @@ impl<E: fmt::Display> fmt::Display for FeedError<E> {
         match self {
             Self::NonFiniteStamp => f.write_str("event stamp is not finite"),
             Self::NonFiniteOdometry => f.write_str("odometry sample is not finite"),
+            Self::NoVehicle => f.write_str("a car's odometry sample, but the feed has no vehicle"),
             Self::Estimator(e) => write!(f, "estimator refused the step: {e}"),
         }
     }
@@ -152,6 +185,8 @@ impl<E: fmt::Debug + fmt::Display> core::error::Error for FeedError<E> {}
 pub enum Fed<T: nalgebra::Scalar> {
     /// A velocity sample: held for the motion until the next event.
     VelocityHeld,
+    /// A car's speed and steering: held for the motion until the next event.
+    AckermannHeld,
     /// An odometry increment: applied.
     IncrementApplied,
     /// A sighting, for the caller's data association.
@@ -167,7 +202,16 @@ pub enum Fed<T: nalgebra::Scalar> {
 pub struct EventFeed<T> {
     max_gap: f64,
     last: Option<f64>,
-    velocity: Option<(T, T)>,
+    held: Held<T>,
+    car: Option<Ackermann<T>>,
+}
+
+/// The odometry sample in force.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Held<T> {
+    Nothing,
+    Velocity(T, T),
+    Ackermann(T, T),
 }
 
 impl<T: Real> EventFeed<T> {
@@ -177,7 +221,20 @@ impl<T: Real> EventFeed<T> {
         Self {
             max_gap: max_gap_s,
             last: None,
-            velocity: None,
+            held: Held::Nothing,
+            car: None,
+        }
+    }
+
+    /// A feed for a car: as [`EventFeed::new`], and [`EventKind::Ackermann`] samples move
+    /// the estimator through `car` (without one they are refused,
+    /// [`FeedError::NoVehicle`]).
+    pub const fn with_vehicle(max_gap_s: f64, car: Ackermann<T>) -> Self {
+        Self {
+            max_gap: max_gap_s,
+            last: None,
+            held: Held::Nothing,
+            car: Some(car),
         }
     }
 
@@ -186,9 +243,17 @@ impl<T: Real> EventFeed<T> {
         self.last
     }
 
-    /// The velocity `(v, ω)` held since the last velocity sample.
+    /// The velocity `(v, ω)` held since the last velocity sample (for a car's sample,
+    /// its speed and turn rate `v tan φ / L`).
     pub fn held_velocity(&self) -> Option<(T, T)> {
-        self.velocity
+        match self.held {
+            Held::Nothing => None,
+            Held::Velocity(v, omega) => Some((v, omega)),
+            Held::Ackermann(v, steering) => {
+                let omega = self.car.and_then(|car| car.turn_rate(v, steering))?;
+                Some((v, omega))
+            }
+        }
     }
 
     /// Predicts `estimator` up to `stamp` with the held velocity (nothing when no
@@ -201,10 +266,18 @@ impl<T: Real> EventFeed<T> {
         if !stamp.is_finite() {
             return Err(FeedError::NonFiniteStamp);
         }
-        if let (Some(last), Some((v, omega))) = (self.last, self.velocity) {
+        if let Some(last) = self.last {
             let dt = (stamp - last).min(self.max_gap);
             if dt > 0.0 {
-                estimator.predict_velocity(v, omega, T::lit(dt))?;
+                match (self.held, &self.car) {
+                    (Held::Velocity(v, omega), _) => {
+                        estimator.predict_velocity(v, omega, T::lit(dt))?;
+                    }
+                    (Held::Ackermann(v, steering), Some(car)) => {
+                        estimator.predict_ackermann(car, v, steering, T::lit(dt))?;
+                    }
+                    _ => {}
+                }
             }
         }
         self.last = Some(self.last.map_or(stamp, |last| last.max(stamp)));
@@ -222,6 +295,10 @@ impl<T: Real> EventFeed<T> {
         let odometry_ok = match &event.kind {
             EventKind::Velocity { v, omega } => v.finite() && omega.finite(),
             EventKind::Increment(inc) => inc.x.finite() && inc.y.finite() && inc.theta.finite(),
+            EventKind::Ackermann { v, steering } => match &self.car {
+                Some(car) => car.turn_rate(*v, *steering).is_some(),
+                None => return Err(FeedError::NoVehicle),
+            },
             _ => true,
         };
         if !event.stamp.is_finite() {
@@ -233,8 +310,12 @@ impl<T: Real> EventFeed<T> {
         self.advance(estimator, event.stamp)?;
         Ok(match event.kind {
             EventKind::Velocity { v, omega } => {
-                self.velocity = Some((v, omega));
+                self.held = Held::Velocity(v, omega);
                 Fed::VelocityHeld
+            }
+            EventKind::Ackermann { v, steering } => {
+                self.held = Held::Ackermann(v, steering);
+                Fed::AckermannHeld
             }
             EventKind::Increment(inc) => {
                 estimator.predict_increment(&inc)?;
@@ -436,5 +517,52 @@ mod tests {
         );
         assert_eq!(slam.landmark_count(), 2);
         assert_eq!(ids.get(4), Some(1));
+    }
+
+    /// A car's samples are held and drive the EKF through the feed's vehicle exactly as
+    /// `predict_ackermann` called by hand; a feed without a vehicle, or a steering angle
+    /// beyond the vehicle's limit, is refused and changes nothing.
+    #[test]
+    fn a_car_is_held_and_moved_through_the_vehicle() {
+        use crate::motion::{Ackermann, AckermannNoise};
+        let car = Ackermann {
+            wheelbase: 2.5,
+            max_steering: 0.6,
+            noise: AckermannNoise {
+                speed_std: 0.1,
+                speed_std_per_mps: 0.0,
+                steering_std: 0.02,
+                steering_std_per_mps: 0.0,
+            },
+        };
+        let drive = |v, steering| EventKind::Ackermann { v, steering };
+        let mut fed = Slam::new(EkfConfig::DEFAULT_F64);
+        let mut feed = EventFeed::with_vehicle(1.0, car);
+        assert_eq!(
+            feed.feed(&mut fed, &Event::new(1.0, drive(2.0, 0.2))),
+            Ok(Fed::AckermannHeld)
+        );
+        feed.feed(&mut fed, &Event::new(1.5, drive(2.0, -0.1)))
+            .unwrap();
+        assert!(matches!(
+            feed.feed(&mut fed, &sighting(1.75, Identity::Unknown)),
+            Ok(Fed::Sighting(_))
+        ));
+        let mut by_hand = Slam::new(EkfConfig::DEFAULT_F64);
+        by_hand.predict_ackermann(&car, 2.0, 0.2, 0.5).unwrap();
+        by_hand.predict_ackermann(&car, 2.0, -0.1, 0.25).unwrap();
+        assert_eq!(fed.pose(), by_hand.pose());
+        assert_eq!(fed.pose_covariance(), by_hand.pose_covariance());
+        assert_eq!(
+            feed.feed(&mut fed, &Event::new(2.0, drive(2.0, 0.7))),
+            Err(FeedError::NonFiniteOdometry)
+        );
+        assert_eq!(fed.pose(), by_hand.pose());
+        let mut plain = EventFeed::new(1.0);
+        assert_eq!(
+            plain.feed(&mut fed, &Event::new(2.0, drive(2.0, 0.1))),
+            Err(FeedError::NoVehicle)
+        );
+        assert_eq!(plain.last_stamp(), None);
     }
 }

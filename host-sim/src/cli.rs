@@ -68,6 +68,23 @@ pub enum Command {
     /// Write a CARMEN log as a ROS 2 bag (MCAP: LaserScan, Odometry, /tf_static), e.g.
     /// for `replay --dataset rosbag:<file.mcap>`.
     ExportRosbag(ExportRosbagArgs),
+    /// Write a landmark recording (`mrclam:<dir>/robotN`, `landmarks:<file>`) as a plain
+    /// landmark log (docs/guide.md), for `replay --dataset landmarks:<file>`.
+    ExportLandmarks(ExportLandmarksArgs),
+}
+
+/// Options of `host-sim export-landmarks`.
+#[derive(Debug, Clone, Args)]
+pub struct ExportLandmarksArgs {
+    /// The recording: `mrclam:<dir>` (e.g. `mrclam:dataset6/robot3`) or `landmarks:<file>`.
+    #[arg(long, short)]
+    pub dataset: DatasetSpec,
+    /// Robot whose log is written (MRCLAM; a `/robotN` in the dataset wins).
+    #[arg(long, default_value_t = 1)]
+    pub robot: u8,
+    /// The plain landmark log to write.
+    #[arg(long, short)]
+    pub out: PathBuf,
 }
 
 /// Topics and lidar mount of a ROS 2 bag (`rosbag:<bag>`, `export-rosbag`).
@@ -442,6 +459,11 @@ pub struct SimArgs {
     /// Record the runs into this MCAP file (topics under /ekf, /grid_slam, /grid_localize).
     #[arg(long)]
     pub mcap: Option<PathBuf>,
+    /// Drive the landmark field with a car (speed and steering, `[vehicle]` of the
+    /// settings) whose sensor sits `[scenario] car_sensor_ahead_m` ahead of the rear axle,
+    /// instead of the differential-drive robot.
+    #[arg(long)]
+    pub car: bool,
 }
 
 /// Options of `host-sim hil`.
@@ -635,6 +657,7 @@ impl From<&SimArgs> for SimOptions {
             grid_config: a.grid_config.clone(),
             global: (&a.global).into(),
             mcap: a.mcap.clone(),
+            car: a.car,
         }
     }
 }
@@ -699,6 +722,9 @@ pub fn run(cli: &Cli) -> Result<()> {
         }
         Some(Command::Texture(args)) => texture::texture_cli(&args.into(), cli.quiet),
         Some(Command::Detections(args)) => detections::detections_cli(&args.into(), cli.quiet),
+        Some(Command::ExportLandmarks(a)) => {
+            crate::commands::export_landmarks::export_cli(&a.dataset, a.robot, &a.out, cli.quiet)
+        }
         Some(Command::ExportRosbag(a)) => {
             crate::commands::rosbag::export_cli(&a.dataset, &a.out, &(&a.bag).into(), cli.quiet)
         }

@@ -393,6 +393,69 @@ pub fn mrclam_reader(data: &[u8]) {
     }
 }
 
+/// Fuzzes the plain landmark log reader (`landmarks:<file>`) and the EKF replay of what
+/// it reads: the input is written as `fuzz.txt` and read. No panic; an error names the
+/// file and a line; a log read has a motion record and a sighting, finite values in
+/// stamp order, and replays (known ids, the built-in `landmarks` settings) without
+/// panicking.
+pub fn landmark_log_reader(data: &[u8]) {
+    use host_sim::domain::AssociationMode;
+    use microslam::event::EventKind;
+    let dir = tempfile::tempdir().expect("temporary folder");
+    let path = dir.path().join("fuzz.txt");
+    std::fs::write(&path, data).expect("write fuzz file");
+    match host_sim::inputs::readers::landmarks::read(&path) {
+        Ok(recording) => {
+            let motion = |k: &EventKind<f64>| {
+                matches!(
+                    k,
+                    EventKind::Velocity { .. }
+                        | EventKind::Increment(_)
+                        | EventKind::Ackermann { .. }
+                )
+            };
+            assert!(
+                recording.events.iter().any(|e| motion(&e.kind)),
+                "no motion accepted"
+            );
+            assert!(
+                recording
+                    .events
+                    .iter()
+                    .any(|e| matches!(e.kind, EventKind::Sighting(_))),
+                "no sighting accepted"
+            );
+            assert!(
+                recording
+                    .events
+                    .windows(2)
+                    .all(|w| w[0].stamp <= w[1].stamp),
+                "events out of order"
+            );
+            let settings = host_sim::domain::config::Settings::load_for(
+                "landmarks",
+                None,
+                Some(AssociationMode::Known),
+            )
+            .expect("built-in landmarks settings");
+            let _ = host_sim::drivers::ekf::replay(
+                &recording,
+                &settings,
+                AssociationMode::Known,
+                host_sim::domain::Precision::F64,
+                None,
+            );
+        }
+        Err(e) => {
+            let text = e.to_string();
+            assert!(
+                text.contains("fuzz.txt:"),
+                "error without the file and line: {text}"
+            );
+        }
+    }
+}
+
 /// Fuzzes the npz reader: the input is written as THOR's `Encoders20.npz` and
 /// `Imu20.npz` (cut at the first `0xFF 0xFE` pair) and read as run 20: no panic.
 pub fn npz_reader(data: &[u8]) {
@@ -527,6 +590,7 @@ pub const TARGETS: &[(&str, FuzzCheck)] = &[
     ("carmen_reader", carmen_reader),
     ("relations_reader", relations_reader),
     ("mrclam_reader", mrclam_reader),
+    ("landmark_log_reader", landmark_log_reader),
     ("npz_reader", npz_reader),
     ("map_reader", map_reader),
     ("rosbag_reader", rosbag_reader),

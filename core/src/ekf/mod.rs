@@ -139,6 +139,7 @@ use deferred::DeferredMotion;
 use nalgebra::{ArrayStorage, SVector};
 
 // One concern a file; the filter's steps are `impl EkfSlam` blocks spread over them.
+mod ackermann; // prediction of a car: speed and steering through the bicycle model
 mod bierman; // the kernels of Bierman's scalar update
 mod calibration; // calibration slots: odometry scale factors, range bias
 mod config; // `EkfConfig`: noise, sensor mount, gate

@@ -97,7 +97,7 @@ impl<T: Real, const N: usize, const P: usize> EkfSlam<T, N, P> {
 
     /// `P' = F P Fᵀ + G Q Gᵀ` for a motion step, mean ← new pose; `wrt_scale` is
     /// ∂pose'/∂(s_v, s_ω) when the odometry scale factors are states.
-    fn apply_motion<const U: usize>(
+    pub(super) fn apply_motion<const U: usize>(
         &mut self,
         step: &MotionStep<T, U>,
         q: &[T; U],

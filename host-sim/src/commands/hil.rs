@@ -149,6 +149,20 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
         return run_cli(&options, quiet);
     }
     let mut recording = crate::inputs::readers::read(&args.dataset, args.robot)?;
+    if recording.events.iter().any(|e| {
+        matches!(
+            e.kind,
+            microslam::event::EventKind::Ackermann { .. }
+                | microslam::event::EventKind::Increment(_)
+        )
+    }) {
+        bail!(
+            "{}: the firmware's landmark session is driven by velocities here; a car's \
+             speed and steering (ackermann records) and odometry increments have no HIL \
+             run yet: replay it with `host-sim replay`",
+            recording.name
+        );
+    }
     let settings = if args.dataset_settings {
         let family = args.dataset.family();
         let tuned =

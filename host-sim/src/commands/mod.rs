@@ -3,6 +3,7 @@
 //! progress bars and prints the summaries.
 
 pub mod detections;
+pub mod export_landmarks;
 pub mod global;
 pub mod hil;
 pub mod hil_localizer;

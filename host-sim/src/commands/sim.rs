@@ -53,6 +53,10 @@ pub struct SimOptions {
     /// Record the runs into this MCAP file (topics under `/ekf`, `/grid_slam`,
     /// `/grid_localize`).
     pub mcap: Option<PathBuf>,
+    /// Drive the landmark field with the settings' car (`[vehicle]`, its sensor
+    /// `[scenario] car_sensor_ahead_m` ahead of the rear axle) instead of the
+    /// differential-drive robot.
+    pub car: bool,
 }
 
 impl Default for SimOptions {
@@ -70,6 +74,7 @@ impl Default for SimOptions {
             grid_config: None,
             global: GlobalOptions::default(),
             mcap: None,
+            car: false,
         }
     }
 }
@@ -79,8 +84,17 @@ impl Default for SimOptions {
 /// localizer in the lidar world into `out/grid/slam/` and `out/grid/localize/`.
 pub fn run_cli(args: &SimOptions, quiet: bool) -> Result<()> {
     let started = std::time::Instant::now();
-    let settings = Settings::load_for("sim", args.config.as_deref(), Some(args.association))?;
-    let recording = simulate(&settings, args.seed)?;
+    let mut settings = Settings::load_for("sim", args.config.as_deref(), Some(args.association))?;
+    let recording = if args.car {
+        let ahead = settings
+            .scenario
+            .as_ref()
+            .map_or(0.0, |s| s.car_sensor_ahead_m);
+        settings.sighting.mount = [ahead, 0.0, 0.0];
+        crate::inputs::sim::simulate_car(&settings, args.seed)?
+    } else {
+        simulate(&settings, args.seed)?
+    };
     let mut mcap = super::open_mcap(args.mcap.as_deref())?;
     run_and_report(
         &recording,

@@ -9,7 +9,7 @@ use microslam::ekf::EkfConfig;
 use microslam::ekf::health::HealthConfig;
 use microslam::gate::{ChiSquareGate, chi_square_quantile};
 use microslam::geometry::Pose2;
-use microslam::motion::{IncrementNoise, VelocityNoise};
+use microslam::motion::{Ackermann, AckermannNoise, IncrementNoise, VelocityNoise};
 use microslam::scalar::Real;
 use microslam::sensors::range_bearing::RangeBearingSensor;
 use serde::{Deserialize, Serialize};
@@ -19,6 +19,7 @@ use std::path::Path;
 const BUILTIN: &[(&str, &str)] = &[
     ("mrclam", include_str!("../../configs/mrclam.toml")),
     ("sim", include_str!("../../configs/sim.toml")),
+    ("landmarks", include_str!("../../configs/landmarks.toml")),
 ];
 
 /// All settings of a landmark-SLAM replay.
@@ -34,9 +35,44 @@ pub struct Settings {
     /// Robust weighting and recovery of the EKF's updates (`[recovery]`; off when absent).
     #[serde(default)]
     pub recovery: RecoverySettings,
+    /// Noise of odometry increments (`[increment]`; zero when absent: the recordings
+    /// with built-in settings report velocities).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub increment: Option<IncrementSettings>,
+    /// A car's wheelbase, steering limit and speed/steering noise (`[vehicle]`): needed by
+    /// `ackermann` records of a plain landmark log.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vehicle: Option<VehicleSettings>,
     /// Simulator scenario (only in `sim.toml`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scenario: Option<Scenario>,
+}
+
+/// Noise of odometry increments (`microslam::motion::IncrementNoise`; see
+/// `configs/landmarks.toml`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+#[allow(missing_docs)]
+pub struct IncrementSettings {
+    pub translation_std: f64,
+    pub translation_std_per_metre: f64,
+    pub rotation_std: f64,
+    pub rotation_std_per_radian: f64,
+    pub rotation_std_per_metre: f64,
+}
+
+/// A car (`microslam::motion::Ackermann`; see `configs/landmarks.toml`). The sensor's
+/// offset ahead of the rear axle is `[sighting] mount`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+#[allow(missing_docs)]
+pub struct VehicleSettings {
+    pub wheelbase_m: f64,
+    pub max_steering_rad: f64,
+    pub speed_std: f64,
+    pub speed_std_per_mps: f64,
+    pub steering_std: f64,
+    pub steering_std_per_mps: f64,
 }
 
 /// See `configs/mrclam.toml` for the meaning of each field.
@@ -387,6 +423,41 @@ impl Settings {
         if s.mount.iter().any(|v| !v.is_finite()) {
             bail!("sensor mount must be finite");
         }
+        if let Some(i) = &self.increment {
+            let figures = [
+                ("increment.translation_std", i.translation_std),
+                (
+                    "increment.translation_std_per_metre",
+                    i.translation_std_per_metre,
+                ),
+                ("increment.rotation_std", i.rotation_std),
+                (
+                    "increment.rotation_std_per_radian",
+                    i.rotation_std_per_radian,
+                ),
+                ("increment.rotation_std_per_metre", i.rotation_std_per_metre),
+            ];
+            if let Some((name, v)) = figures
+                .iter()
+                .find(|(_, v)| !(v.is_finite() && (0.0..=MAX_NOISE_STD).contains(v)))
+            {
+                bail!("{name} = {v}: must be finite, within 0 ..= {MAX_NOISE_STD}");
+            }
+        }
+        if let Some(bad) = self.vehicle::<f64>().and_then(|v| v.invalid_setting()) {
+            bail!("vehicle.{}: {}", Self::vehicle_key(bad.name), bad.rule);
+        }
+        if let Some(v) = &self.vehicle {
+            let figures = [
+                ("vehicle.speed_std", v.speed_std),
+                ("vehicle.speed_std_per_mps", v.speed_std_per_mps),
+                ("vehicle.steering_std", v.steering_std),
+                ("vehicle.steering_std_per_mps", v.steering_std_per_mps),
+            ];
+            if let Some((name, x)) = figures.iter().find(|(_, x)| *x > MAX_NOISE_STD) {
+                bail!("{name} = {x}: beyond any physical range (0 ..= {MAX_NOISE_STD})");
+            }
+        }
         // The filter can run in `f32` (`--precision f32`) and the firmware does: a value
         // valid as an `f64` may still be beyond `f32`'s range (≈ 3.4e38).
         let in_f32 = self.ekf_config::<f32>().invalid_setting();
@@ -415,19 +486,54 @@ impl Settings {
         }
     }
 
+    /// The settings file's key in `[vehicle]` of a field [`Ackermann::invalid_setting`]
+    /// names.
+    fn vehicle_key(field: &str) -> &str {
+        match field {
+            "wheelbase" => "wheelbase_m",
+            "max_steering" => "max_steering_rad",
+            other => other,
+        }
+    }
+
+    /// The car of `[vehicle]` in scalar `T`, `None` when the settings have none.
+    pub fn vehicle<T: Real>(&self) -> Option<Ackermann<T>> {
+        let v = self.vehicle.as_ref()?;
+        let l = T::lit;
+        Some(Ackermann {
+            wheelbase: l(v.wheelbase_m),
+            max_steering: l(v.max_steering_rad),
+            noise: AckermannNoise {
+                speed_std: l(v.speed_std),
+                speed_std_per_mps: l(v.speed_std_per_mps),
+                steering_std: l(v.steering_std),
+                steering_std_per_mps: l(v.steering_std_per_mps),
+            },
+        })
+    }
+
     /// The EKF configuration in scalar `T`.
     pub fn ekf_config<T: Real>(&self) -> EkfConfig<T> {
         let o = &self.odometry;
         let s = &self.sighting;
         let l = T::lit;
         EkfConfig {
-            // Increments are not used with velocity odometry; kept at zero noise.
-            increment_noise: IncrementNoise {
-                translation_std: T::ZERO,
-                translation_std_per_metre: T::ZERO,
-                rotation_std: T::ZERO,
-                rotation_std_per_radian: T::ZERO,
-                rotation_std_per_metre: T::ZERO,
+            // `[increment]`, zero noise without it (velocity odometry uses none).
+            increment_noise: match &self.increment {
+                Some(i) => IncrementNoise {
+                    translation_std: l(i.translation_std),
+                    translation_std_per_metre: l(i.translation_std_per_metre),
+                    rotation_std: l(i.rotation_std),
+                    rotation_std_per_radian: l(i.rotation_std_per_radian),
+                    rotation_std_per_metre: l(i.rotation_std_per_metre),
+                },
+                None => IncrementNoise {
+                    translation_std: T::ZERO,
+                    translation_std_per_metre: T::ZERO,
+                    rotation_std: T::ZERO,
+                    rotation_std_per_radian: T::ZERO,
+                    rotation_std_per_metre: T::ZERO,
+                },
             },
             velocity_noise: VelocityNoise {
                 linear_std: l(o.linear_std),
@@ -532,6 +638,9 @@ pub struct Scenario {
     pub wobble_period_s: f64,
     pub fov_deg: f64,
     pub max_range_m: f64,
+    /// `host-sim sim --car`: the car's sensor this far ahead of its rear axle, m.
+    #[serde(default)]
+    pub car_sensor_ahead_m: f64,
 }
 
 #[cfg(test)]

@@ -12,7 +12,7 @@ use microslam::ekf::health::Supervisor;
 use microslam::ekf::{EkfSlam, UpdateOutcome, factor_len, state_dim};
 use microslam::event::{EventKind, Identity};
 use microslam::geometry::Pose2;
-use microslam::motion::integrate_velocity;
+use microslam::motion::{Ackermann, compose_increment, integrate_velocity};
 use microslam::scalar::Real;
 use microslam::sensors::range_bearing::RangeBearing;
 use std::collections::BTreeMap;
@@ -178,7 +178,8 @@ pub fn replay_with(
             settings.odometry.max_speed_mps,
             settings.odometry.max_turn_rate_radps,
         );
-        let dr = s.spawn(move || dead_reckoning(recording, max_gap, limits));
+        let vehicle = settings.vehicle::<f64>();
+        let dr = s.spawn(move || dead_reckoning_with(recording, max_gap, limits, vehicle));
         let mut run = match precision {
             Precision::F32 => Replayer::<f32>::new(settings, mode, recording)?
                 .run(recording, progress, precision, on_samples),
@@ -200,6 +201,18 @@ pub fn dead_reckoning(
     max_gap: f64,
     limits: (f64, f64),
 ) -> Vec<(f64, Pose2<f64>)> {
+    dead_reckoning_with(recording, max_gap, limits, None)
+}
+
+/// [`dead_reckoning`] of a recording that may hold a car's samples
+/// ([`EventKind::Ackermann`], moved through `vehicle`; skipped without one) and odometry
+/// increments (composed at once; the motion held before them stops).
+pub fn dead_reckoning_with(
+    recording: &Recording,
+    max_gap: f64,
+    limits: (f64, f64),
+    vehicle: Option<Ackermann<f64>>,
+) -> Vec<(f64, Pose2<f64>)> {
     let (max_speed, max_turn) = limits;
     let mut out = Vec::with_capacity(recording.events.len());
     let mut pose = recording.initial_pose.unwrap_or(Pose2::IDENTITY);
@@ -213,12 +226,27 @@ pub fn dead_reckoning(
             }
         }
         last = Some(last.map_or(e.stamp, |p: f64| p.max(e.stamp)));
-        if let EventKind::Velocity { v, omega } = e.kind {
-            // As the filter does: an implausible sample is skipped, the last velocity held.
-            if v.abs() <= max_speed && omega.abs() <= max_turn {
-                velocity = (v, omega);
+        match e.kind {
+            EventKind::Velocity { v, omega } => {
+                // As the filter does: an implausible sample is skipped, the last velocity held.
+                if v.abs() <= max_speed && omega.abs() <= max_turn {
+                    velocity = (v, omega);
+                }
+                out.push((e.stamp, pose));
             }
-            out.push((e.stamp, pose));
+            EventKind::Ackermann { v, steering } => {
+                let omega = vehicle.and_then(|car| car.turn_rate(v, steering));
+                if let Some(omega) = omega.filter(|w| v.abs() <= max_speed && w.abs() <= max_turn) {
+                    velocity = (v, omega);
+                }
+                out.push((e.stamp, pose));
+            }
+            EventKind::Increment(inc) => {
+                pose = compose_increment(&pose, &inc).pose;
+                velocity = (0.0, 0.0);
+                out.push((e.stamp, pose));
+            }
+            _ => {}
         }
     }
     out
@@ -230,8 +258,21 @@ fn plausible(settings: &Settings, v: f64, omega: f64) -> bool {
         && omega.abs() <= settings.odometry.max_turn_rate_radps
 }
 
+/// The odometry sample in force between two events.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Held {
+    /// Velocities (through the velocity profile: held or interpolated).
+    Velocity,
+    /// A car's speed and steering angle.
+    Ackermann(f64, f64),
+    /// Nothing moves (before the first sample, after an increment).
+    Still,
+}
+
 struct Replayer<T: Real> {
     slam: Box<Slam<T>>,
+    /// The car of `[vehicle]`, for [`EventKind::Ackermann`] samples.
+    vehicle: Option<Ackermann<T>>,
     ids: KnownIds<MAX_LANDMARKS>,
     jcbb: Jcbb<T, MAX_BATCH, MAX_CANDIDATES>,
     supervisor: Supervisor<T>,
@@ -276,8 +317,21 @@ impl<T: Real> Replayer<T> {
         {
             bail!("range bias estimation refused: {e}");
         }
+        let vehicle = settings.vehicle::<T>();
+        if vehicle.is_none()
+            && recording
+                .events
+                .iter()
+                .any(|e| matches!(e.kind, EventKind::Ackermann { .. }))
+        {
+            bail!(
+                "{} has `ackermann` records (a car's speed and steering) but the settings have no [vehicle] (wheelbase_m, max_steering_rad and the noise: configs/landmarks.toml)",
+                recording.name
+            );
+        }
         Ok(Self {
             slam,
+            vehicle,
             ids: KnownIds::new(),
             jcbb: Jcbb::new(settings.association_config::<T>()),
             supervisor: Supervisor::new(settings.health_config::<T>()),
@@ -331,6 +385,7 @@ impl<T: Real> Replayer<T> {
         let window = self.settings.association.batch_window_s;
         let mut trajectory = Vec::with_capacity(events.len());
         let mut velocity = (0.0f64, 0.0f64);
+        let mut held = Held::Velocity;
         let mut last: Option<f64> = None;
         let mut sightings = 0;
         let mut steps = 0;
@@ -357,8 +412,17 @@ impl<T: Real> Replayer<T> {
             if let Some(prev) = last {
                 let dt = (t - prev).min(max_gap);
                 if dt > 0.0 {
-                    let (v, omega) = profile.over(velocity, held_stamp, prev, prev + dt);
-                    let r = self.slam.predict_velocity(lit(v), lit(omega), lit(dt));
+                    let r = match (held, &self.vehicle) {
+                        (Held::Velocity, _) => {
+                            let (v, omega) = profile.over(velocity, held_stamp, prev, prev + dt);
+                            self.slam.predict_velocity(lit(v), lit(omega), lit(dt))
+                        }
+                        (Held::Ackermann(v, steering), Some(car)) => {
+                            self.slam
+                                .predict_ackermann(car, lit(v), lit(steering), lit(dt))
+                        }
+                        _ => Ok(()),
+                    };
                     if r.is_err() {
                         self.counts.predictions_refused += 1;
                     }
@@ -366,12 +430,38 @@ impl<T: Real> Replayer<T> {
             }
             last = Some(last.map_or(t, |p: f64| p.max(t)));
             match event.kind {
-                EventKind::Velocity { v, omega } => {
-                    if plausible(&self.settings, v, omega) {
-                        velocity = (v, omega);
-                        held_stamp = t;
-                    } else {
-                        self.counts.odometry_refused += 1;
+                EventKind::Velocity { .. }
+                | EventKind::Ackermann { .. }
+                | EventKind::Increment(_) => {
+                    match event.kind {
+                        EventKind::Velocity { v, omega } => {
+                            if plausible(&self.settings, v, omega) {
+                                velocity = (v, omega);
+                                held_stamp = t;
+                                held = Held::Velocity;
+                            } else {
+                                self.counts.odometry_refused += 1;
+                            }
+                        }
+                        EventKind::Ackermann { v, steering } => {
+                            let turn = self
+                                .vehicle
+                                .and_then(|car| car.turn_rate(lit::<T>(v), lit(steering)));
+                            match turn {
+                                Some(omega) if plausible(&self.settings, v, omega.to_f64()) => {
+                                    held = Held::Ackermann(v, steering);
+                                }
+                                _ => self.counts.odometry_refused += 1,
+                            }
+                        }
+                        EventKind::Increment(inc) => {
+                            let inc = Pose2::new(lit(inc.x), lit(inc.y), lit(inc.theta));
+                            if self.slam.predict_increment(&inc).is_err() {
+                                self.counts.predictions_refused += 1;
+                            }
+                            held = Held::Still;
+                        }
+                        _ => {}
                     }
                     steps += 1;
                     trajectory.push(self.sample(t));

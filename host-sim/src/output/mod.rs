@@ -6,6 +6,7 @@ pub mod figure;
 pub mod floor_texture;
 pub mod grid_map;
 pub mod grid_picture;
+pub mod landmark_log;
 pub mod mcap;
 mod plots;
 pub mod rosbag;

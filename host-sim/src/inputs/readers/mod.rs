@@ -5,6 +5,7 @@
 
 pub mod bag_storage;
 pub mod carmen;
+pub mod landmarks;
 pub mod map;
 pub mod mrclam;
 pub mod reference;
@@ -33,6 +34,8 @@ pub enum DatasetSpec {
     /// A ROS 2 bag with `sensor_msgs/msg/LaserScan` and `nav_msgs/msg/Odometry` messages:
     /// an MCAP or SQLite 3 file, or a rosbag2 bag folder (`rosbag:<bag>`).
     Rosbag(String),
+    /// A plain landmark log ([`landmarks`], documented in docs/guide.md): a file.
+    Landmarks(String),
 }
 
 impl FromStr for DatasetSpec {
@@ -43,8 +46,9 @@ impl FromStr for DatasetSpec {
             Some(("carmen", file)) if !file.is_empty() => Ok(Self::Carmen(file.to_owned())),
             Some(("thor", dir)) if !dir.is_empty() => Ok(Self::Thor(dir.to_owned())),
             Some(("rosbag", file)) if !file.is_empty() => Ok(Self::Rosbag(file.to_owned())),
+            Some(("landmarks", file)) if !file.is_empty() => Ok(Self::Landmarks(file.to_owned())),
             _ => Err(format!(
-                "unknown dataset `{s}`: expected `mrclam:<dir>` (e.g. mrclam:dataset6, or mrclam:dataset6/robot3 for one robot), `carmen:<file>`, `thor:<dir>` or `rosbag:<bag>` (an .mcap or .db3 file, or a rosbag2 bag folder)"
+                "unknown dataset `{s}`: expected `mrclam:<dir>` (e.g. mrclam:dataset6, or mrclam:dataset6/robot3 for one robot), `carmen:<file>`, `thor:<dir>`, `rosbag:<bag>` (an .mcap or .db3 file, or a rosbag2 bag folder) or `landmarks:<file>` (a plain landmark log)"
             )),
         }
     }
@@ -58,6 +62,7 @@ impl DatasetSpec {
             Self::Carmen(_) => "carmen",
             Self::Thor(_) => "thor",
             Self::Rosbag(_) => "rosbag",
+            Self::Landmarks(_) => "landmarks",
         }
     }
 }
@@ -75,6 +80,7 @@ pub fn read(spec: &DatasetSpec, robot: u8) -> Result<Recording> {
                 &variants,
             ))
         }
+        DatasetSpec::Landmarks(file) => Ok(landmarks::read(std::path::Path::new(file))?),
         DatasetSpec::Carmen(_) | DatasetSpec::Thor(_) | DatasetSpec::Rosbag(_) => {
             bail!(
                 "`{}` datasets are replayed with `--filter grid-slam`",

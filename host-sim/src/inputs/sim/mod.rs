@@ -22,8 +22,35 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 
 pub mod lidar_world;
 
-/// Simulates the scenario of `settings` with noise seed `seed`.
+/// Simulates the scenario of `settings` with noise seed `seed`: the differential-drive
+/// robot, its odometry reporting velocities.
 pub fn simulate(settings: &Settings, seed: u64) -> Result<Recording> {
+    simulate_drive(settings, seed, None)
+}
+
+/// The same scenario driven by a car (`[vehicle]` of `settings`, required): the same
+/// landmark field (the same seed places the same landmarks) and the same path, the car's
+/// rear-axle centre on it; its odometry reports the speed and the steering angle
+/// `φ = atan(ω L / v)` ([`EventKind::Ackermann`]) with the `[vehicle]` noise, and its
+/// sensor sits at `[sighting] mount` (ahead of the rear axle for a forward sensor).
+pub fn simulate_car(settings: &Settings, seed: u64) -> Result<Recording> {
+    let car = settings
+        .vehicle::<f64>()
+        .context("the simulated car needs a [vehicle] section")?;
+    if let Some(bad) = car.invalid_setting() {
+        bail!("[vehicle]: {bad}");
+    }
+    let mut run = simulate_drive(settings, seed, Some(car))?;
+    run.name = format!("sim/car/seed{seed}");
+    Ok(run)
+}
+
+/// [`simulate`] for the differential-drive robot (`car` `None`) or a car.
+fn simulate_drive(
+    settings: &Settings,
+    seed: u64,
+    car: Option<microslam::motion::Ackermann<f64>>,
+) -> Result<Recording> {
     let sc = settings
         .scenario
         .as_ref()
@@ -76,19 +103,37 @@ pub fn simulate(settings: &Settings, seed: u64) -> Result<Recording> {
         let v = sc.speed_mps;
         let omega = v / sc.loop_radius_m
             + sc.wobble_radps * (std::f64::consts::TAU * t / sc.wobble_period_s).sin();
-        let sv = o.linear_std + o.linear_std_per_mps * v.abs();
-        let sw =
-            o.angular_std + o.angular_std_per_radps * omega.abs() + o.angular_std_per_mps * v.abs();
         let scale = (1.0 / dt).sqrt();
-        let v_meas = v + sv * scale * unit.sample(&mut rng);
-        let w_meas = omega + sw * scale * unit.sample(&mut rng);
-        events.push(Event::new(
-            t,
-            EventKind::Velocity {
-                v: v_meas,
-                omega: w_meas,
-            },
-        ));
+        if let Some(car) = &car {
+            // The steering that turns the rear axle at ω, and what the car reports.
+            let steering = (omega * car.wheelbase / v).atan();
+            let n = &car.noise;
+            let sv = n.speed_std + n.speed_std_per_mps * v.abs();
+            let sp = n.steering_std + n.steering_std_per_mps * v.abs();
+            let v_meas = v + sv * scale * unit.sample(&mut rng);
+            let steering_meas = steering + sp * scale * unit.sample(&mut rng);
+            events.push(Event::new(
+                t,
+                EventKind::Ackermann {
+                    v: v_meas,
+                    steering: steering_meas,
+                },
+            ));
+        } else {
+            let sv = o.linear_std + o.linear_std_per_mps * v.abs();
+            let sw = o.angular_std
+                + o.angular_std_per_radps * omega.abs()
+                + o.angular_std_per_mps * v.abs();
+            let v_meas = v + sv * scale * unit.sample(&mut rng);
+            let w_meas = omega + sw * scale * unit.sample(&mut rng);
+            events.push(Event::new(
+                t,
+                EventKind::Velocity {
+                    v: v_meas,
+                    omega: w_meas,
+                },
+            ));
+        }
         if k % frame_every == 0 {
             for l in &landmarks {
                 let landmark = Vector2::new(l.position[0], l.position[1]);

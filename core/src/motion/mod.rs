@@ -16,6 +16,9 @@
 //! The noise of each form is configuration ([`IncrementNoise`], [`VelocityNoise`]); nothing
 //! here hard-codes a covariance.
 //!
+//! A car reports neither: its speed and steering angle drive the bicycle model of
+//! [`Ackermann`] (module [`ackermann`]), which moves along the same exact arc.
+//!
 //! # References
 //!
 //! - El Masri El Chaarani, A., Ashraf, J., and Abu Hara, R. (n.d.). *EKF-SLAM with
@@ -28,6 +31,9 @@ use crate::error::InvalidSetting;
 use crate::geometry::{Pose2, wrap_near};
 use crate::scalar::Real;
 use nalgebra::{Matrix2, Matrix3, Matrix3x2};
+
+pub mod ackermann;
+pub use ackermann::{Ackermann, AckermannNoise};
 
 /// A pose increment `(dx, dy, dθ)` expressed in the previous robot frame.
 pub type OdometryIncrement<T> = Pose2<T>;

@@ -1,0 +1,3 @@
+#![no_main]
+//! See `microslam_replay_tests::fuzzing::landmark_log_reader` for what is checked.
+libfuzzer_sys::fuzz_target!(|data: &[u8]| microslam_replay_tests::fuzzing::landmark_log_reader(data));

@@ -1,0 +1,98 @@
+//! `replay --dataset landmarks:<file>` from the command line: a good log is replayed and
+//! scored, a log it cannot use fails naming the file and line, never exiting 0.
+
+mod common;
+
+use common::{host_sim, succeeds};
+use std::path::Path;
+
+/// A short car run among three posts, with ground truth and the posts' positions.
+const CAR: &str = "# a car\n\
+    ackermann 0.0 2.0 0.0\n\
+    truth 0.0 0 0 0\n\
+    sighting 0.0 5.0 0.2 1\n\
+    sighting 0.0 6.0 -0.3 2\n\
+    ackermann 1.0 2.0 0.0\n\
+    truth 1.0 2 0 0\n\
+    sighting 1.0 3.1 0.33 1\n\
+    sighting 1.0 4.2 -0.45 2\n\
+    ackermann 2.0 2.0 0.0\n\
+    truth 2.0 4 0 0\n\
+    landmark 1 4.9 1.0\n\
+    landmark 2 5.7 -1.8\n";
+
+fn replay(dir: &Path, text: &str) -> std::process::Output {
+    let log = dir.join("run.txt");
+    std::fs::write(&log, text).unwrap();
+    host_sim()
+        .args(["replay", "--quiet", "--no-plots", "--dataset"])
+        .arg(format!("landmarks:{}", log.display()))
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .expect("host-sim starts")
+}
+
+#[test]
+fn a_plain_log_is_replayed_and_scored() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = replay(dir.path(), CAR);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let metrics: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("out/metrics.json")).unwrap(),
+    )
+    .unwrap();
+    assert!(metrics["ate_rmse_m"]["se2"].is_number(), "{metrics}");
+    assert!(metrics["landmark_rmse_m"]["se2"].is_number(), "{metrics}");
+    assert_eq!(metrics["landmarks_created"], 2);
+}
+
+#[test]
+fn an_unusable_log_fails_naming_the_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    for (text, expected) in [
+        ("sighting 1 2 0.1 7\n", "run.txt:1: no motion record"),
+        ("velocity 1 0.5 0\n", "run.txt:1: no sighting to use"),
+        (
+            "velocity 1 0.5 0\nsighting 1 2 0.1 7\nodometry 2 1 1\n",
+            "run.txt:3: unknown record type `odometry`",
+        ),
+        (
+            "velocity 1 0.5 0\nsighting 1 -2 0.1 7\n",
+            "run.txt:2: sighting field 3 (range): -2 m is not a positive range",
+        ),
+    ] {
+        let out = replay(dir.path(), text);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{text:?} exited 0");
+        assert!(err.contains(expected), "{text:?}: {err}");
+    }
+}
+
+#[test]
+fn export_landmarks_writes_a_log_that_reads_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("run.txt");
+    std::fs::write(&log, CAR).unwrap();
+    let copy = dir.path().join("copy.txt");
+    succeeds(
+        host_sim()
+            .args(["export-landmarks", "--quiet", "--dataset"])
+            .arg(format!("landmarks:{}", log.display()))
+            .arg("--out")
+            .arg(&copy),
+    );
+    let text = std::fs::read_to_string(&copy).unwrap();
+    assert_eq!(
+        text.lines().filter(|l| l.starts_with("ackermann")).count(),
+        3
+    );
+    assert_eq!(
+        text.lines().filter(|l| l.starts_with("landmark")).count(),
+        2
+    );
+}
