@@ -673,7 +673,7 @@ fn building_slam_firmware_in_qemu_equals_host_bit_for_bit_on_intel() {
         microslam::geometry::Pose2::IDENTITY,
         EstimatorKind::Grid,
     );
-    // The run, then SaveMap and the map image read back chunk by chunk.
+    // The run, then SaveMap, the map image read back chunk by chunk, and a status.
     let host = host_slam_replies(&messages, true).expect("host reference");
     let bytes = host.bytes.clone();
     let expected = host.replies;
@@ -681,7 +681,7 @@ fn building_slam_firmware_in_qemu_equals_host_bit_for_bit_on_intel() {
     let map = microslam::grid::MapImage::parse(&image).expect("a valid map image");
     assert_eq!(
         expected.len(),
-        messages.len() + 1 + image.len().div_ceil(microslam::wire::MAP_CHUNK_BYTES),
+        messages.len() + 1 + image.len().div_ceil(microslam::wire::MAP_CHUNK_BYTES) + 1,
         "one reply per message"
     );
     let applied = last_chunks

@@ -17,7 +17,8 @@ use super::hil::encode_all;
 /// What the host reference computed.
 pub struct HostSlam {
     /// The bytes to send the device: the messages given, then (with `save_map`)
-    /// [`Command::SaveMap`] and a [`Command::ReadMap`] for every chunk of the image.
+    /// [`Command::SaveMap`], a [`Command::ReadMap`] for every chunk of the image and a
+    /// closing [`Command::ReportStatus`].
     pub bytes: Vec<u8>,
     /// Its replies, one per message.
     pub replies: Vec<ToHost>,
@@ -112,7 +113,16 @@ pub fn host_slam_session(bytes: Vec<u8>, save_map_seq: Option<u32>) -> Result<Ho
                 let read = encode_all(&reads);
                 replies.extend(read.iter().filter_map(|&b| session.receive(b)));
                 bytes.extend_from_slice(&read);
+                seq = seq.wrapping_add(reads.len() as u32);
             }
+            // The stream ends with a status, as every stream does (the device's stack
+            // peak, now with the map's drawing in it).
+            let status = encode_all(&[ToDevice::Command {
+                seq,
+                command: Command::ReportStatus,
+            }]);
+            replies.extend(status.iter().filter_map(|&b| session.receive(b)));
+            bytes.extend_from_slice(&status);
         }
     }
     let map_image = map_from_replies(&replies)?;
