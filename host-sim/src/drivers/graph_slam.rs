@@ -15,7 +15,7 @@ use anyhow::{Result, anyhow, bail};
 use microslam::geometry::Pose2;
 use microslam::grid::{OccupancyGrid, occupancy_bytes};
 use microslam::profile;
-use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+use microslam::sensors::lidar::LidarScan;
 use microslam::slam::graph::scratch_len;
 use microslam::slam::keyframes::{KeyframeStorage, KeyframeStore, StoreError};
 use microslam::slam::{GraphSlam, GraphSlamConfig};
@@ -231,12 +231,7 @@ pub fn draw_map<const N: usize, const BITMAP: usize, const P: usize, S: Keyframe
         Some([x, y]) => OccupancyGrid::<N, N, BITMAP>::new(c.resolution, x, y, c.log_odds),
         None => OccupancyGrid::<N, N, BITMAP>::centred(c.resolution, c.log_odds),
     });
-    let decimation = store.decimation();
-    let lidar = store.lidar();
-    let geometry = LidarGeometry {
-        angle_increment: lidar.angle_increment * decimation as f32,
-        ..lidar
-    };
+    let geometry = store.beam_geometry();
     let mut ranges = vec![0.0f32; store.beams()];
     for k in 0..store.len() {
         let Some(pose) = slam.graph().pose(k as usize) else {

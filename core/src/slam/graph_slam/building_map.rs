@@ -101,15 +101,6 @@ fn extent(
     })
 }
 
-/// The geometry of a stored keyframe's beams: every `decimation`-th of the lidar's.
-fn keyframe_geometry<S: KeyframeStorage>(store: &KeyframeStore<S>) -> LidarGeometry {
-    let lidar = store.lidar();
-    LidarGeometry {
-        angle_increment: lidar.angle_increment * store.decimation() as f32,
-        ..lidar
-    }
-}
-
 /// Points a stored scan is drawn from between two neighbouring beams that hit one
 /// surface, per gap: a keyframe keeps every `decimation`-th beam, which leaves a wall
 /// seen at 10 m as dots 0.35 m apart (2° apart); the points in between, at ranges
@@ -198,7 +189,7 @@ impl<
         // from the sensor's place on the robot, and a cell's rounding either way.
         let reach =
             lidar.max_range + libm::hypotf(mount.x, mount.y) + 2.0 * self.config.grid.resolution;
-        let geometry = keyframe_geometry(store);
+        let geometry = store.beam_geometry();
         let beams = store.beams().min(B);
         let mut ranges = [0.0f32; B];
         let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
@@ -286,7 +277,7 @@ impl<
             out.write(layout.occupied + bitmap, pad)?;
             out.write(layout.free + bitmap, pad)?;
         }
-        let scan_geometry = keyframe_geometry(store);
+        let scan_geometry = store.beam_geometry();
         let beams = store.beams().min(B);
         let tile_m = NEAR as f32 * geometry.resolution;
         let (tiles_x, tiles_y) = (geometry.width / NEAR, geometry.height / NEAR);

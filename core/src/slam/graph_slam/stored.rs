@@ -2,7 +2,7 @@
 
 use super::SlamError;
 use crate::pf::ScanPoints;
-use crate::sensors::lidar::{LidarGeometry, LidarScan};
+use crate::sensors::lidar::LidarScan;
 use crate::slam::keyframes::{KeyframeStorage, KeyframeStore};
 
 /// Loads keyframe `index` from `store` into `points` (robot-frame end points of its
@@ -18,11 +18,7 @@ pub(super) fn load_stored<S: KeyframeStorage, const B: usize>(
     store.read(u32::try_from(index).unwrap_or(u32::MAX), read)?;
     // The stored beams are every `decimation`-th of the scan: the same directions as a
     // scan of them alone with the increment times the decimation.
-    let lidar = store.lidar();
-    let geometry = LidarGeometry {
-        angle_increment: lidar.angle_increment * store.decimation() as f32,
-        ..lidar
-    };
+    let geometry = store.beam_geometry();
     points.load(
         &LidarScan::new(ranges.get(..beams).unwrap_or(&[]), geometry),
         1,

@@ -511,6 +511,17 @@ impl<S: KeyframeStorage> KeyframeStore<S> {
         self.header.lidar
     }
 
+    /// The geometry of the stored ranges alone ([`KeyframeStore::read`]): the lidar's,
+    /// with its beams `decimation` times as far apart (the kept beams point where a scan
+    /// of them alone would).
+    pub fn beam_geometry(&self) -> LidarGeometry {
+        let lidar = self.header.lidar;
+        LidarGeometry {
+            angle_increment: lidar.angle_increment * self.decimation() as f32,
+            ..lidar
+        }
+    }
+
     /// Every how many beams of a scan one is kept.
     pub fn decimation(&self) -> usize {
         usize::from(self.header.decimation)

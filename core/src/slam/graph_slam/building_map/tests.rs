@@ -93,11 +93,7 @@ fn tiles_match_one_grid() {
     let mut grid: Box<OccupancyGrid<512, 384, { occupancy_bytes(512, 384) }>> = Box::new(
         OccupancyGrid::new(c.resolution, g.origin_x, g.origin_y, c.log_odds),
     );
-    let lidar = store.lidar();
-    let geometry = LidarGeometry {
-        angle_increment: lidar.angle_increment * store.decimation() as f32,
-        ..lidar
-    };
+    let geometry = store.beam_geometry();
     let mut ranges = vec![0.0f32; store.beams()];
     for (k, pose) in slam.graph().poses().iter().enumerate() {
         store.read(k as u32, &mut ranges).unwrap();
