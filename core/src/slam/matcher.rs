@@ -536,18 +536,21 @@ impl<const BYTES: usize, const LEVELS: usize> Search<'_, BYTES, LEVELS> {
 
     /// Score of the end cells moved by `(dx, dy)` on `bits` (level or base).
     fn score(&mut self, bits: &[u8], dx: i32, dy: i32) -> u32 {
-        let w = self.geometry.width as i32;
-        let h = self.geometry.height as i32;
+        let w = self.geometry.width as u32;
+        let h = self.geometry.height as u32;
         let bpr = (w as usize).div_ceil(8);
         let mut hits = 0u32;
-        for &(cx, cy) in self.cells.iter().take(self.n) {
-            let (x, y) = (cx.saturating_add(dx), cy.saturating_add(dy));
-            if (0..w).contains(&x) && (0..h).contains(&y) {
+        // Offsets are within the window (`u16` cells) and end cells saturate at `i32`'s
+        // ends ([`floor_i32`]): a sum that wraps lands near 2³¹, never in the grid, and
+        // one unsigned comparison per axis tests both of the grid's edges.
+        for &(cx, cy) in self.cells.get(..self.n).unwrap_or(&[]) {
+            let (x, y) = (cx.wrapping_add(dx) as u32, cy.wrapping_add(dy) as u32);
+            if x < w && y < h {
                 let byte = bits
-                    .get(y as usize * bpr + x as usize / 8)
+                    .get(y as usize * bpr + (x >> 3) as usize)
                     .copied()
                     .unwrap_or(0);
-                hits += u32::from(byte >> (x % 8) & 1);
+                hits += u32::from(byte >> (x & 7) & 1);
             }
         }
         self.work = self.work.saturating_add(self.n as u32);
