@@ -167,6 +167,10 @@ awk '/^ekf /{
         printf "%-40s %s\n", pre "_max_step_instructions", g["max"];
         printf "%-40s %s\n", pre "_max_closure_instructions", g["max_closure"];
         printf "%-40s %s\n", pre "_max_keyframe_instructions", g["max_keyframe"];
+        printf "%-40s %s\n", pre "_max_plain_instructions", g["max_plain"];
+        printf "%-40s %s\n", pre "_max_old_map_instructions", g["max_old_map"];
+        printf "%-40s %s\n", pre "_max_match_instructions", g["max_match"];
+        printf "%-40s %s\n", pre "_max_solve_instructions", g["max_solve"];
         printf "%-40s %s\n", pre "_steps_over_10m", g["over_10m"];
     }
     /^slam_bytes=/{ split($0, kv, "="); printf "%-40s %s\n", "slam_estimator_bytes", kv[2] }

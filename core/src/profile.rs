@@ -108,8 +108,8 @@ pub const SLAM_NEAR: usize = 128;
 /// Edge of its far occupancy bitmap, cells (512 × 512 bits = 32 KB, 25.6 m square): what
 /// the robot saw around it beyond the near window, and what the filter scores on.
 pub const SLAM_FAR: usize = 512;
-/// Keyframes its pose graph holds (one each 0.5 m or 0.3 rad of travel: 320 m of a
-/// robot's path; the Intel lab's raw log makes 600).
+/// Keyframes its pose graph holds (one each 0.65 m or 0.35 rad of travel: about 400 m of
+/// a robot's path; the Intel lab's raw log makes 490, MIT CSAIL's 615).
 pub const SLAM_NODES: usize = 640;
 /// Loop edges its pose graph holds.
 pub const SLAM_LOOPS: usize = 192;

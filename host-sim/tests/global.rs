@@ -202,13 +202,13 @@ fn intel_device_map_image_localizes_and_relocalizes() {
     let relation = m["relations"]["trans_mean_m"]
         .as_f64()
         .expect("relation error");
-    // Measured: 0.0254 m over 1 030 relations (the bar: 0.035 m).
+    // Measured: 0.0256 m over 1 030 relations (the bar: 0.035 m).
     assert_eq!(m["relations"]["used"], 1030);
     assert!(relation < 0.027, "{relation}");
 
     // Trial seed 1 with the device's search budget on the image as the firmware reads
-    // it (the free bitmap included). Measured: 19 of 20, none on a wrong pose (trial
-    // seeds 1-12: 228 of 240, docs/results-grid.md).
+    // it (the free bitmap included). Measured: 20 of 20, none on a wrong pose (trial
+    // seeds 1-12: 232 of 240, one on a wrong pose, docs/results-grid.md).
     let g = global(
         &dir.path().join("global"),
         &map,
@@ -221,6 +221,6 @@ fn intel_device_map_image_localizes_and_relocalizes() {
             "5",
         ],
     );
-    assert_eq!(g["successes"], 19, "{:?}", g["scans_to_converge"]);
+    assert_eq!(g["successes"], 20, "{:?}", g["scans_to_converge"]);
     assert_eq!(g["tracking_a_wrong_pose"], 0);
 }

@@ -107,6 +107,13 @@ impl<const W: usize, const H: usize, const BYTES: usize> OccupancyBitmap<W, H, B
         &self.bits
     }
 
+    /// The bits to change in place (row `y`'s `⌈W / 8⌉` bytes from `y · ⌈W / 8⌉`, cell
+    /// `x` in bit `x % 8` of byte `x / 8`).
+    #[inline]
+    pub(crate) fn bits_mut(&mut self) -> &mut [u8] {
+        &mut self.bits
+    }
+
     /// A read-only view for scoring scans (bits only, see
     /// [`GridView::from_occupancy_bits`]).
     pub fn view(&self) -> GridView<'_> {

@@ -5,6 +5,18 @@ use super::correlation::{
     MAX_SHIFTS, ScanPoint, ShiftScore, WEIGHT_ONE, best_shift_with_prior, search_window,
 };
 
+/// A heading search before the particles are scored (`slam::score_scan`): offsets up to
+/// `span` radians either way in steps of `step` ([`ParticleFilter::search_heading`]),
+/// kept when the best scores more than `1 + min_gain` times no offset.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct HeadingSearch {
+    pub(crate) span: f32,
+    pub(crate) step: f32,
+    /// Every `coarse`-th offset first, then the ones around the best.
+    pub(crate) coarse: u8,
+    pub(crate) min_gain: f32,
+}
+
 /// A shift search: [`search_window`] or one of its variants.
 pub(crate) type ShiftSearch =
     fn(&GridView<'_>, &Pose2<f32>, &[ScanPoint], u8, &mut [u32; MAX_SHIFTS]) -> ShiftScore;
@@ -172,10 +184,11 @@ impl<const P: usize> ParticleFilter<P> {
     }
 
     /// Which heading offset makes the scan fit the map best around `around`, coarse to
-    /// fine: each offset `2j · step` with `|2j · step| ≤ span` (tried 0, −2 step,
-    /// +2 step, …) is scored by the shift search at `around` turned by it, then the two
-    /// offsets one `step` either side of the best of them (within `span`). Half the
-    /// shift searches of trying every `step`, and the answer on the same lattice.
+    /// fine: each offset `c·j · step` with `|c·j · step| ≤ span` (`c` = `heading.coarse`, at
+    /// least 1; tried 0, −c step, +c step, …) is scored by the shift search at `around`
+    /// turned by it, then the `c − 1` offsets either side of the best of them (within
+    /// `span`). With `c` = 2 half the shift searches of trying every `step`, the answer
+    /// on the same lattice; with `c` = 1 every `step`.
     /// Returns the offset whose best shift scores highest and that score, and the score
     /// of no offset; `(0, s, s)` when none scores more than no offset. For a robot that
     /// turns faster than its odometry follows: the particles' heading noise covers the
@@ -186,9 +199,11 @@ impl<const P: usize> ParticleFilter<P> {
         points: &[ScanPoint],
         half_width: u8,
         search: ShiftSearch,
-        span: f32,
-        step: f32,
+        heading: &HeadingSearch,
     ) -> (f32, u32, u32) {
+        let HeadingSearch {
+            span, step, coarse, ..
+        } = *heading;
         let mut scores = [0u32; MAX_SHIFTS];
         let none = search(map, around, points, half_width, &mut scores).score;
         if !(span.is_finite() && step.is_finite() && step > 0.0) {
@@ -204,14 +219,19 @@ impl<const P: usize> ParticleFilter<P> {
             }
         };
         let steps = libm::floorf(span / step) as i32;
-        for k in 1..=2 * (steps / 2) {
+        // Every `coarse`-th offset, then those between it and its neighbours around the
+        // best.
+        let coarse = i32::from(coarse.max(1));
+        for k in 1..=2 * (steps / coarse) {
             let j = if k % 2 == 1 { -(k + 1) / 2 } else { k / 2 };
-            score(2 * j, &mut best);
+            score(coarse * j, &mut best);
         }
-        let coarse = best.0;
-        for j in [coarse - 1, coarse + 1] {
-            if j.abs() <= steps {
-                score(j, &mut best);
+        let centre = best.0;
+        for d in 1..coarse {
+            for j in [centre - d, centre + d] {
+                if j.abs() <= steps {
+                    score(j, &mut best);
+                }
             }
         }
         (best.0 as f32 * step, best.1, none)

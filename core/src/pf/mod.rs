@@ -37,6 +37,7 @@ mod slam;
 
 pub use correlation::{ScanPoint, ScanPoints, ShiftScore};
 pub use estimator::{GridEstimator, SavedMap};
+pub(crate) use filter::HeadingSearch;
 pub use filter::{ParticleFilter, UpdateReport};
 pub use localizer::{
     GridLocalizer, LocalizerState, LocalizerStatus, LostDetection, MAX_HYPOTHESES,
@@ -45,9 +46,7 @@ pub use localizer::{
 pub use prediction::MotionNoise;
 pub use resampling::Resampling;
 pub use slam::{GridSlam, StepReport};
-pub(crate) use slam::{
-    HeadingSearch, score_scan as score_slam_scan, shift_search as slam_shift_search,
-};
+pub(crate) use slam::{score_scan as score_slam_scan, shift_search as slam_shift_search};
 
 use crate::error::InvalidSetting;
 use crate::grid::LogOdds;

@@ -9,7 +9,7 @@
 use super::correlation::{
     ScanPoints, search_window, search_window_sparse, search_window_sparse_rows,
 };
-use super::filter::ShiftSearch;
+use super::filter::{HeadingSearch, ShiftSearch};
 use super::{GridPfConfig, ParticleFilter, PfError};
 use crate::geometry::Pose2;
 use crate::grid::{GridView, OccupancyGrid, ScanIntegration};
@@ -235,16 +235,6 @@ impl<'g, const W: usize, const H: usize, const P: usize, const B: usize, const B
     }
 }
 
-/// A heading search before the particles are scored ([`score_scan`]): offsets up to
-/// `span` radians either way in steps of `step`, kept when the best scores more than
-/// `1 + min_gain` times no offset.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct HeadingSearch {
-    pub(crate) span: f32,
-    pub(crate) step: f32,
-    pub(crate) min_gain: f32,
-}
-
 /// The scoring half of a SLAM step: loads `scan` into `points` and, with a map to score
 /// on (`None` for the first scan, which only starts the map), scores and moves the
 /// particles ([`ParticleFilter::update_with_prior`] with the configured shift prior),
@@ -277,8 +267,7 @@ pub(crate) fn score_scan<const P: usize, const B: usize>(
                 points.as_slice(),
                 config.filter.shift_window_cells,
                 search,
-                h.span,
-                h.step,
+                &h,
             );
             if delta != 0.0 && best as f32 > (1.0 + h.min_gain) * none as f32 {
                 filter.turn(delta)?;

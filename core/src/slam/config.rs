@@ -49,6 +49,14 @@ pub struct LoopClosureConfig {
     pub submap_radius_m: f32,
     /// The window searched around the new keyframe's graph pose.
     pub window: MatchWindow,
+    /// Old keyframes a scan draws into the map a closure matches against, at most (> 0):
+    /// the old map is drawn over the scans after the keyframe, so that no scan pays for
+    /// drawing every old keyframe near a place visited many times.
+    pub old_keyframes_per_scan: u16,
+    /// Each old end point is widened to the cells this many cells around it (0: none; 1:
+    /// 3 × 3) before the match: a keyframe keeps a thinned scan, so its walls are dotted
+    /// lines that a new scan's end points fall between.
+    pub old_map_dilation_cells: u8,
     /// End-point look-ups of the match a scan does at most (it stops at the first block
     /// of 16 × 16 translations past this), > 0; the rest waits for the next scans, so that no
     /// scan pays for a whole match. `u32::MAX`: the whole match at the keyframe's scan.
@@ -78,6 +86,9 @@ pub struct HeadingSearchConfig {
     pub max_span_rad: f32,
     /// Step between offsets, radians (> 0).
     pub step_rad: f32,
+    /// Every this many steps first, then the steps between around the best (≥ 1; 1:
+    /// every step, 2: half the work, the answer on the same lattice).
+    pub coarse_steps: u8,
     /// An offset is taken when its best shift scores more than `1 + min_gain` times no
     /// offset's.
     pub min_gain: f32,
@@ -116,17 +127,21 @@ pub struct GraphSlamConfig {
 
 impl GraphSlamConfig {
     /// The settings for the 32-particle filter of a microcontroller
-    /// ([`GridPfConfig::MICROCONTROLLER`]) with a keyframe every 0.5 m or 0.3 rad, the
-    /// loop closure of `docs/results-grid.md`, and a heading search at every scan of
-    /// ±0.1 rad plus the odometry's turn (at most ±0.25 rad, coarse to fine), taken when it scores 25 %
-    /// better: the MIT CSAIL log's odometry is off by 0.02 rad a scan on straight runs and
-    /// by up to 0.3 rad in its fast turns, which 32 particles' heading noise does not
-    /// cover. Chosen on the Intel and MIT CSAIL logs together (`docs/results-grid.md`).
+    /// ([`GridPfConfig::MICROCONTROLLER`]) with a keyframe every 0.65 m or 0.35 rad (640
+    /// keyframes hold about 400 m of driving), the loop closure of `docs/results-grid.md`
+    /// spread over the scans (32 old keyframes drawn, 200 000 end-point look-ups of the
+    /// match, or one solve of at most 64 iterations a step, a scan: every scan of the
+    /// board profile under 10 M instructions), the old map widened by a cell, and a
+    /// heading search at every scan of ±0.1 rad plus the odometry's turn (at most
+    /// ±0.35 rad, every 0.01 rad), taken when it scores 25 % better: the MIT CSAIL log's
+    /// odometry is off by 0.02 rad a scan on straight runs and by up to 0.3 rad in its
+    /// fast turns, which 32 particles' heading noise does not cover. Chosen on the Intel
+    /// and MIT CSAIL logs together (`docs/results-grid.md`).
     pub const MICROCONTROLLER: Self = Self {
         grid: GridPfConfig::MICROCONTROLLER,
         keyframes: KeyframeSpacing {
-            distance_m: 0.5,
-            turn_rad: 0.3,
+            distance_m: 0.65,
+            turn_rad: 0.35,
         },
         chain: ChainNoise {
             position_std_m: 0.005,
@@ -147,10 +162,15 @@ impl GraphSlamConfig {
                 distinct_cells: 10,
                 max_runner_up: 0.85,
             },
-            work_per_scan: 800_000,
+            old_keyframes_per_scan: 32,
+            old_map_dilation_cells: 1,
+            work_per_scan: 200_000,
             position_std_floor_m: 0.05,
             heading_std_floor_rad: 0.01,
-            solver: SolverSettings::DEFAULT,
+            solver: SolverSettings {
+                max_iterations: 64,
+                ..SolverSettings::DEFAULT
+            },
         },
         estimate_radius: EstimateRadius {
             position_m: 0.1,
@@ -159,8 +179,9 @@ impl GraphSlamConfig {
         heading_search: HeadingSearchConfig {
             span_rad: 0.1,
             span_per_radian: 1.0,
-            max_span_rad: 0.25,
+            max_span_rad: 0.35,
             step_rad: 0.01,
+            coarse_steps: 1,
             min_gain: 0.25,
         },
     };
@@ -188,6 +209,10 @@ impl GraphSlamConfig {
                 InvalidSetting::non_negative("submap_radius_m", l.submap_radius_m),
                 InvalidSetting::non_negative("window_half_angle_rad", w.half_angle),
                 InvalidSetting::positive("window_angle_step_rad", w.angle_step),
+                InvalidSetting::positive(
+                    "old_keyframes_per_scan",
+                    f32::from(l.old_keyframes_per_scan),
+                ),
                 InvalidSetting::positive("work_per_scan", l.work_per_scan as f32),
                 InvalidSetting::fraction("min_hit_fraction", w.min_hit_fraction),
                 InvalidSetting::fraction("max_runner_up", w.max_runner_up),
@@ -208,6 +233,10 @@ impl GraphSlamConfig {
                     self.heading_search.max_span_rad,
                 ),
                 InvalidSetting::positive("heading_step_rad", self.heading_search.step_rad),
+                InvalidSetting::positive(
+                    "heading_coarse_steps",
+                    f32::from(self.heading_search.coarse_steps),
+                ),
                 InvalidSetting::non_negative("heading_min_gain", self.heading_search.min_gain),
             ])
             .or_else(|| l.solver.invalid_setting())

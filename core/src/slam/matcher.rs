@@ -438,6 +438,35 @@ fn spread(bits: &mut [u8], width: usize, shift: usize) {
     }
 }
 
+/// Widens every set bit of `bits` (rows of `width` bits) to the 3 × 3 cells around it:
+/// one pass of [`spread`] towards `+x, +y`, then one towards `−x, −y`.
+pub(crate) fn dilate(bits: &mut [u8], width: usize) {
+    spread(bits, width, 1);
+    let bpr = width.div_ceil(8);
+    // Rows: row y |= row y − 1, in decreasing y (row y − 1 not yet changed).
+    let rows = bits.len() / bpr.max(1);
+    for y in (1..rows).rev() {
+        for b in 0..bpr {
+            let below = bits.get((y - 1) * bpr + b).copied().unwrap_or(0);
+            if let Some(v) = bits.get_mut(y * bpr + b) {
+                *v |= below;
+            }
+        }
+    }
+    // Columns: bit x |= bit x − 1, in decreasing bytes (byte i − 1 not yet changed).
+    for row in bits.chunks_exact_mut(bpr) {
+        for i in (0..row.len()).rev() {
+            let carry = i
+                .checked_sub(1)
+                .and_then(|j| row.get(j))
+                .map_or(0, |p| p >> 7);
+            if let Some(v) = row.get_mut(i) {
+                *v |= (*v << 1) | carry;
+            }
+        }
+    }
+}
+
 /// A candidate: heading index, cell offsets from the guess, its score.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct Candidate {

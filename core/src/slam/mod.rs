@@ -22,8 +22,8 @@ pub mod matcher;
 
 pub use config::{ChainNoise, EstimateRadius, GraphSlamConfig, KeyframeSpacing, LoopClosureConfig};
 pub use graph_slam::{
-    ClosureOutcome, GraphCounters, GraphSlam, GraphStep, MATCH_BYTES, MATCH_CELLS, MATCH_LEVELS,
-    SlamError, WithKeyframes, workspace_bytes,
+    ClosureOutcome, ClosureWork, GraphCounters, GraphSlam, GraphStep, MATCH_BYTES, MATCH_CELLS,
+    MATCH_LEVELS, SlamError, WithKeyframes, workspace_bytes,
 };
 #[cfg(feature = "map-image")]
 pub use graph_slam::{MAX_MAP_CELLS, MapImageSummary};

@@ -25,6 +25,7 @@ use firmware_example::cost::{BEAMS, LIDAR, RING_WAYPOINTS, Ticks, ring_range};
 use firmware_example::flash::SramFlash;
 use microslam::geometry::Pose2;
 use microslam::sensors::lidar::LidarScan;
+use microslam::slam::ClosureWork;
 use microslam::slam::keyframes::{KeyframeStore, NorFlashStorage};
 use panic_probe as _;
 use static_cell::ConstStaticCell;
@@ -61,8 +62,11 @@ struct Costs {
     /// loop edge (and so solved the graph) cost.
     max_attempt: u64,
     max_closure: u64,
-    /// The most a keyframe's scan cost (it builds the old map a closure matches against).
+    /// The most a keyframe's scan cost.
     max_keyframe: u64,
+    /// The most a scan cost, by the loop closure work it did ([`ClosureWork`]: none, the
+    /// old map drawn, a slice of the match, the graph solved).
+    max_by_work: [u64; 4],
     /// The most any other scan cost.
     max_other: u64,
     /// Scans over 10 M instructions (100 ms at 100 MHz).
@@ -123,6 +127,15 @@ fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
         costs.total += n;
         costs.over_10m += u32::from(n > 10_000_000);
         costs.max = costs.max.max(n);
+        let kind = match step.work {
+            ClosureWork::None => 0,
+            ClosureWork::OldMap => 1,
+            ClosureWork::Match => 2,
+            ClosureWork::Solve => 3,
+        };
+        if let Some(m) = costs.max_by_work.get_mut(kind) {
+            *m = (*m).max(n);
+        }
         if step.keyframe.is_some() {
             costs.max_keyframe = costs.max_keyframe.max(n);
         } else {
@@ -140,7 +153,7 @@ fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
     let est = slam.pose();
     writeln!(
         out,
-        "slam p={} beams={} nodes={} loops={} scans={} keyframes={} attempts={} closures={} mean={} max={} max_attempt={} max_closure={} max_keyframe={} max_other={} over_10m={} error_mm={}",
+        "slam p={} beams={} nodes={} loops={} scans={} keyframes={} attempts={} closures={} mean={} max={} max_attempt={} max_closure={} max_keyframe={} max_other={} max_plain={} max_old_map={} max_match={} max_solve={} over_10m={} error_mm={}",
         GRID_PARTICLES,
         BEAMS,
         SLAM_NODES,
@@ -155,6 +168,10 @@ fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
         costs.max_closure,
         costs.max_keyframe,
         costs.max_other,
+        costs.max_by_work[0],
+        costs.max_by_work[1],
+        costs.max_by_work[2],
+        costs.max_by_work[3],
         costs.over_10m,
         (libm::hypotf(est.x - truth.x, est.y - truth.y) * 1000.0) as u32
     )?;

@@ -212,7 +212,7 @@ mod tests {
             f64::from(y) - (truth[1] - scans[0].pose[1]),
         );
         assert!(dx.hypot(dy) < 0.15, "{x} {y} vs {truth:?}");
-        // Keyframes every 0.5 m of the 3 m drive, and the map image saved at the end,
+        // Keyframes every 0.65 m of the 3 m drive, and the map image saved at the end,
         // read back through the session: one tile of 128 cells (6.4 m) a side covers the
         // 6 m × 4 m room.
         assert!(host.counters.keyframes >= 5, "{:?}", host.counters);

@@ -1,10 +1,11 @@
 //! Loop closure: a new keyframe matched against the old ones near it, a loop edge, and
 //! the graph solved, spread over the scans after the keyframe so that no scan pays for
-//! all of it: the keyframe's scan builds the old map, the next ones search it
-//! (`work_per_scan` look-ups each), the one after the match solves the graph.
+//! all of it: the keyframe's scan and the next draw the old map (`old_keyframes_per_scan`
+//! old keyframes each), the next ones search it (`work_per_scan` look-ups each), the one
+//! after the match solves the graph.
 
 use super::stored::load_stored;
-use super::{ClosureOutcome, GraphSlam, SlamError};
+use super::{ClosureOutcome, ClosureWork, GraphSlam, SlamError};
 use crate::geometry::{Pose2, sin_cos_f32};
 use crate::slam::graph::LoopEdge;
 use crate::slam::keyframes::{KeyframeStorage, KeyframeStore};
@@ -17,6 +18,18 @@ use crate::slam::matcher::{MAX_MATCH_POINTS, MatchProgress};
 pub(super) enum Pending {
     /// None.
     Idle,
+    /// The map of the old keyframes near keyframe `node` being drawn, from old keyframe
+    /// `next` to `last` (those within the submap radius of `here`, its graph pose), for
+    /// the match of its end points (`points`, `n` of them) around keyframe `old`.
+    OldMap {
+        node: u16,
+        old: u16,
+        next: u16,
+        last: u16,
+        here: Pose2<f32>,
+        points: [(f32, f32); MAX_MATCH_POINTS],
+        n: u16,
+    },
     /// The match of keyframe `node` against the old map around keyframe `old`.
     Matching {
         node: u16,
@@ -40,18 +53,16 @@ impl<
 > GraphSlam<P, B, NEAR, NEAR_BITS, FAR, FAR_BITS, NODES, LOOPS, SCRATCH>
 {
     /// At keyframe `node`: when an old enough keyframe lies within the candidate radius,
-    /// builds the map of the old keyframes near it (at their graph poses) and starts the
-    /// match of this scan against it, which [`GraphSlam::advance_closure`] runs over the
-    /// next scans. The filter is left as it is: its local map holds only what it saw
-    /// lately, and the graph's frame follows from the newest keyframe
-    /// ([`GraphSlam::pose`]). Nothing is started while another closure is under way
-    /// (counted in `closures_skipped`). `true` when the old map was built (the scan's
-    /// loop closure work is done).
-    pub(super) fn start_closure<S: KeyframeStorage>(
-        &mut self,
-        node: u16,
-        store: &KeyframeStore<S>,
-    ) -> Result<bool, SlamError> {
+    /// starts a closure: the old map is cleared and this scan's end points kept for the
+    /// match; the map of the old keyframes near it (at their graph poses) is then drawn,
+    /// `old_keyframes_per_scan` of them at this scan ([`GraphSlam::draw_old_map`]) and as
+    /// many at each of the next ([`GraphSlam::advance_closure`]), and matched over the
+    /// scans after that. The
+    /// filter is left as it is: its local map holds only what it saw lately, and the
+    /// graph's frame follows from the newest keyframe ([`GraphSlam::pose`]). Nothing is
+    /// started while another closure is under way (counted in `closures_skipped`). `true`
+    /// when a closure started (the scan's loop closure work is done).
+    pub(super) fn start_closure(&mut self, node: u16) -> Result<bool, SlamError> {
         let lc = self.config.loop_closure;
         let k = usize::from(node);
         let Some(newest_old) = k.checked_sub(usize::from(lc.min_age_keyframes)) else {
@@ -60,22 +71,14 @@ impl<
         let Some(here) = self.graph.pose(k) else {
             return Ok(false);
         };
-        let near = |p: &Pose2<f32>, r: f32| {
-            let (dx, dy) = (p.x - here.x, p.y - here.y);
-            dx * dx + dy * dy <= r * r
-        };
         let Some(old) = self
             .graph
             .poses()
             .iter()
             .take(newest_old + 1)
             .enumerate()
-            .filter(|(_, p)| near(p, lc.candidate_radius_m))
-            .min_by(|(_, a), (_, b)| {
-                let da = (a.x - here.x) * (a.x - here.x) + (a.y - here.y) * (a.y - here.y);
-                let db = (b.x - here.x) * (b.x - here.x) + (b.y - here.y) * (b.y - here.y);
-                da.total_cmp(&db)
-            })
+            .filter(|(_, p)| within(p, &here, lc.candidate_radius_m))
+            .min_by(|(_, a), (_, b)| distance2(a, &here).total_cmp(&distance2(b, &here)))
             .map(|(j, _)| j)
         else {
             return Ok(false);
@@ -85,69 +88,133 @@ impl<
             return Ok(false);
         }
         self.counters.attempts = self.counters.attempts.saturating_add(1);
-        // The old map around this keyframe: every old keyframe near it at its graph pose.
         let res = self.config.grid.resolution;
         let half = 0.5 * super::MATCH_CELLS as f32 * res;
-        let buffers = self.workspace.matching();
-        buffers.map.init(
+        self.workspace.matching().map.init(
             res,
             here.x - half,
             here.y - half,
             self.config.grid.log_odds.occupied_above,
         )?;
-        for j in 0..=newest_old {
-            let Some(pose) = self.graph.pose(j) else {
+        // The end points are written in place (a second copy of them on the stack would
+        // deepen the peak of a scan's stack by a kilobyte).
+        self.pending = Pending::OldMap {
+            node,
+            old: u16::try_from(old).unwrap_or(u16::MAX),
+            next: 0,
+            last: u16::try_from(newest_old).unwrap_or(u16::MAX),
+            here,
+            points: [(0.0, 0.0); MAX_MATCH_POINTS],
+            n: 0,
+        };
+        if let Pending::OldMap { points, n, .. } = &mut self.pending {
+            let stride = self
+                .points
+                .as_slice()
+                .len()
+                .div_ceil(MAX_MATCH_POINTS)
+                .max(1);
+            for (slot, p) in points
+                .iter_mut()
+                .zip(self.points.robot_points().step_by(stride))
+            {
+                *slot = p;
+                *n += 1;
+            }
+        }
+        Ok(true)
+    }
+
+    /// Draws the next `old_keyframes_per_scan` old keyframes of the closure under way
+    /// into its old map; after the last, builds the matcher's levels and starts the match.
+    pub(super) fn draw_old_map<S: KeyframeStorage>(
+        &mut self,
+        store: &KeyframeStore<S>,
+    ) -> Result<(), SlamError> {
+        let lc = self.config.loop_closure;
+        let Pending::OldMap {
+            node,
+            old,
+            next,
+            last,
+            here,
+            points,
+            n,
+        } = &mut self.pending
+        else {
+            return Ok(());
+        };
+        let buffers = self.workspace.matching();
+        let (mut j, end) = (usize::from(*next), usize::from(*last) + 1);
+        let mut drawn = 0u16;
+        while j < end && drawn < lc.old_keyframes_per_scan {
+            let pose = self.graph.pose(j);
+            j += 1;
+            let Some(pose) = pose.filter(|p| within(p, here, lc.submap_radius_m)) else {
                 continue;
             };
-            if !near(&pose, lc.submap_radius_m) {
-                continue;
-            }
-            load_stored(&mut self.stored, &mut self.ranges, j, store)?;
+            load_stored(&mut self.stored, &mut self.ranges, j - 1, store)?;
             let (s, c) = sin_cos_f32(pose.theta);
             for (px, py) in self.stored.robot_points() {
                 buffers
                     .map
                     .set_world(pose.x + c * px - s * py, pose.y + s * px + c * py);
             }
+            drawn += 1;
+        }
+        *next = u16::try_from(j).unwrap_or(u16::MAX);
+        if j < end {
+            return Ok(());
+        }
+        for _ in 0..lc.old_map_dilation_cells {
+            crate::slam::matcher::dilate(buffers.map.bits_mut(), super::MATCH_CELLS);
         }
         buffers.levels.build(&buffers.map);
-        let mut points = [(0.0f32, 0.0f32); MAX_MATCH_POINTS];
-        let mut n = 0;
-        let stride = self
-            .points
-            .as_slice()
-            .len()
-            .div_ceil(MAX_MATCH_POINTS)
-            .max(1);
-        for p in self.points.robot_points().step_by(stride) {
-            if let Some(slot) = points.get_mut(n) {
-                *slot = p;
-                n += 1;
-            }
-        }
         // A scan with nothing to match is no closure, not an error of the run.
-        if let Ok(progress) = buffers.levels.start(
+        let started = buffers.levels.start(
             &buffers.map,
-            points.get(..n).unwrap_or(&[]),
-            &here,
+            points.get(..usize::from(*n)).unwrap_or(&[]),
+            here,
             &lc.window,
-        ) {
-            self.pending = Pending::Matching {
-                node,
-                old: u16::try_from(old).unwrap_or(u16::MAX),
+        );
+        self.pending = match started {
+            Ok(progress) => Pending::Matching {
+                node: *node,
+                old: *old,
                 progress,
-            };
-        }
-        Ok(true)
+            },
+            Err(_) => Pending::Idle,
+        };
+        Ok(())
     }
 
     /// Runs the closure under way for one scan: a slice of the match (and, when it ends
-    /// accepted, the loop edge), or the graph's solve after a loop edge. `Some` when a
-    /// match ended at this scan.
-    pub(super) fn advance_closure(&mut self) -> Result<Option<ClosureOutcome>, SlamError> {
+    /// accepted, the loop edge), or the graph's solve after a loop edge: the outcome when
+    /// a match ended at this scan, and what the scan did.
+    pub(super) fn advance_closure<S: KeyframeStorage>(
+        &mut self,
+        store: &KeyframeStore<S>,
+    ) -> Result<(Option<ClosureOutcome>, ClosureWork), SlamError> {
+        let work = match self.pending {
+            Pending::Idle => ClosureWork::None,
+            Pending::OldMap { .. } => ClosureWork::OldMap,
+            Pending::Matching { .. } => ClosureWork::Match,
+            Pending::Solving => ClosureWork::Solve,
+        };
+        Ok((self.advance_pending(store)?, work))
+    }
+
+    fn advance_pending<S: KeyframeStorage>(
+        &mut self,
+        store: &KeyframeStore<S>,
+    ) -> Result<Option<ClosureOutcome>, SlamError> {
         let lc = self.config.loop_closure;
         match &mut self.pending {
             Pending::Idle => Ok(None),
+            Pending::OldMap { .. } => {
+                self.draw_old_map(store)?;
+                Ok(None)
+            }
             Pending::Solving => {
                 self.pending = Pending::Idle;
                 self.graph.optimise(self.workspace.solving(), &lc.solver)?;
@@ -211,6 +278,17 @@ impl<
             }
         }
     }
+}
+
+/// Squared distance between the positions of `a` and `b`.
+fn distance2(a: &Pose2<f32>, b: &Pose2<f32>) -> f32 {
+    let (dx, dy) = (a.x - b.x, a.y - b.y);
+    dx * dx + dy * dy
+}
+
+/// `true` when `p` lies within `radius` metres of `here`.
+fn within(p: &Pose2<f32>, here: &Pose2<f32>, radius: f32) -> bool {
+    distance2(p, here) <= radius * radius
 }
 
 /// The information of a position with covariance `[xx, xy, yy, ·]` (world frame) plus

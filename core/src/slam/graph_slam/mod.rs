@@ -112,6 +112,25 @@ pub struct GraphStep {
     /// A loop closure match that ended at this scan (started at an earlier keyframe),
     /// and what came of it.
     pub closure: Option<ClosureOutcome>,
+    /// The loop closure work this scan did (at most one kind a scan).
+    pub work: ClosureWork,
+}
+
+/// The part of a loop closure a scan did: a closure is spread over the scans after its
+/// keyframe so that no scan pays for all of it (what a scan's time budget is checked
+/// against).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ClosureWork {
+    /// No loop closure work.
+    #[default]
+    None,
+    /// Old keyframes drawn into the map a closure matches against.
+    OldMap,
+    /// A slice of the match (it may have ended the match: [`GraphStep::closure`]).
+    Match,
+    /// The pose graph solved after a loop edge was added.
+    Solve,
 }
 
 /// What a loop closure attempt did.
@@ -382,6 +401,7 @@ impl<
         let heading = (span >= h.step_rad).then_some(crate::pf::HeadingSearch {
             span,
             step: h.step_rad,
+            coarse: h.coarse_steps,
             min_gain: h.min_gain,
         });
         let (report, _) = crate::pf::score_slam_scan(
@@ -414,6 +434,7 @@ impl<
             map,
             keyframe: None,
             closure: None,
+            work: ClosureWork::None,
         };
         // A scan that starts a loop closure (builds the old map) does no more of it; any
         // other scan runs a slice of the one under way: no scan pays for both.
@@ -421,11 +442,14 @@ impl<
         if let Some(node) = self.keyframe(scan, store)? {
             step.keyframe = Some(node);
             if self.config.loop_closure.enabled {
-                started = self.start_closure(node, store)?;
+                started = self.start_closure(node)?;
             }
         }
-        if !started {
-            step.closure = self.advance_closure()?;
+        if started {
+            step.work = ClosureWork::OldMap;
+            self.draw_old_map(store)?;
+        } else {
+            (step.closure, step.work) = self.advance_closure(store)?;
         }
         step.pose = self.pose();
         step.filter_pose = self.pose;

@@ -126,13 +126,13 @@ fn the_loop_closes_through_the_graph() {
     let (e_closed, e_open) = (position_rmse(&closed, &truth), position_rmse(&open, &truth));
     println!("closed {e_closed:.3} m {counters:?}; open {e_open:.3} m {open_counters:?}");
     assert_eq!(open_counters.attempts, 0);
-    // Measured (seed 1): 23 closures of 69 attempts; 0.896 m closed against 1.372 m open
-    // (seeds 2, 3: 0.880 / 1.900 m, 0.996 / 2.275 m). The filter loses along-track
-    // distance in the ring's 2 m corridor (the shift search pulls the particles back at
-    // the edge of what is mapped), which is what the loop closure has to take out.
-    assert!(counters.closures >= 21, "{counters:?}");
-    assert!(e_closed < 0.94, "{e_closed}");
-    assert!(e_open > 1.3, "{e_open}");
+    // Measured (seed 1): 13 closures of 53 attempts (9 keyframes found a closure under
+    // way); 0.524 m closed against 0.698 m open. The filter loses along-track distance in
+    // the ring's 2 m corridor (the shift search pulls the particles back at the edge of
+    // what is mapped), which is what the loop closure has to take out.
+    assert!(counters.closures >= 12, "{counters:?}");
+    assert!(e_closed < 0.55, "{e_closed}");
+    assert!(e_open > 0.66, "{e_open}");
 }
 
 #[test]

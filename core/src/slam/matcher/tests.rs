@@ -343,3 +343,27 @@ fn a_match_run_in_slices_gives_the_same_answer() {
         }
     }
 }
+
+#[test]
+fn dilate_sets_the_three_by_three_cells_around_each_bit() {
+    // 24 × 6 cells, bits at (7, 1), (8, 4) (either side of a byte boundary) and (0, 0)
+    // (a corner: nothing outside the grid).
+    const W: usize = 24;
+    let mut bits = [0u8; 3 * 6];
+    let set = |bits: &mut [u8], x: usize, y: usize| bits[y * 3 + x / 8] |= 1 << (x % 8);
+    let is_set = |bits: &[u8], x: usize, y: usize| bits[y * 3 + x / 8] >> (x % 8) & 1 == 1;
+    for (x, y) in [(7, 1), (8, 4), (0, 0)] {
+        set(&mut bits, x, y);
+    }
+    super::dilate(&mut bits, W);
+    let near =
+        |x: usize, y: usize, cx: usize, cy: usize| x.abs_diff(cx) <= 1 && y.abs_diff(cy) <= 1;
+    for y in 0..6 {
+        for x in 0..W {
+            let expected = [(7, 1), (8, 4), (0, 0)]
+                .iter()
+                .any(|&(cx, cy)| near(x, y, cx, cy));
+            assert_eq!(is_set(&bits, x, y), expected, "cell ({x}, {y})");
+        }
+    }
+}
