@@ -57,11 +57,10 @@ impl<
     /// match; the map of the old keyframes near it (at their graph poses) is then drawn,
     /// `old_keyframes_per_scan` of them at this scan ([`GraphSlam::draw_old_map`]) and as
     /// many at each of the next ([`GraphSlam::advance_closure`]), and matched over the
-    /// scans after that. The
-    /// filter is left as it is: its local map holds only what it saw lately, and the
-    /// graph's frame follows from the newest keyframe ([`GraphSlam::pose`]). Nothing is
-    /// started while another closure is under way (counted in `closures_skipped`). `true`
-    /// when a closure started (the scan's loop closure work is done).
+    /// scans after that. The filter is left as it is: its local map holds only what it
+    /// saw lately, and the graph's frame follows from the newest keyframe
+    /// ([`GraphSlam::pose`]). Nothing is started while another closure is under way
+    /// (counted in `closures_skipped`). `true` when a closure started.
     pub(super) fn start_closure(&mut self, node: u16) -> Result<bool, SlamError> {
         let lc = self.config.loop_closure;
         let k = usize::from(node);

@@ -436,8 +436,9 @@ impl<
             closure: None,
             work: ClosureWork::None,
         };
-        // A scan that starts a loop closure (builds the old map) does no more of it; any
-        // other scan runs a slice of the one under way: no scan pays for both.
+        // A scan that starts a loop closure draws the first old keyframes of its old map
+        // and does no more of it; any other scan runs a slice of the one under way: no
+        // scan pays for two parts.
         let mut started = false;
         if let Some(node) = self.keyframe(scan, store)? {
             step.keyframe = Some(node);
