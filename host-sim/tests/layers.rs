@@ -358,3 +358,59 @@ fn paths_are_resolved_from_the_file() {
     );
     assert!(imported_paths(&code_only("let s = \"crate::cli\"; // crate::cli\n"), &m).is_empty());
 }
+
+/// The longest a source file of `core/src` or `host-sim/src` may be, in lines: a file
+/// holds one concern, and a module's tests live in a file of their own
+/// (`x.rs` declares `#[cfg(test)] mod tests;`, the tests are in `x/tests.rs`), which
+/// this limit leaves out.
+const MAX_FILE_LINES: usize = 800;
+
+/// Files of `dirs` longer than [`MAX_FILE_LINES`], test files (`tests.rs`,
+/// `*_tests.rs`, anything under a `tests/` folder) left out.
+fn long_files(dirs: &[PathBuf]) -> Vec<String> {
+    let mut files = Vec::new();
+    for dir in dirs {
+        rust_files(dir, &mut files);
+    }
+    files
+        .iter()
+        .filter(|f| {
+            let name = f.file_stem().map(|s| s.to_string_lossy().into_owned());
+            let is_test = name.is_some_and(|n| n == "tests" || n.ends_with("_tests"))
+                || f.components().any(|c| c.as_os_str() == "tests");
+            !is_test
+        })
+        .filter_map(|f| {
+            let lines = std::fs::read_to_string(f)
+                .expect("read source")
+                .lines()
+                .count();
+            (lines > MAX_FILE_LINES).then(|| format!("{}: {lines} lines", f.display()))
+        })
+        .collect()
+}
+
+#[test]
+fn no_source_file_is_longer_than_the_limit() {
+    let core = Path::new(env!("CARGO_MANIFEST_DIR")).join("../core/src");
+    let long = long_files(&[src(), core]);
+    assert!(
+        long.is_empty(),
+        "files over {MAX_FILE_LINES} lines (split them by concern; tests go in a file of \
+         their own): {long:#?}"
+    );
+}
+
+#[test]
+fn the_length_check_sees_a_long_file_and_leaves_tests_out() {
+    let dir = std::env::temp_dir().join(format!("microslam-long-files-{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("module")).expect("temp dir");
+    let long = "fn f() {}\n".repeat(MAX_FILE_LINES + 1);
+    std::fs::write(dir.join("module.rs"), &long).expect("write");
+    std::fs::write(dir.join("module/tests.rs"), &long).expect("write");
+    std::fs::write(dir.join("short.rs"), "fn g() {}\n".repeat(MAX_FILE_LINES)).expect("write");
+    let found = long_files(std::slice::from_ref(&dir));
+    std::fs::remove_dir_all(&dir).expect("clean up");
+    assert_eq!(found.len(), 1, "{found:?}");
+    assert!(found[0].contains("module.rs: 801 lines"), "{found:?}");
+}
