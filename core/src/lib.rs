@@ -20,7 +20,8 @@
 //! - [`event::Event`]: one time-stamped sensor sample; readers produce them, and
 //!   [`feed::EventFeed`] turns a stream of them into estimator steps.
 //! - `wire` (feature `wire`): the messages between a host and the device on a serial line,
-//!   with a streaming, allocation-free frame decoder.
+//!   with a streaming, allocation-free frame decoder; `device` (same feature): the
+//!   program that answers them on the device, `device::Session`.
 //!
 //! Every estimator is generic over the scalar ([`Real`]: `f32` on a Cortex-M4F, `f64` on
 //! the host), returns errors as small `Copy` values and never panics on bad input: a step
@@ -64,6 +65,8 @@
 )]
 
 pub mod association;
+#[cfg(feature = "wire")]
+pub mod device;
 pub mod ekf;
 pub mod error;
 pub mod event;

@@ -36,7 +36,7 @@ pub const EKF_CONFIG: EkfConfig<f32> = EkfConfig::MICROCONTROLLER;
 
 /// A configuration of all-zero bytes, used only to build the filter in a `static`: a
 /// value of zero bytes lands in `.bss`, so the 35 KB filter costs no flash for initial
-/// values. The wire session (`microslam::wire::Session::new`) then sets [`EKF_CONFIG`]
+/// values. The wire session (`microslam::device::Session::new`) then sets [`EKF_CONFIG`]
 /// in place.
 pub const ZEROED_EKF_CONFIG: EkfConfig<f32> = EkfConfig {
     increment_noise: IncrementNoise {
@@ -84,7 +84,7 @@ pub const GRID_CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
 
 /// Lidar and wheels as the wire session hands them to the grid estimator.
 #[cfg(feature = "wire")]
-pub const GRID_SETUP: crate::wire::GridSetup = crate::wire::GridSetup::EXAMPLE;
+pub const GRID_SETUP: crate::device::GridSetup = crate::device::GridSetup::EXAMPLE;
 
 /// Particles of the localizer on a map in flash. Without the 64 KB grid in RAM far more
 /// would fit (28 bytes each); the instruction budget per scan is what limits them.

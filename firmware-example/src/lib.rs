@@ -27,7 +27,8 @@ pub mod stack;
 
 use embedded_hal::digital::OutputPin;
 use embedded_io::{Read, Write};
-use microslam::wire::{MAX_FRAME_LEN, Session, ToHost, encode_frame};
+use microslam::device::Session;
+use microslam::wire::{MAX_FRAME_LEN, ToHost, encode_frame};
 
 /// Defines the binary's `HardFault` handler: log the faulting address (defmt) and halt
 /// with code 3 ([`board::halt`]). One handler for every binary of this package; each

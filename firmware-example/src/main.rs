@@ -25,7 +25,7 @@ use firmware_example::config::{EKF_LANDMARKS, Ekf};
 #[cfg(feature = "building-slam")]
 use firmware_example::config::{SLAM_EKF_LANDMARKS as EKF_LANDMARKS, SlamEkf as Ekf};
 use firmware_example::{board, serve, stack};
-use microslam::wire::Session;
+use microslam::device::Session;
 use panic_probe as _;
 use static_cell::ConstStaticCell;
 
@@ -92,9 +92,10 @@ mod grid {
     use firmware_example::config::{
         LOCALIZER_CONFIG, LOCALIZER_PARTICLES, Localizer, MAP_IMAGE, MAP_ROW_BYTES, RELOCALIZATION,
     };
+    use microslam::device::LocalizerEstimator;
     use microslam::geometry::Pose2;
     use microslam::grid::{MapImage, MapImageError};
-    use microslam::wire::{LocalizerEstimator, Refusal};
+    use microslam::wire::Refusal;
     use static_cell::StaticCell;
 
     /// The localizer (particles, scan points), borrowing the map image in flash.

@@ -7,10 +7,11 @@
 //! accepted.
 
 use microslam::association::{KnownIds, observe_known};
+use microslam::device::Session;
 use microslam::ekf::{EkfConfig, EkfSlam, factor_len, state_dim};
 use microslam::geometry::Pose2;
 use microslam::sensors::range_bearing::RangeBearing;
-use microslam::wire::{FrameDecoder, MAX_FRAME_LEN, Session, ToDevice, encode_frame};
+use microslam::wire::{FrameDecoder, MAX_FRAME_LEN, ToDevice, encode_frame};
 use nalgebra::{DMatrix, Matrix2, Matrix3, Vector3};
 
 /// Landmarks of the fuzzed filters: small, so that the table fills up.

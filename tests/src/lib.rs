@@ -2,7 +2,7 @@
 //!
 //! - [`firmware`]: runs the firmware of `firmware-example` under QEMU, streams wire frames
 //!   to its UART and collects its replies; the same bytes through a host
-//!   [`microslam::wire::Session`] give the reference it must equal.
+//!   [`microslam::device::Session`] give the reference it must equal.
 //! - [`fuzzing`]: the checks of the fuzz targets in `fuzz/`, also replayed by `cargo test`
 //!   over the kept regression inputs.
 //! - [`replay_known_f64`]: the EKF replay most tests measure.

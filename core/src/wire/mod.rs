@@ -13,9 +13,10 @@
 //!   one scan back together and drops a scan with a missing chunk.
 //! - [`events`]: [`EventsToWire`] turns the core's event stream into messages (for a
 //!   host streaming a dataset to a device).
-//! - [`session`]: the device side: [`Session`] turns received bytes into estimator steps
-//!   and replies. The firmware runs it behind its UART; a host runs the same code to get
-//!   the reference the firmware must match.
+//!
+//! This is the bottom layer of the link: bytes ↔ messages. The program that answers the
+//! messages on the device, turning them into estimator steps, is
+//! [`crate::device::Session`], one layer above.
 //!
 //! ```
 //! use microslam::wire::{encode_frame, FrameDecoder, Odometry, ToDevice, MAX_FRAME_LEN};
@@ -41,9 +42,7 @@ pub mod events;
 pub mod frame;
 pub mod messages;
 pub mod scan;
-pub mod session;
 
-pub use crate::pf::GridEstimator;
 pub use events::EventsToWire;
 pub use frame::{
     EncodeError, FrameDecoder, FrameError, MAX_FRAME_LEN, MAX_PAYLOAD_LEN, WireCounters,
@@ -55,7 +54,6 @@ pub use messages::{
     ToHost, TrackingState,
 };
 pub use scan::{Scan, ScanAssembler, ScanError};
-pub use session::{GridSetup, LocalizerEstimator, MAX_SCAN_BEAMS, Session};
 
 #[cfg(test)]
 mod tests;

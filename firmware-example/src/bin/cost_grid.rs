@@ -23,11 +23,11 @@ use cortex_m_rt::entry;
 use firmware_example::board::Serial;
 use firmware_example::config::LOCALIZER_CONFIG;
 use firmware_example::cost::{BEAMS, LIDAR, Ticks, report_calibration};
+use microslam::device::GridEstimator;
 use microslam::geometry::Pose2;
 use microslam::grid::GridView;
 use microslam::pf::{GridLocalizer, GridPfConfig};
 use microslam::sensors::lidar::LidarScan;
-use microslam::wire::GridEstimator;
 use panic_probe as _;
 
 /// Grid SLAM's settings (the firmware's `GRID_CONFIG`).

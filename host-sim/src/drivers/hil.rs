@@ -19,11 +19,12 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
+use microslam::device::Session;
 use microslam::geometry::Pose2;
 use microslam::profile;
 use microslam::wire::{
-    Command as WireCommand, EkfSettings, EventsToWire, FrameDecoder, MAX_FRAME_LEN, Session,
-    ToDevice, ToHost, encode_frame,
+    Command as WireCommand, EkfSettings, EventsToWire, FrameDecoder, MAX_FRAME_LEN, ToDevice,
+    ToHost, encode_frame,
 };
 use serde::Serialize;
 

@@ -9,14 +9,14 @@
 use std::path::Path;
 
 use anyhow::{Result, bail};
+use microslam::device::{LocalizerEstimator, Session};
 use microslam::geometry::Pose2;
 use microslam::grid::MapImage;
 use microslam::grid::map_image::{DEFAULT_LAYER_LEVELS, encode_map_image_with_layers};
 use microslam::grid::ros_map::RosMap;
 use microslam::profile;
 use microslam::wire::{
-    Command as WireCommand, EstimatorKind, LocalizerEstimator, Odometry, SCAN_CHUNK_BEAMS,
-    ScanChunk, Session, ToDevice, ToHost,
+    Command as WireCommand, EstimatorKind, Odometry, SCAN_CHUNK_BEAMS, ScanChunk, ToDevice, ToHost,
 };
 
 use crate::inputs::readers::carmen::LaserMessage;

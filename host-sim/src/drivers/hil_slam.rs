@@ -6,10 +6,11 @@
 //! ([`Command::SaveMap`], [`Command::ReadMap`]).
 
 use anyhow::{Result, anyhow, bail};
+use microslam::device::Session;
 use microslam::geometry::Pose2;
 use microslam::profile;
 use microslam::slam::{GraphCounters, GraphSlam};
-use microslam::wire::{Command, MAP_CHUNK_BYTES, Session, ToDevice, ToHost};
+use microslam::wire::{Command, MAP_CHUNK_BYTES, ToDevice, ToHost};
 
 use super::graph_slam::VecStorage;
 use super::hil::encode_all;

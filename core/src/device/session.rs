@@ -18,12 +18,12 @@ use crate::sensors::lidar::{LidarGeometry, LidarScan};
 use crate::sensors::range_bearing::RangeBearing;
 use crate::sensors::wheel_odometry::{DiffDriveGeometry, WheelTicks};
 
-use super::frame::{FrameDecoder, FrameError, MAX_FRAME_LEN};
-use super::messages::{
+use crate::wire::frame::{FrameDecoder, FrameError, MAX_FRAME_LEN};
+use crate::wire::messages::{
     Command, Estimate, EstimatorKind, LocalizerReport, Odometry, Refusal, ScanChunk, Status,
     StepResult, ToDevice, ToHost, TrackingState,
 };
-use super::scan::ScanAssembler;
+use crate::wire::scan::ScanAssembler;
 
 /// The most beams of one scan a [`Session`] reassembles (a 1° scanner); longer scans are
 /// dropped and answered with [`StepResult::Rejected`].
@@ -101,7 +101,8 @@ const TICKS_REFUSED: u8 = 0x81;
 ///
 /// ```
 /// use microslam::ekf::{factor_len, state_dim, EkfConfig, EkfSlam};
-/// use microslam::wire::{encode_frame, Odometry, Session, ToDevice, ToHost, MAX_FRAME_LEN};
+/// use microslam::device::Session;
+/// use microslam::wire::{encode_frame, Odometry, ToDevice, ToHost, MAX_FRAME_LEN};
 ///
 /// let mut ekf = EkfSlam::<f32, { state_dim(8) }, { factor_len(8) }>::new(EkfConfig::DEFAULT_F32);
 /// let mut session = Session::<_, _, 8>::new(&mut ekf, EkfConfig::DEFAULT_F32);
@@ -462,7 +463,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
                 };
             }
             Command::ReadMap { offset } => {
-                let mut bytes = super::MapBytes([0; super::MAP_CHUNK_BYTES]);
+                let mut bytes = crate::wire::MapBytes([0; crate::wire::MAP_CHUNK_BYTES]);
                 let read = self
                     .grid
                     .as_ref()
@@ -502,7 +503,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
         }
         ToHost::Status {
             seq,
-            protocol: super::PROTOCOL_VERSION,
+            protocol: crate::wire::PROTOCOL_VERSION,
             estimator: self.active,
             status: self.status,
             stack_peak_bytes: 0,
