@@ -414,3 +414,91 @@ fn the_length_check_sees_a_long_file_and_leaves_tests_out() {
     assert_eq!(found.len(), 1, "{found:?}");
     assert!(found[0].contains("module.rs: 801 lines"), "{found:?}");
 }
+
+/// The library's levels (`core/src`, docs/design.md), bottom first: a module imports only
+/// modules on lower levels. `testing` (the unit tests' worlds, compiled for tests only)
+/// and the unit tests themselves are left out: a test may drive any layer.
+const CORE_LEVELS: &[&[&str]] = &[
+    &["scalar", "log"],
+    &["geometry", "gate", "error"],
+    &["sensors"],
+    &["motion", "event"],
+    &["ekf", "grid"],
+    &["association", "pf"],
+    &["feed", "wire", "slam"],
+    &["device"],
+    &["profile"],
+];
+
+fn core_level(top: &str) -> Option<usize> {
+    CORE_LEVELS.iter().position(|level| level.contains(&top))
+}
+
+fn is_test_module(module: &[String]) -> bool {
+    module
+        .iter()
+        .any(|m| m == "tests" || m.ends_with("_tests") || m == "testing")
+}
+
+/// Imports of the library that do not go to a lower level: `(module, path)` as text.
+fn core_level_breaches(krate: &Crate) -> Vec<String> {
+    let mut bad = Vec::new();
+    for (module, paths) in &krate.imports {
+        if module.len() == 1 && ROOTS.contains(&module[0].as_str()) || is_test_module(module) {
+            continue;
+        }
+        let own = core_level(&module[0])
+            .unwrap_or_else(|| panic!("core module {} is on no level", module.join("::")));
+        for path in paths {
+            let Some(top) = path.first() else { continue };
+            if top == &module[0] || top == "testing" {
+                continue;
+            }
+            // A path that starts with no module of the library is an item of the crate
+            // root or a `super::` path inside one module: nothing to check.
+            match core_level(top) {
+                None => {}
+                Some(l) if l < own => {}
+                Some(_) => bad.push(format!(
+                    "{} (level {own}) imports {}",
+                    module.join("::"),
+                    path.join("::")
+                )),
+            }
+        }
+    }
+    bad
+}
+
+fn core_src() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../core/src")
+}
+
+#[test]
+fn every_core_module_imports_only_lower_levels() {
+    let krate = read_crate(&core_src());
+    let bad = core_level_breaches(&krate);
+    assert!(
+        bad.is_empty(),
+        "imports that are not downward:\n{}",
+        bad.join("\n")
+    );
+}
+
+#[test]
+fn the_core_check_sees_a_sideways_and_an_upward_import() {
+    let mut krate = read_crate(&core_src());
+    // `grid` importing `ekf` (the same level) and `scalar` importing `geometry` (a level up).
+    krate
+        .imports
+        .entry(vec!["grid".to_owned(), "view".to_owned()])
+        .or_default()
+        .push(vec!["ekf".to_owned(), "EkfSlam".to_owned()]);
+    krate
+        .imports
+        .entry(vec!["scalar".to_owned()])
+        .or_default()
+        .push(vec!["geometry".to_owned(), "sin_cos_f32".to_owned()]);
+    let bad = core_level_breaches(&krate);
+    assert_eq!(bad.len(), 2, "{bad:#?}");
+}
