@@ -1,6 +1,9 @@
 //! Scores of the grid filters in the simulator's lidar world: position and heading RMSE
 //! against the true poses, with **no alignment** (both filters start at the true start
-//! pose in the world frame, so the estimate's frame is the truth's).
+//! pose in the world frame, so the estimate's frame is the truth's), and the position
+//! RMSE after the least-squares rotation and translation (ATE(se2), as `replay` scores
+//! against a reference): a map turned as a whole about its start by an early heading error
+//! counts fully in the first and not in the second.
 
 use crate::drivers::grid::f32_pose;
 use crate::inputs::sim::lidar_world::LidarRecording;
@@ -18,6 +21,18 @@ pub fn ate_m(rec: &LidarRecording, trajectory: &[(f64, Pose2<f32>)]) -> f64 {
         })
         .sum();
     (sum / n as f64).sqrt()
+}
+
+/// Position RMSE of `trajectory` against the recording's truth after the least-squares
+/// rotation and translation (ATE(se2)), metres; `None` for fewer than two poses.
+pub fn ate_se2_m(rec: &LidarRecording, trajectory: &[(f64, Pose2<f32>)]) -> Option<f64> {
+    let (est, truth): (Vec<Pose2<f64>>, Vec<Pose2<f64>>) = trajectory
+        .iter()
+        .zip(&rec.scans)
+        .map(|((_, e), s)| (e.cast(), s.truth))
+        .unzip();
+    let t = super::alignment::se2_least_squares(&est, &truth)?;
+    super::position_rmse(&t, &est, &truth)
 }
 
 /// Heading RMSE against the truth, degrees.
