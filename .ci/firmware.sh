@@ -92,12 +92,23 @@ OFFICE_DIR="$OUT/office-sim"
 MICROSLAM_MAP="$OFFICE_DIR/grid/slam/map.yaml" cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --bin firmware-example
 cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/localizer-office.elf"
 export OFFICE_LOCALIZER_ELF="$OUT/localizer-office.elf" OFFICE_LOCALIZER_MAP="$OFFICE_DIR/grid/slam/map.yaml"
+# The same firmware with the board's own map of the Intel lab: the image the
+# building-scale SLAM firmware writes into its flash at the end of the log (`SaveMap`),
+# here from the same code on the host (`replay --loop-closure`, P = 32: bit for bit the
+# device's, as the building-scale SLAM's HIL checks), its layers added by the build script.
+step "build: localizer firmware with the board SLAM's own Intel map in flash (qemu)"
+BOARD_MAP_DIR="$OUT/intel-board-map"
+"$TARGET_DIR/release/host-sim" -q replay --filter grid-slam --dataset carmen:intel/intel-raw-part.clf \
+    --particles 32 --loop-closure --no-plots --out "$BOARD_MAP_DIR"
+MICROSLAM_MAP="$BOARD_MAP_DIR/map.bin" cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --bin firmware-example
+cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/localizer-board-map.elf"
+export BOARD_MAP_LOCALIZER_ELF="$OUT/localizer-board-map.elf" BOARD_MAP_LOCALIZER_MAP="$BOARD_MAP_DIR/map.bin"
 # ---- end localizer firmware ----
 
 measured="$OUT/measured.txt"
 : >"$measured"
 record() { printf '%-40s %s\n' "$1" "$2" >>"$measured"; }
-for board in qemu stm32f411 localizer localizer-stm32f411; do
+for board in qemu stm32f411 localizer localizer-stm32f411 localizer-board-map; do
     read -r text data bss _ < <(arm-none-eabi-size "$OUT/$board.elf" | tail -1)
     record "${board//-/_}_flash_bytes" "$((text + data))"
     record "${board//-/_}_static_ram_bytes" "$((data + bss))"
@@ -127,7 +138,7 @@ record "building_slam_stack_peak_bytes" "$sstack"
 sstatic=$(awk '$1 == "building_slam_static_ram_bytes" { print $2 }' "$measured")
 record "building_slam_ram_with_stack_bytes" "$((sstatic + sstack))"
 # What the RAM bar is about: static RAM plus the stack (the QEMU runs' peak for both).
-for board in qemu stm32f411 localizer localizer_stm32f411; do
+for board in qemu stm32f411 localizer localizer_stm32f411 localizer_board_map; do
     static=$(awk -v n="${board}_static_ram_bytes" '$1 == n { print $2 }' "$measured")
     peak=$stack; [[ $board == localizer* ]] && peak=$lstack
     record "${board}_ram_with_stack_bytes" "$((static + peak))"

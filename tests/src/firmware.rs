@@ -314,6 +314,27 @@ pub fn office_localizer_map() -> PathBuf {
     )
 }
 
+/// The localizer firmware built with the board's own map of the Intel lab
+/// (`MICROSLAM_MAP` = the `map.bin` the building-scale SLAM writes at the end of a
+/// `host-sim replay --particles 32 --loop-closure` run, the image the board writes into
+/// its flash): `$BOARD_MAP_LOCALIZER_ELF`, else
+/// `target/firmware-elf/localizer-board-map.elf` (where `.ci/firmware.sh` puts it).
+pub fn board_map_localizer_elf() -> PathBuf {
+    path_from_env(
+        "BOARD_MAP_LOCALIZER_ELF",
+        "target/firmware-elf/localizer-board-map.elf",
+    )
+}
+
+/// The map [`board_map_localizer_elf`] was built with: `$BOARD_MAP_LOCALIZER_MAP`, else
+/// `target/firmware-elf/intel-board-map/map.bin`.
+pub fn board_map_localizer_map() -> PathBuf {
+    path_from_env(
+        "BOARD_MAP_LOCALIZER_MAP",
+        "target/firmware-elf/intel-board-map/map.bin",
+    )
+}
+
 /// A copy of `elf` at `out` with one byte of the embedded map image `image` flipped
 /// (after the header: the CRC-32 no longer matches). `None` when the image is not found
 /// in the ELF verbatim.
