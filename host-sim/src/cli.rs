@@ -71,6 +71,24 @@ pub enum Command {
     /// Write a landmark recording (`mrclam:<dir>/robotN`, `landmarks:<file>`) as a plain
     /// landmark log (docs/guide.md), for `replay --dataset landmarks:<file>`.
     ExportLandmarks(ExportLandmarksArgs),
+    /// Write a CARMEN log's front scans as the byte stream of an LDROBOT LD06 lidar (one
+    /// revolution a scan), to feed a board's lidar UART with a recording.
+    ExportLd06(ExportLd06Args),
+}
+
+/// Options of `host-sim export-ld06`.
+#[derive(Debug, Clone, Args)]
+pub struct ExportLd06Args {
+    /// The CARMEN log: `carmen:<log>`, e.g. `carmen:intel/intel-raw-part.clf` (beams 1° or
+    /// 0.5° apart).
+    #[arg(long, short)]
+    pub dataset: DatasetSpec,
+    /// The byte stream to write.
+    #[arg(long, short, default_value = "out/ld06.bin")]
+    pub out: PathBuf,
+    /// Write only the first N scans.
+    #[arg(long)]
+    pub scans: Option<usize>,
 }
 
 /// Options of `host-sim export-landmarks`.
@@ -724,6 +742,9 @@ pub fn run(cli: &Cli) -> Result<()> {
         Some(Command::Detections(args)) => detections::detections_cli(&args.into(), cli.quiet),
         Some(Command::ExportLandmarks(a)) => {
             crate::commands::export_landmarks::export_cli(&a.dataset, a.robot, &a.out, cli.quiet)
+        }
+        Some(Command::ExportLd06(a)) => {
+            crate::commands::ld06::export_cli(&a.dataset, &a.out, a.scans, cli.quiet)
         }
         Some(Command::ExportRosbag(a)) => {
             crate::commands::rosbag::export_cli(&a.dataset, &a.out, &(&a.bag).into(), cli.quiet)

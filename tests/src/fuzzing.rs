@@ -221,6 +221,48 @@ pub fn wire_decoder(data: &[u8]) {
     }
 }
 
+/// Fuzzes the LD06 lidar's packet decoder and the revolution binner behind it: every
+/// byte is accounted for (in a packet, skipped, or still buffered: fewer than a packet's
+/// length); every packet re-encodes to bytes that decode to the same packet; every beam
+/// of every finished revolution is empty or a range within the setup's limits, and a
+/// revolution holds no more points than its packets carried.
+pub fn ld06_decoder(data: &[u8]) {
+    use microslam::sensors::ld06::{
+        EMPTY_BIN, Ld06Decoder, Ld06Packet, Ld06Setup, PACKET_BYTES, POINTS_PER_PACKET,
+        RevolutionBinner,
+    };
+    let mut decoder = Ld06Decoder::new();
+    let setup = Ld06Setup::LD06;
+    let mut binner = RevolutionBinner::<360>::new(setup).expect("the LD06 setup is valid");
+    let mut packets = 0usize;
+    for &b in data {
+        let Some(p) = decoder.push(b) else { continue };
+        packets += 1;
+        assert_eq!(
+            Ld06Packet::parse(&p.encode()),
+            Ok(p),
+            "re-encoded packet decodes"
+        );
+        if binner.push(&p) {
+            let scan = binner.scan();
+            assert!(
+                scan.ranges
+                    .iter()
+                    .all(|&r| r == EMPTY_BIN || (r >= setup.min_range && r < setup.max_range)),
+                "a beam out of the setup's limits"
+            );
+            assert!(binner.points() as usize <= packets * POINTS_PER_PACKET);
+        }
+    }
+    let c = decoder.counters();
+    assert_eq!(c.packets as usize, packets);
+    let used = packets * PACKET_BYTES + c.skipped_bytes as usize;
+    assert!(
+        used <= data.len() && data.len() - used < PACKET_BYTES,
+        "{c:?}"
+    );
+}
+
 /// Fuzzes the grid SLAM step API on a small map: each op is a selector byte and three
 /// `f32`s (predictions), or a scan whose ranges are the next bytes read as `f32`s and
 /// whose geometry comes from the input too. No panic; refused input changes nothing; the
@@ -587,6 +629,7 @@ pub fn rosbag_reader(data: &[u8]) {
 
 /// Every fuzz target by name, for the regression replay.
 pub const TARGETS: &[(&str, FuzzCheck)] = &[
+    ("ld06_decoder", ld06_decoder),
     ("grid_steps", grid_steps),
     ("carmen_reader", carmen_reader),
     ("relations_reader", relations_reader),

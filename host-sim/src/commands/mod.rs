@@ -8,6 +8,7 @@ pub mod global;
 pub mod hil;
 pub mod hil_localizer;
 pub mod hil_slam;
+pub mod ld06;
 pub mod localize;
 pub mod replay;
 pub mod rosbag;

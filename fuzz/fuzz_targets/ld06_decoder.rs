@@ -1,0 +1,3 @@
+#![no_main]
+//! See `microslam_replay_tests::fuzzing::ld06_decoder` for what is checked.
+libfuzzer_sys::fuzz_target!(|data: &[u8]| microslam_replay_tests::fuzzing::ld06_decoder(data));
