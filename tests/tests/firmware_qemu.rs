@@ -308,18 +308,24 @@ fn dataset_ekf_settings_travel_over_the_wire() {
 #[test]
 #[ignore = "needs qemu-system-arm, the localizer ELF, its map and the datasets: run by .ci/firmware.sh"]
 fn localizer_firmware_in_qemu_equals_host_bit_for_bit_on_intel() {
+    use microslam_replay_tests::firmware::{localizer_elf, localizer_map};
+    intel_tracking(&built(localizer_elf()), &built(localizer_map()), 400);
+}
+
+/// The localizer firmware `elf` (built with the map `map`) in localizer mode on the
+/// first `n` scans of the Intel raw log, started at the first pose: every completed scan
+/// reaches the localizer, every reply equals the host's bit for bit. Prints the stack
+/// peak (`.ci/firmware.sh` records the largest).
+fn intel_tracking(elf: &std::path::Path, map: &std::path::Path, n: usize) {
     use host_sim::drivers::hil_localizer::{
         host_localizer_replies, localizer_messages, map_image_of,
     };
-    use microslam_replay_tests::firmware::{localizer_elf, localizer_map};
-    let elf = built(localizer_elf());
-    let map = built(localizer_map());
     let log_path = host_sim::inputs::readers::carmen::resolve_log("intel/intel-raw-part.clf")
         .expect("Intel log");
     let log = host_sim::inputs::readers::carmen::read_log(&log_path).expect("Intel log reads");
     let mut scans = host_sim::inputs::readers::carmen::front_scans(&log);
-    scans.truncate(400);
-    let image = map_image_of(&map).expect("the map converts");
+    scans.truncate(n);
+    let image = map_image_of(map).expect("the map converts");
     let (messages, last_chunks) = localizer_messages(&scans, microslam::geometry::Pose2::IDENTITY);
     let bytes = encode_all(&messages);
     let expected = host_localizer_replies(&bytes, &image).expect("host reference");
@@ -334,9 +340,10 @@ fn localizer_firmware_in_qemu_equals_host_bit_for_bit_on_intel() {
         .count();
     assert_eq!(applied, scans.len(), "every scan reaches the localizer");
 
-    let run = run_equal_to_host(&elf, bytes, &expected, Duration::from_secs(600));
+    let run = run_equal_to_host(elf, bytes, &expected, Duration::from_secs(600));
     println!(
-        "localizer: {} scans, {} frames → {} replies in {:.2} s",
+        "localizer on {}: {} scans, {} frames → {} replies in {:.2} s",
+        map.display(),
         scans.len(),
         messages.len(),
         run.replies.len(),
@@ -539,39 +546,10 @@ fn intel_relocalizations(
 #[test]
 #[ignore = "needs qemu-system-arm, the board-map localizer ELF, its map and the datasets: run by .ci/firmware.sh"]
 fn localizer_firmware_on_the_boards_own_map_tracks_and_relocalizes_on_intel() {
-    use host_sim::drivers::hil_localizer::{
-        host_localizer_replies, localizer_messages, map_image_of,
-    };
     use microslam_replay_tests::firmware::{board_map_localizer_elf, board_map_localizer_map};
     let (elf, map) = (board_map_localizer_elf(), board_map_localizer_map());
     let relocalized = intel_relocalizations(&elf, &map, &INTEL_STARTS);
-    let log_path = host_sim::inputs::readers::carmen::resolve_log("intel/intel-raw-part.clf")
-        .expect("Intel log");
-    let log = host_sim::inputs::readers::carmen::read_log(&log_path).expect("Intel log reads");
-    let mut scans = host_sim::inputs::readers::carmen::front_scans(&log);
-    scans.truncate(400);
-    let image = map_image_of(&map).expect("the board's image converts");
-    let (messages, last_chunks) = localizer_messages(&scans, microslam::geometry::Pose2::IDENTITY);
-    let bytes = encode_all(&messages);
-    let expected = host_localizer_replies(&bytes, &image).expect("host reference");
-    let applied = last_chunks
-        .iter()
-        .filter(|&&i| {
-            matches!(expected.get(i), Some(ToHost::Localization { estimate, .. })
-                if estimate.result == StepResult::Applied
-                    && estimate.estimator == EstimatorKind::Localizer)
-        })
-        .count();
-    assert_eq!(applied, scans.len(), "every scan reaches the localizer");
-    let run = run_equal_to_host(&elf, bytes, &expected, Duration::from_secs(600));
-    println!(
-        "board map: {} scans tracked, {} replies equal to the host's in {:.2} s",
-        scans.len(),
-        run.replies.len(),
-        run.elapsed.as_secs_f64()
-    );
-    let (_, _, stack_peak_bytes) = final_status(&run.replies);
-    println!("firmware stack peak with localizer: {stack_peak_bytes} bytes");
+    intel_tracking(&elf, &map, 400);
     // Measured: all five found, 0.013-0.035 m and at most 0.15° from the reference.
     assert_eq!(
         relocalized,
