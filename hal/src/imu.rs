@@ -8,9 +8,10 @@ use mpu6050_dmp::config::DigitalLowPassFilter;
 use mpu6050_dmp::gyro::GyroFullScale;
 use mpu6050_dmp::sensor::Mpu6050;
 
-/// The MPU-6050's identity register, and what an MPU-6050 answers.
+/// The MPU-6050's identity register (`WHO_AM_I`).
 const WHO_AM_I: u8 = 0x75;
-/// What an MPU-6050 answers at [`WHO_AM_I`] (an MPU-6500 answers 0x70, an MPU-9250 0x71).
+/// What an MPU-6050 answers at its `WHO_AM_I` register, 0x75 (an MPU-6500 answers 0x70,
+/// an MPU-9250 0x71).
 pub const MPU6050_ID: u8 = 0x68;
 
 /// Why the gyro could not be set up or read.
