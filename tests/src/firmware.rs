@@ -58,6 +58,25 @@ pub fn run_in_qemu(
     host_sim::drivers::hil::run_qemu(elf, bytes, expected, timeout).expect("qemu-system-arm runs")
 }
 
+/// [`run_in_qemu`] on another QEMU board.
+pub fn run_in_qemu_on(
+    machine: host_sim::drivers::hil::QemuMachine,
+    elf: &Path,
+    bytes: Vec<u8>,
+    expected: Expected<'_>,
+    timeout: Duration,
+) -> QemuRun {
+    host_sim::drivers::hil::run_qemu_on(machine, elf, bytes, expected, timeout)
+        .expect("qemu-system-arm runs")
+}
+
+/// The STM32 build of the firmware for QEMU's `netduinoplus2` (`--no-default-features
+/// --features stm32f411,stm32-in-qemu`): `$STM32_QEMU_ELF`, else
+/// `target/firmware-elf/stm32-qemu.elf` (where `.ci/firmware.sh` puts it).
+pub fn stm32_qemu_elf() -> PathBuf {
+    path_from_env("STM32_QEMU_ELF", "target/firmware-elf/stm32-qemu.elf")
+}
+
 /// A deterministic drive: a robot circling twice through a ring of 12 landmarks, velocity
 /// odometry at 10 Hz with a slowly varying bias, range-bearing sightings (with
 /// deterministic "noise") of the landmarks within 4 m and ±60°, a reset half-way (to

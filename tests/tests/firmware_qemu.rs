@@ -6,10 +6,11 @@
 
 use std::time::Duration;
 
+use host_sim::drivers::hil::QemuMachine;
 use microslam::wire::{EstimatorKind, Status, StepResult, ToDevice, ToHost};
 use microslam_replay_tests::firmware::{
     Expected, QemuRun, encode_all, firmware_elf, host_replies, lidar_world_messages, run_in_qemu,
-    synthetic_drive, synthetic_lidar_drive, with_line_noise,
+    run_in_qemu_on, synthetic_drive, synthetic_lidar_drive, with_line_noise,
 };
 
 /// Bits of every f32, so that equality means bit for bit (and NaN = NaN).
@@ -57,7 +58,18 @@ fn run_equal_to_host(
     expected: &[ToHost],
     timeout: Duration,
 ) -> QemuRun {
-    let run = run_in_qemu(elf, bytes, Expected::host(expected), timeout);
+    run_equal_to_host_on(QemuMachine::Mps2An386, elf, bytes, expected, timeout)
+}
+
+/// [`run_equal_to_host`] on the QEMU board `machine`.
+fn run_equal_to_host_on(
+    machine: QemuMachine,
+    elf: &std::path::Path,
+    bytes: Vec<u8>,
+    expected: &[ToHost],
+    timeout: Duration,
+) -> QemuRun {
+    let run = run_in_qemu_on(machine, elf, bytes, Expected::host(expected), timeout);
     assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
     assert_eq!(run.replies.len(), expected.len(), "every message answered");
     for (i, (got, want)) in run.replies.iter().zip(expected).enumerate() {
@@ -103,6 +115,48 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_a_synthetic_drive() {
     assert_eq!(status.frames_ok as usize, messages.len());
     println!("firmware stack peak: {stack_peak_bytes} bytes");
     assert!(stack_peak_bytes > 0);
+}
+
+/// The STM32 build (`--features stm32f411,stm32-in-qemu`: USART2 and GPIO through
+/// stm32f4xx-hal, the clocks left at the reset HSI because QEMU does not model the RCC)
+/// under QEMU's `netduinoplus2`, an STM32F405 (the STM32F4 memory map and USARTs): the
+/// synthetic EKF drive with line noise, then the lidar drive through the grid SLAM;
+/// every reply equals the host's bit for bit and every noise burst is counted.
+#[test]
+#[ignore = "needs qemu-system-arm and the STM32 ELF for QEMU: run by .ci/firmware.sh"]
+fn stm32_build_under_netduinoplus2_equals_host_bit_for_bit() {
+    use microslam_replay_tests::firmware::stm32_qemu_elf;
+    let elf = built(stm32_qemu_elf());
+    let messages = synthetic_drive();
+    let (bytes, noise) = with_line_noise(&encode_all(&messages), 97);
+    let expected = host_replies(&bytes);
+    let run = run_equal_to_host_on(
+        QemuMachine::NetduinoPlus2,
+        &elf,
+        bytes,
+        &expected,
+        Duration::from_secs(240),
+    );
+    let (_, status, ekf_stack) = final_status(&run.replies);
+    assert_eq!(status.frames_bad, noise, "every noise burst counted once");
+    assert_eq!(status.frames_ok as usize, messages.len());
+
+    let (messages, scans) = synthetic_lidar_drive(100);
+    let bytes = encode_all(&messages);
+    let expected = host_replies(&bytes);
+    let run = run_equal_to_host_on(
+        QemuMachine::NetduinoPlus2,
+        &elf,
+        bytes,
+        &expected,
+        Duration::from_secs(600),
+    );
+    let (_, status, grid_stack) = final_status(&run.replies);
+    assert!(status.resamples > 0, "the grid SLAM ran");
+    println!(
+        "STM32 build on netduinoplus2: EKF drive and {scans} lidar scans equal to the host; \
+         stack peaks {ekf_stack} / {grid_stack} bytes"
+    );
 }
 
 /// MRCLAM dataset 6, robot 1 (62 k odometry samples, 1.9 k sightings of 15 landmarks with

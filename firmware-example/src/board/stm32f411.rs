@@ -23,7 +23,13 @@ pub fn init() -> (Serial, Led) {
         defmt::error!("peripherals taken twice");
         halt(2)
     };
-    let mut rcc = dp.RCC.freeze(Config::hsi().sysclk(100.MHz()));
+    // QEMU's netduinoplus2 does not model the RCC: its PLL never reports ready, so that
+    // build stays on the 16 MHz HSI the chip starts on (the USART's divider follows).
+    #[cfg(feature = "stm32-in-qemu")]
+    let clocks = Config::hsi();
+    #[cfg(not(feature = "stm32-in-qemu"))]
+    let clocks = Config::hsi().sysclk(100.MHz());
+    let mut rcc = dp.RCC.freeze(clocks);
     let gpioa = dp.GPIOA.split(&mut rcc);
     let led = gpioa.pa5.into_push_pull_output();
     let serial = match dp

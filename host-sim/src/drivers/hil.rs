@@ -369,6 +369,45 @@ fn reader_thread(mut source: impl Read + Send + 'static) -> mpsc::Receiver<Vec<u
     rx
 }
 
+/// How long the STM32 firmware is given under `netduinoplus2` to enable its USART before
+/// the host writes (QEMU's model of it drops bytes that arrive before).
+const NETDUINO_BOOT: Duration = Duration::from_millis(500);
+
+/// The QEMU board a firmware runs on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum QemuMachine {
+    /// `mps2-an386` (Cortex-M4): the firmware's `qemu` build, its link on UART0.
+    Mps2An386,
+    /// `netduinoplus2`, an STM32F405 (Cortex-M4F, the STM32F4 memory map and USARTs): the
+    /// firmware's STM32 build (`stm32f411,stm32-in-qemu`), its link on USART2.
+    NetduinoPlus2,
+}
+
+impl QemuMachine {
+    /// QEMU's arguments for the board and for its link on the child's stdin/stdout: on
+    /// the netduino, `-serial` goes to USART1, USART2, … in order, so the first is null.
+    fn args(self) -> &'static [&'static str] {
+        match self {
+            Self::Mps2An386 => &[
+                "-machine",
+                "mps2-an386",
+                "-cpu",
+                "cortex-m4",
+                "-serial",
+                "stdio",
+            ],
+            Self::NetduinoPlus2 => &[
+                "-machine",
+                "netduinoplus2",
+                "-serial",
+                "null",
+                "-serial",
+                "stdio",
+            ],
+        }
+    }
+}
+
 /// Runs `elf` under QEMU (`mps2-an386`, UART0 on the child's stdin/stdout, semihosting
 /// on a file next to the ELF), writes `bytes` and collects the `expected` replies (a
 /// stream that opens with the [`handshake`] is refused when the firmware does not answer
@@ -379,10 +418,21 @@ pub fn run_qemu(
     expected: Expected<'_>,
     timeout: Duration,
 ) -> Result<LinkRun> {
+    run_qemu_on(QemuMachine::Mps2An386, elf, bytes, expected, timeout)
+}
+
+/// [`run_qemu`] on the board `machine`.
+pub fn run_qemu_on(
+    machine: QemuMachine,
+    elf: &Path,
+    bytes: Vec<u8>,
+    expected: Expected<'_>,
+    timeout: Duration,
+) -> Result<LinkRun> {
     let semihosting_log = elf.with_extension("semihosting.log");
     let mut child: Child = Command::new("qemu-system-arm")
-        .args(["-machine", "mps2-an386", "-cpu", "cortex-m4"])
-        .args(["-display", "none", "-monitor", "none", "-serial", "stdio"])
+        .args(machine.args())
+        .args(["-display", "none", "-monitor", "none"])
         .arg("-chardev")
         .arg(format!("file,id=semi,path={}", semihosting_log.display()))
         .args([
@@ -402,6 +452,11 @@ pub fn run_qemu(
         bail!("qemu-system-arm without piped stdio");
     };
     let rx = reader_thread(stdout);
+    if machine == QemuMachine::NetduinoPlus2 {
+        // The STM32 USART model drops what arrives before the firmware has enabled it
+        // (the mps2 UART does not): let the firmware boot first.
+        thread::sleep(NETDUINO_BOOT);
+    }
     let exchanged = exchange(stdin, &rx, bytes, expected, timeout);
     let _ = child.kill();
     let _ = child.wait();
