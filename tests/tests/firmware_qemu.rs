@@ -120,10 +120,11 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_a_synthetic_drive() {
 /// The STM32 build (`--features stm32f411,stm32-in-qemu`: USART2 and GPIO through
 /// stm32f4xx-hal, the clocks left at the reset HSI because QEMU does not model the RCC)
 /// under QEMU's `netduinoplus2`, an STM32F405 (the STM32F4 memory map and USARTs): the
-/// synthetic EKF drive with line noise, then the lidar drive through the grid SLAM;
+/// synthetic EKF drive with line noise, the lidar drive through the grid SLAM, and MRCLAM
+/// dataset 6 robot 1 with 1 % of its frames corrupted (as the mps2 build's HIL test);
 /// every reply equals the host's bit for bit and every noise burst is counted.
 #[test]
-#[ignore = "needs qemu-system-arm and the STM32 ELF for QEMU: run by .ci/firmware.sh"]
+#[ignore = "needs qemu-system-arm, the STM32 ELF for QEMU and the datasets: run by .ci/firmware.sh"]
 fn stm32_build_under_netduinoplus2_equals_host_bit_for_bit() {
     use microslam_replay_tests::firmware::stm32_qemu_elf;
     let elf = built(stm32_qemu_elf());
@@ -157,6 +158,9 @@ fn stm32_build_under_netduinoplus2_equals_host_bit_for_bit() {
         "STM32 build on netduinoplus2: EKF drive and {scans} lidar scans equal to the host; \
          stack peaks {ekf_stack} / {grid_stack} bytes"
     );
+    // The HIL equality of the mps2 build: MRCLAM dataset 6, robot 1, 1 % of the frames
+    // corrupted.
+    mrclam6_equal_to_host(QemuMachine::NetduinoPlus2, &elf);
 }
 
 /// MRCLAM dataset 6, robot 1 (62 k odometry samples, 1.9 k sightings of 15 landmarks with
@@ -166,6 +170,13 @@ fn stm32_build_under_netduinoplus2_equals_host_bit_for_bit() {
 #[test]
 #[ignore = "needs qemu-system-arm, the firmware ELF and the datasets: run by .ci/firmware.sh"]
 fn firmware_in_qemu_equals_host_bit_for_bit_on_mrclam_dataset6() {
+    mrclam6_equal_to_host(QemuMachine::Mps2An386, &built(firmware_elf()));
+}
+
+/// MRCLAM dataset 6, robot 1, with 1 % of the frames corrupted, through the firmware
+/// `elf` on the QEMU board `machine`: every estimate equal to the host's bit for bit,
+/// every corrupted frame counted once. Writes the device's trajectory next to the ELF.
+fn mrclam6_equal_to_host(machine: QemuMachine, elf: &std::path::Path) {
     let dir = host_sim::domain::datasets::resolve("mrclam", "dataset6").expect("MRCLAM dataset 6");
     let recording = host_sim::inputs::readers::mrclam::read(&dir, 1).expect("robot 1 reads");
     let messages = host_sim::drivers::hil::messages_for(&recording, None);
@@ -178,10 +189,15 @@ fn firmware_in_qemu_equals_host_bit_for_bit_on_mrclam_dataset6() {
         "no reply to a corrupted frame"
     );
 
-    let elf = built(firmware_elf());
-    let run = run_equal_to_host(&elf, bytes.clone(), &expected, Duration::from_secs(900));
+    let run = run_equal_to_host_on(
+        machine,
+        elf,
+        bytes.clone(),
+        &expected,
+        Duration::from_secs(900),
+    );
     println!(
-        "mrclam dataset6 robot1: {} events → {} frames ({} bytes) → {} replies in {:.1} s",
+        "mrclam dataset6 robot1 on {machine:?}: {} events → {} frames ({} bytes) → {} replies in {:.1} s",
         recording.events.len(),
         messages.len(),
         bytes.len(),
