@@ -49,6 +49,24 @@ fn a_plain_log_is_replayed_and_scored() {
     assert!(metrics["ate_rmse_m"]["se2"].is_number(), "{metrics}");
     assert!(metrics["landmark_rmse_m"]["se2"].is_number(), "{metrics}");
     assert_eq!(metrics["landmarks_created"], 2);
+    // Every record accounted for: 3 ackermann records, 4 sightings.
+    let inputs = &metrics["inputs"];
+    assert_eq!(inputs["odometry"]["read"], 3, "{inputs}");
+    assert_eq!(inputs["odometry"]["used"], 3, "{inputs}");
+    let s = &inputs["sightings"];
+    assert_eq!(s["read"], 4, "{inputs}");
+    let lost: u64 = [
+        "reader_dropped",
+        "out_of_range",
+        "gated",
+        "ambiguous",
+        "refused",
+    ]
+    .iter()
+    .map(|k| s[k].as_u64().unwrap())
+    .sum();
+    assert_eq!(s["used"].as_u64().unwrap() + lost, 4, "{inputs}");
+    assert!(!metrics.to_string().contains("null"), "{metrics}");
 }
 
 #[test]
@@ -64,6 +82,15 @@ fn an_unusable_log_fails_naming_the_file_and_line() {
         (
             "velocity 1 0.5 0\nsighting 1 -2 0.1 7\n",
             "run.txt:2: sighting field 3 (range): -2 m is not a positive range",
+        ),
+        // Read without a fault, but nothing of it can be used (issue 62).
+        (
+            "velocity 1 0.5 0\nsighting 1 200 0.1 7\nsighting 2 250 0.1 7\nvelocity 3 0 0\n",
+            "none of the 2 landmark sightings could be used (2 outside the settings' min_range ..= max_range)",
+        ),
+        (
+            "velocity 1 90 0\nsighting 1 2 0.1 7\nvelocity 2 80 0\n",
+            "none of the 2 odometry records could be used (2 refused as not finite or beyond the settings' max_speed_mps",
         ),
     ] {
         let out = replay(dir.path(), text);

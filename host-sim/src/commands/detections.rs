@@ -178,6 +178,5 @@ pub fn detections_cli(args: &DetectionsOptions, quiet: bool) -> Result<()> {
 }
 
 pub(crate) fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
-    let json = serde_json::to_string_pretty(value)?;
-    std::fs::write(path, json + "\n").with_context(|| format!("cannot write {}", path.display()))
+    crate::output::write_report(path, value)
 }

@@ -117,10 +117,7 @@ pub fn run_and_write(
         "global": global,
     });
     crate::output::create_folder(out)?;
-    std::fs::write(
-        out.join("metrics.json"),
-        serde_json::to_string_pretty(&doc)? + "\n",
-    )?;
+    crate::output::write_report(&out.join("metrics.json"), &doc)?;
     if !quiet {
         let g = &doc["global"];
         println!(

@@ -210,7 +210,7 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
         device_ate(&run.replies, &recording.ground_truth);
     crate::output::create_folder(&args.out)?;
     let report = args.out.join("hil.json");
-    std::fs::write(&report, serde_json::to_string_pretty(&comparison)?)?;
+    crate::output::write_report(&report, &comparison)?;
     std::fs::write(args.out.join("firmware.tum"), tum(&run.replies))?;
     if let Some(mut file) = super::open_mcap(args.mcap.as_deref())? {
         crate::output::mcap::scene::record_estimates(

@@ -60,12 +60,15 @@ pub struct LocalizerHil {
     /// Particles of the firmware's localizer.
     pub particles: usize,
     /// The device's stack high-water mark from its final status, bytes.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub stack_peak_bytes: Option<u32>,
     /// Wall time, s.
     pub seconds: f64,
     /// Relation error of the device's trajectory (when a relations file was found).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub relation_error: Option<crate::metrics::relations::RelationError>,
     /// The localizer's state after the last scan (lost events, relocalizations).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub final_localizer: Option<microslam::wire::LocalizerReport>,
     /// The full comparison (pose and covariance differences).
     pub comparison: crate::drivers::hil::Comparison,
@@ -173,7 +176,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
     };
     crate::output::create_folder(args.out)?;
     let json = args.out.join("hil.json");
-    std::fs::write(&json, serde_json::to_string_pretty(&report)?)?;
+    crate::output::write_report(&json, &report)?;
     let poses = trajectory(&run.replies, &scans, &last_chunks)
         .into_iter()
         .map(|(t, [x, y, th])| (t, Pose2::new(x, y, th)));

@@ -45,14 +45,18 @@ pub struct SlamHil {
     /// accepted), which the device's, bit-identical in every reply, shares.
     pub host_counters: HostCounters,
     /// The device's stack high-water mark from its final status, bytes.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub stack_peak_bytes: Option<u32>,
     /// Wall time, s.
     pub seconds: f64,
     /// Relation error of the device's trajectory (when a relations file was found).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub relation_error: Option<crate::metrics::relations::RelationError>,
     /// ATE of the device's trajectory against `--reference`, with the poses matched.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub reference: Option<ReferenceReport>,
     /// The map written: whose copy it is.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub map: Option<String>,
     /// The full comparison (pose and covariance differences, first differing message).
     pub comparison: crate::drivers::hil::Comparison,
@@ -216,7 +220,7 @@ pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
         comparison,
     };
     let json = args.out.join("hil.json");
-    std::fs::write(&json, serde_json::to_string_pretty(&report)?)?;
+    crate::output::write_report(&json, &report)?;
     std::fs::write(
         args.out.join("firmware.tum"),
         tum_text(poses.iter().copied()),

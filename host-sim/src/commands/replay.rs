@@ -185,6 +185,13 @@ pub fn run_and_report(
         }
         let pairs = crate::output::join_writer(writer)?;
         let mut metrics = crate::metrics::evaluate_paired(recording, &run, pairs);
+        if let Err(e) = crate::metrics::inputs::check_scored(recording, &metrics) {
+            // Nothing of a run that used nothing is left: the trajectory was written
+            // while the filter ran.
+            let _ = std::fs::remove_file(out.join("trajectory.tum"));
+            let _ = std::fs::remove_file(out.join("groundtruth.tum"));
+            return Err(e);
+        }
         metrics.faults = faults;
         crate::output::write_all(out, recording, &run, &mut metrics, plots, started)?;
         if let Some((file, prefix)) = mcap {
@@ -259,7 +266,7 @@ pub(crate) fn metrics_json(
     wall: f64,
 ) -> serde_json::Value {
     let scans = run.trajectory.len();
-    serde_json::json!({
+    let mut doc = serde_json::json!({
         "dataset": dataset,
         "scans": scans,
         "particles": options.particles,
@@ -298,7 +305,20 @@ pub(crate) fn metrics_json(
             }),
             "summary": summary,
         })),
-    })
+    });
+    // What does not apply to the run (no relations file, no faults, no localizer, no
+    // loop closure) is left out, never written as `null`.
+    crate::output::drop_absent(
+        &mut doc,
+        &[
+            "relations",
+            "scan_spacing",
+            "faults",
+            "localizer",
+            "loop_closure",
+        ],
+    );
+    doc
 }
 
 /// What a grid run read, used and lost of each input stream, with the reason, and a
@@ -772,10 +792,7 @@ fn thor_replay(dir: &str, run: u32, out: &Path, plots: bool, quiet: bool) -> Res
         "end_pose": [end.x, end.y, end.theta],
         "wall_time_s": start.elapsed().as_secs_f64(),
     });
-    std::fs::write(
-        out.join("metrics.json"),
-        serde_json::to_string_pretty(&metrics)? + "\n",
-    )?;
+    crate::output::write_report(&out.join("metrics.json"), &metrics)?;
     if !quiet {
         println!(
             "thor run {run}: {} encoder samples, {duration:.1} s, {length:.2} m driven; outputs in {}",

@@ -291,7 +291,7 @@ pub fn run_and_write(
     ] {
         let dir = out.join(name);
         let scans = run.trajectory.len();
-        let metrics = serde_json::json!({
+        let mut metrics = serde_json::json!({
             "dataset": rec.name,
             "estimator": what,
             "scans": scans,
@@ -319,6 +319,7 @@ pub fn run_and_write(
                 "summary": summary,
             })),
         });
+        crate::output::drop_absent(&mut metrics, &["localizer", "loop_closure"]);
         write_outputs(&dir, run, &config, &metrics, Some(&truth), plots)?;
         write_tum(
             &dir.join("groundtruth.tum"),

@@ -185,18 +185,25 @@ pub struct Row {
     /// The recording (`mrclam/dataset6/robot3`).
     pub recording: String,
     /// ATE after an SE(2) alignment, m.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub ate_se2_m: Option<f64>,
     /// Landmark RMSE after the alignment, m.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub landmark_se2_m: Option<f64>,
     /// Mean pose NEES (3 expected).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub nees_mean: Option<f64>,
     /// Share of steps whose pose NEES lies inside the 95 % χ²₃ band.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub nees_in_95: Option<f64>,
     /// Mean NIS of accepted sightings (2 expected).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub nis_mean: Option<f64>,
     /// Association purity.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub purity: Option<f64>,
     /// Dead-reckoning ATE after the alignment, m.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub dead_reckoning_se2_m: Option<f64>,
     /// Recoveries of the supervision.
     pub recoveries: usize,
@@ -206,6 +213,7 @@ pub struct Row {
     pub lost_share: f64,
     /// With ground truth: share of the estimates whose lost flag agrees with their error
     /// being above 1 m.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub lost_flag_agreement: Option<f64>,
 }
 
@@ -237,16 +245,24 @@ pub struct Aggregate {
     pub settings: usize,
     /// Its varied keys and values.
     pub label: String,
-    /// Mean ATE(se2) over the recordings, m.
+    /// Mean ATE(se2) over the recordings, m (∞ when one has none: left out of the JSON).
+    #[serde(skip_serializing_if = "not_finite")]
     pub ate_mean_m: f64,
-    /// Worst ATE(se2), m.
+    /// Worst ATE(se2), m (∞ when a recording has none: left out of the JSON).
+    #[serde(skip_serializing_if = "not_finite")]
     pub ate_worst_m: f64,
-    /// Worst mean pose NEES.
+    /// Worst mean pose NEES (∞ when a recording has none: left out of the JSON).
+    #[serde(skip_serializing_if = "not_finite")]
     pub nees_worst: f64,
     /// Lowest association purity.
     pub purity_worst: f64,
     /// Recordings scored.
     pub runs: usize,
+}
+
+/// Whether `v` is NaN or infinite (a figure left out of the JSON).
+fn not_finite(v: &f64) -> bool {
+    !v.is_finite()
 }
 
 /// The whole table.
@@ -421,10 +437,7 @@ pub fn write(out: &Path, table: &Table) -> Result<()> {
     crate::output::create_folder(out)?;
     std::fs::write(out.join("sweep.csv"), csv(table))
         .with_context(|| format!("cannot write {}", out.join("sweep.csv").display()))?;
-    let json = serde_json::to_string_pretty(table)?;
-    std::fs::write(out.join("sweep.json"), json)
-        .with_context(|| format!("cannot write {}", out.join("sweep.json").display()))?;
-    Ok(())
+    crate::output::write_report(&out.join("sweep.json"), table)
 }
 
 /// The rows as CSV (a header line; text fields quoted, empty cells for missing figures).

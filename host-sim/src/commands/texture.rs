@@ -48,6 +48,7 @@ pub struct TextureReport {
     /// hints).
     pub ekf_poses: TextureError,
     /// ATE of those EKF poses (SE(2)-aligned), metres; the map uses them unaligned.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub ekf_ate_rmse_m: Option<f64>,
 }
 

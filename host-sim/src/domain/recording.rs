@@ -38,6 +38,9 @@ pub struct Recording {
     pub initial_pose: Option<Pose2<f64>>,
     /// Sightings the reader dropped (of other robots, unknown barcodes).
     pub dropped_sightings: usize,
+    /// Why the reader dropped them, with counts by reason (`metrics.json`'s
+    /// `inputs.sightings.reader_dropped_because`; empty when none were dropped).
+    pub dropped_reason: String,
 }
 
 impl Recording {

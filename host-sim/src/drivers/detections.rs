@@ -216,6 +216,7 @@ pub fn camera_recording(
         landmarks: base.landmarks.clone(),
         initial_pose: base.initial_pose,
         dropped_sightings: 0,
+        dropped_reason: String::new(),
     };
     Ok((recording, detections))
 }
@@ -249,6 +250,7 @@ pub struct ClassReport {
     /// Wrong-class detections dropped (ambiguous, refused).
     pub dropped: usize,
     /// `corrected / wrong_class`.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub corrected_share: Option<f64>,
     /// Right-class detections associated with another sign's landmark.
     pub right_class_misassociated: usize,

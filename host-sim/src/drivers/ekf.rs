@@ -110,8 +110,10 @@ pub struct AssociationCounts {
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct Calibration {
     /// Odometry speed and turn-rate scale factors `[s_v, s_ω]`.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub odometry_scale: Option<[f64; 2]>,
     /// Range bias `[b₀ (m), b₂ (m/rad²)]`: ranges measured `r + b₀ + b₂ β²`.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub range_bias: Option<[f64; 2]>,
 }
 
@@ -711,6 +713,7 @@ mod tests {
             landmarks: Vec::new(),
             initial_pose: Some(Pose2::new(1.0, -2.0, 0.5)),
             dropped_sightings: 0,
+            dropped_reason: String::new(),
         }
     }
 

@@ -53,6 +53,7 @@ pub struct Trial {
     /// Its time stamp.
     pub stamp: f64,
     /// First scan (1-based) from which the estimate stays within tolerance, if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub scans_to_converge: Option<usize>,
     /// Position error after each scan, metres.
     pub error_m: Vec<f64>,
@@ -60,12 +61,15 @@ pub struct Trial {
     pub error_deg: Vec<f64>,
     /// The localizer's state after each scan (`lost`, `relocalized`, `tracking`).
     pub state: Vec<&'static str>,
-    /// Position error of the search's best hypothesis, metres.
-    pub best_hypothesis_error_m: f64,
+    /// Position error of the search's best hypothesis, metres (none when the search
+    /// ended without one).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub best_hypothesis_error_m: Option<f64>,
     /// Hypotheses the particles were spread over.
     pub hypotheses: usize,
     /// The search that seeded the particles (none when every search of the trial ended
     /// without a hypothesis: see `failed_searches`).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub search: Option<SearchSummary>,
     /// Searches of the trial that ended without a hypothesis above the minimum score (the
     /// localizer then searches again from the next scan).
@@ -329,7 +333,7 @@ fn trial_p<const P: usize>(
         error_m: Vec::new(),
         error_deg: Vec::new(),
         state: Vec::new(),
-        best_hypothesis_error_m: f64::NAN,
+        best_hypothesis_error_m: None,
         hypotheses: 0,
         search: None,
         failed_searches: 0,
@@ -362,10 +366,8 @@ fn trial_p<const P: usize>(
                 .hypotheses()
                 .len()
                 .min(usize::from(settings.relocalization.hypotheses));
-            trial.best_hypothesis_error_m = loc
-                .hypotheses()
-                .first()
-                .map_or(f64::NAN, |h| errors(&h.pose, want).0);
+            trial.best_hypothesis_error_m =
+                loc.hypotheses().first().map(|h| errors(&h.pose, want).0);
         }
         let (m, d) = errors(&loc.pose(), want);
         trial.error_m.push(m);

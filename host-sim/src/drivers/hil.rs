@@ -549,23 +549,29 @@ pub struct Comparison {
     /// Wall time of the run, s.
     pub seconds: f64,
     /// The device's stack high-water mark from its final status, bytes.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub stack_peak_bytes: Option<u32>,
     /// Frames corrupted on purpose (`--corrupt-frames`).
     pub corrupted_frames: usize,
     /// Bad frames the device counted, from its final status.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub device_frames_bad: Option<u32>,
     /// ATE of the device's trajectory against the recording's ground truth after the SE(2)
     /// least-squares alignment (estimates inside the ground truth's time span), m.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub device_ate_se2_m: Option<f64>,
     /// How many device estimates that ATE is over.
     pub device_ate_poses: usize,
     /// The wire protocol version of the device's last status, when one decoded.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub device_protocol: Option<u16>,
     /// The CRC-32 of the map image in the device's flash, from its last status (`None`:
     /// no valid map, or no status).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub device_map_checksum: Option<u32>,
     /// Index (in the messages sent, from 0) of the first reply that differs from the
     /// host's, when one does.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub first_difference: Option<usize>,
 }
 

@@ -169,6 +169,7 @@ impl TextureMap {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct TextureError {
     /// Mean over covered cells of the mean absolute R, G, B difference (0–255 scale).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub mean_abs_rgb_error: Option<f64>,
     /// Cells with at least one floor point.
     pub covered_cells: usize,
@@ -177,6 +178,7 @@ pub struct TextureError {
     /// `covered_cells / floor_cells`.
     pub coverage: f64,
     /// Share of covered cells whose error is at most 10.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub share_within_10: Option<f64>,
 }
 

@@ -285,6 +285,7 @@ mod tests {
             landmarks: Vec::new(),
             initial_pose: Some(Pose2::new(1.0, 2.0, 0.3)),
             dropped_sightings: 0,
+            dropped_reason: String::new(),
         }
     }
 

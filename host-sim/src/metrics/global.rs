@@ -68,7 +68,8 @@ pub fn metrics(
             "relocalized": ending("relocalized"),
             "lost": ending("lost"),
         },
-        "scans_to_converge": trials.iter().map(|t| t.scans_to_converge).collect::<Vec<_>>(),
+        // Of the trials that converged (`per_trial` has every trial).
+        "scans_to_converge": trials.iter().filter_map(|t| t.scans_to_converge).collect::<Vec<_>>(),
         "tolerance_m": settings.tolerance_m,
         "tolerance_deg": settings.tolerance_deg,
         "max_scans": settings.max_scans,

@@ -22,6 +22,7 @@ mod alignment;
 mod assignment;
 pub mod global;
 pub mod grid;
+pub mod inputs;
 pub mod reference;
 pub mod relations;
 
@@ -57,13 +58,22 @@ fn smallest_position_variance(p: &[[f64; 3]; 3]) -> f64 {
     (a + d) / 2.0 - half_gap
 }
 
-/// A figure under both alignments (`null` in JSON when it cannot be computed).
+/// A figure under both alignments (left out of the JSON where it cannot be computed).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct Aligned {
     /// Both paths in the frames of their own first poses.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub first_pose: Option<f64>,
     /// Least-squares rotation + translation.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub se2: Option<f64>,
+}
+
+impl Aligned {
+    /// Neither alignment gave a figure (the whole entry is left out of the JSON).
+    pub fn is_empty(&self) -> bool {
+        self.first_pose.is_none() && self.se2.is_none()
+    }
 }
 
 /// One landmark's error after the `se2` alignment.
@@ -85,18 +95,24 @@ pub struct Metrics {
     /// Landmark sightings offered to the estimator.
     pub sightings: usize,
     /// Absolute trajectory error, RMSE of positions, metres.
+    #[serde(skip_serializing_if = "Aligned::is_empty")]
     pub ate_rmse_m: Aligned,
     /// RMSE of headings, degrees.
+    #[serde(skip_serializing_if = "Aligned::is_empty")]
     pub yaw_rmse_deg: Aligned,
     /// RMSE of landmark positions, metres.
+    #[serde(skip_serializing_if = "Aligned::is_empty")]
     pub landmark_rmse_m: Aligned,
     /// Landmarks in the final map.
     pub landmarks_created: usize,
     /// Cluster purity of the association (see the module docs).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub association_purity: Option<f64>,
     /// Mean NEES of the pose (3 dof).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub nees_pose_mean: Option<f64>,
     /// Mean NIS of accepted updates (2 dof).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub nis_mean: Option<f64>,
     /// Wall time of the whole command (reading, replay, scoring, writing), seconds.
     pub wall_time_s: f64,
@@ -109,30 +125,37 @@ pub struct Metrics {
     /// Filter scalar.
     pub precision: String,
     /// One-to-one purity: duplicates count as errors too (see the module docs).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub association_one_to_one_purity: Option<f64>,
     /// True landmarks in the dataset.
     pub landmarks_true: usize,
     /// Estimates scored against ground truth.
     pub evaluated_poses: usize,
     /// ATE of odometry alone (dead reckoning), same alignments.
+    #[serde(skip_serializing_if = "Aligned::is_empty")]
     pub dead_reckoning_ate_rmse_m: Aligned,
     /// Fraction of evaluated estimates whose NEES is below the 95 % χ²(3) quantile.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub nees_pose_within_95: Option<f64>,
     /// What the association did.
     pub counts: crate::drivers::ekf::AssociationCounts,
     /// Sightings dropped by the reader (other robots, unknown barcodes).
     pub reader_dropped_sightings: usize,
+    /// What the run read, used and lost of each input stream, with the reasons.
+    pub inputs: inputs::EkfInputs,
     /// Self-calibration the filter estimated (odometry scale, range bias).
     pub calibration: crate::drivers::ekf::Calibration,
     /// Faults injected into the event stream (`replay --faults`), if any.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub faults: Option<crate::inputs::faults::FaultReport>,
     /// The SE(2) alignment of the estimate onto ground truth: x, y (m), θ (rad).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub se2_alignment: Option<[f64; 3]>,
     /// What the `se2` landmark error was aligned on: `trajectory` (the robot's ground
     /// truth) or `landmarks` (no robot ground truth: the estimated landmarks, matched by
     /// id — with hidden ids by the true landmark most of each one's sightings were of —
     /// least-squares aligned onto the true ones).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub landmark_alignment: Option<String>,
     /// Each landmark's error under the alignment of `landmark_rmse_m.se2`, by true id:
     /// which landmarks make up the RMSE.
@@ -143,10 +166,12 @@ pub struct Metrics {
     pub lost_reported: bool,
     /// With ground truth: whether the report agrees with the ATE(se2), lost being an ATE
     /// above [`LOST_ERROR_M`].
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub lost_report_agrees: Option<bool>,
     /// With ground truth: share of the evaluated estimates whose lost flag agrees with
     /// their own position error (after the `se2` alignment) being above
     /// [`LOST_ERROR_M`].
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub lost_flag_agreement: Option<f64>,
 }
 
@@ -265,6 +290,7 @@ fn evaluate_filter(recording: &Recording, run: &ReplayRun, pairs: PosePairs<'_>)
         counts: run.counts,
         calibration: run.calibration,
         reader_dropped_sightings: recording.dropped_sightings,
+        inputs: inputs::EkfInputs::of(recording, run),
         faults: None,
         se2_alignment,
         ..Metrics::default()

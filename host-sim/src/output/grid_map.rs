@@ -118,10 +118,7 @@ pub fn write_outputs(
         &out.join("trajectory.tum"),
         run.trajectory.iter().map(|(t, p)| (*t, p.cast())),
     )?;
-    super::write_file(
-        &out.join("metrics.json"),
-        serde_json::to_string_pretty(metrics)? + "\n",
-    )?;
+    super::write_report(&out.join("metrics.json"), metrics)?;
     Ok(())
 }
 

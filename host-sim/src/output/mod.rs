@@ -9,11 +9,13 @@ pub mod grid_picture;
 pub mod landmark_log;
 pub mod mcap;
 mod plots;
+pub mod report;
 pub mod rosbag;
 pub mod thor;
 mod tum;
 
 pub use plots::{draw_errors, draw_map, write_png};
+pub use report::{drop_absent, write_report};
 pub use tum::{tum_line, tum_text, write_tum};
 
 use crate::domain::recording::Recording;
@@ -90,9 +92,7 @@ pub fn write_all(
     }
     write_landmarks(&out.join("landmarks.csv"), run)?;
     metrics.wall_time_s = started.elapsed().as_secs_f64();
-    let json = serde_json::to_string_pretty(metrics)?;
-    let path = out.join("metrics.json");
-    write_file(&path, json + "\n")
+    write_report(&out.join("metrics.json"), metrics)
 }
 
 /// The result of a scoped writer thread (a panic in it becomes an error).

@@ -302,6 +302,11 @@ pub fn parse(path: &Path, text: &str) -> Result<Recording, ReadError> {
         landmarks,
         initial_pose,
         dropped_sightings: skipped,
+        dropped_reason: if skipped > 0 {
+            format!("{skipped} before the first motion record")
+        } else {
+            String::new()
+        },
     })
 }
 

@@ -96,7 +96,8 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
         );
     }
     events.reserve(measurements.len());
-    let mut dropped = 0;
+    // Sightings dropped: of the other robots, and of barcodes Barcodes.dat does not list.
+    let (mut of_robots, mut unknown) = (0, 0);
     let mut order = InOrder::new(&meas_path);
     for row in &measurements {
         let [t, code, range, bearing] = row.values;
@@ -120,7 +121,8 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
                     covariance: None,
                 }),
             )),
-            _ => dropped += 1,
+            Some(_) => of_robots += 1,
+            None => unknown += 1,
         }
     }
     sort_events(&mut events)?;
@@ -158,7 +160,16 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
         ground_truth,
         landmarks,
         initial_pose,
-        dropped_sightings: dropped,
+        dropped_sightings: of_robots + unknown,
+        dropped_reason: match (of_robots, unknown) {
+            (0, 0) => String::new(),
+            (r, 0) => format!("{r} of other robots"),
+            (0, u) => format!("{u} of a barcode {} does not list", barcodes_path.display()),
+            (r, u) => format!(
+                "{r} of other robots, {u} of a barcode {} does not list",
+                barcodes_path.display()
+            ),
+        },
     })
 }
 
@@ -260,6 +271,32 @@ mod tests {
         );
         write("Landmark_Groundtruth.dat", &format!("{landmark_row}\n"));
         dir
+    }
+
+    #[test]
+    fn dropped_sightings_are_counted_by_reason() {
+        let dir = folder("10.1\t1.01\t2.0\t0.0", "6\t3.0\t4.0\t0.01\t0.01");
+        let head = "# a\n# b\n# c\n# d\n";
+        std::fs::write(
+            dir.path().join("Barcodes.dat"),
+            format!("{head}2\t14\n6\t72\n"),
+        )
+        .unwrap();
+        std::fs::write(
+            dir.path().join("Robot1_Measurement.dat"),
+            format!("{head}10.05\t72\t2.0\t0.1\n10.06\t14\t2.0\t0.1\n10.07\t99\t2.0\t0.1\n10.08\t98\t2.0\t0.1\n"),
+        )
+        .unwrap();
+        let r = read(dir.path(), 1).unwrap();
+        assert_eq!(r.dropped_sightings, 3);
+        let barcodes = dir.path().join("Barcodes.dat");
+        assert_eq!(
+            r.dropped_reason,
+            format!(
+                "1 of other robots, 2 of a barcode {} does not list",
+                barcodes.display()
+            )
+        );
     }
 
     #[test]

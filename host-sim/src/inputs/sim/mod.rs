@@ -171,6 +171,7 @@ fn simulate_drive(
             std::f64::consts::FRAC_PI_2,
         )),
         dropped_sightings: 0,
+        dropped_reason: String::new(),
     })
 }
 

@@ -1,0 +1,222 @@
+//! What a landmark EKF replay read, used and lost of each input stream, with the reasons
+//! (`metrics.json`'s `inputs`), and the refusal of a run that used none of an input it
+//! needs.
+//!
+//! Every odometry record and every sighting of the recording is accounted for: `read` is
+//! `used` plus each way of losing one. A sighting is *used* when it corrected the filter
+//! or created a landmark; one the association turned down (outside the gate, ambiguous)
+//! was read and weighed but not used, which is the filter working, not lost input.
+
+use crate::domain::recording::Recording;
+use crate::drivers::ekf::ReplayRun;
+use anyhow::{Result, bail};
+use serde::Serialize;
+
+/// The odometry stream of a replay.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct OdometryUse {
+    /// Odometry records in the replayed stream.
+    pub read: usize,
+    /// Records that moved the filter.
+    pub used: usize,
+    /// Records refused: a non-finite or implausible reading (beyond the settings'
+    /// `max_speed_mps`, `max_turn_rate_radps`), the previous one held.
+    pub refused_implausible: usize,
+    /// Predictions the filter refused (a step it could not take: the robot would leave
+    /// the 100 km the filter holds, a non-finite result); the filter stayed where it was.
+    pub refused_by_filter: usize,
+}
+
+/// The sightings of a replay.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SightingUse {
+    /// Sightings in the recording's files (those the reader dropped included).
+    pub read: usize,
+    /// Dropped by the reader (`reader_dropped_because` says why).
+    pub reader_dropped: usize,
+    /// The reader's reasons, with counts (left out when it dropped none).
+    #[serde(skip_serializing_if = "String::is_empty")]
+    pub reader_dropped_because: String,
+    /// Outside the settings' `min_range ..= max_range`, or not a valid reading.
+    pub out_of_range: usize,
+    /// Turned down by the association: outside the innovation gate.
+    pub gated: usize,
+    /// Turned down by the association: near a landmark but compatible with none.
+    pub ambiguous: usize,
+    /// Refused by the filter (a full landmark table, a numerical refusal).
+    pub refused: usize,
+    /// Corrected the filter or created a landmark.
+    pub used: usize,
+}
+
+/// `metrics.json`'s `inputs`: every record of each stream accounted for.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct EkfInputs {
+    /// The odometry.
+    pub odometry: OdometryUse,
+    /// The landmark sightings.
+    pub sightings: SightingUse,
+}
+
+impl EkfInputs {
+    /// The streams of `run`, a replay of `recording`.
+    pub fn of(recording: &Recording, run: &ReplayRun) -> Self {
+        let c = &run.counts;
+        let refused_odometry = c.odometry_refused + c.predictions_refused;
+        let used = c.updates + c.added;
+        Self {
+            odometry: OdometryUse {
+                read: run.steps,
+                used: run.steps.saturating_sub(refused_odometry),
+                refused_implausible: c.odometry_refused,
+                refused_by_filter: c.predictions_refused,
+            },
+            sightings: SightingUse {
+                read: run.sightings + recording.dropped_sightings,
+                reader_dropped: recording.dropped_sightings,
+                reader_dropped_because: recording.dropped_reason.clone(),
+                out_of_range: c.dropped,
+                gated: c.gated,
+                ambiguous: c.ambiguous,
+                // Whatever reached the filter and was neither used nor turned down.
+                refused: run
+                    .sightings
+                    .saturating_sub(used + c.dropped + c.gated + c.ambiguous),
+                used,
+            },
+        }
+    }
+
+    /// Refuses a run that used none of an input it needs, naming the recording and the
+    /// counts: no odometry record, every one refused, no sighting, or none used. Checked
+    /// before anything is written, so such a run never exits 0.
+    pub fn check_used(&self, dataset: &str) -> Result<()> {
+        let o = &self.odometry;
+        if o.read == 0 {
+            bail!("{dataset}: no odometry record: nothing drives the filter");
+        }
+        if o.used == 0 {
+            bail!(
+                "{dataset}: none of the {} odometry records could be used ({} refused as \
+                 not finite or beyond the settings' max_speed_mps / max_turn_rate_radps, \
+                 {} refused by the filter)",
+                o.read,
+                o.refused_implausible,
+                o.refused_by_filter
+            );
+        }
+        let s = &self.sightings;
+        if s.read == 0 {
+            bail!("{dataset}: no landmark sighting: nothing to map");
+        }
+        if s.used == 0 {
+            let mut why = Vec::new();
+            if s.reader_dropped > 0 {
+                why.push(format!(
+                    "{} dropped by the reader: {}",
+                    s.reader_dropped, s.reader_dropped_because
+                ));
+            }
+            for (n, what) in [
+                (
+                    s.out_of_range,
+                    "outside the settings' min_range ..= max_range",
+                ),
+                (s.gated, "outside the innovation gate"),
+                (s.ambiguous, "ambiguous"),
+                (s.refused, "refused by the filter"),
+            ] {
+                if n > 0 {
+                    why.push(format!("{n} {what}"));
+                }
+            }
+            bail!(
+                "{dataset}: none of the {} landmark sightings could be used ({})",
+                s.read,
+                why.join("; ")
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Refuses a landmark replay that used none of an input it needs
+/// ([`crate::metrics::inputs::EkfInputs::check_used`]) or whose ground truth it could not
+/// be scored against (robot ground truth that overlaps no estimate).
+pub fn check_scored(recording: &Recording, metrics: &super::Metrics) -> Result<()> {
+    metrics.inputs.check_used(&recording.name)?;
+    if !recording.ground_truth.is_empty() && metrics.evaluated_poses == 0 {
+        let (first, last) = (
+            recording.ground_truth.first().map_or(0.0, |g| g.stamp),
+            recording.ground_truth.last().map_or(0.0, |g| g.stamp),
+        );
+        bail!(
+            "{}: the ground truth ({} poses, {first} s ..= {last} s) overlaps none of the              {} estimates' stamps: no ATE can be computed",
+            recording.name,
+            recording.ground_truth.len(),
+            metrics.steps
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::drivers::ekf::AssociationCounts;
+
+    fn inputs(steps: usize, sightings: usize, counts: AssociationCounts) -> EkfInputs {
+        EkfInputs {
+            odometry: OdometryUse {
+                read: steps,
+                used: steps - counts.odometry_refused - counts.predictions_refused,
+                refused_implausible: counts.odometry_refused,
+                refused_by_filter: counts.predictions_refused,
+            },
+            sightings: SightingUse {
+                read: sightings,
+                used: counts.updates + counts.added,
+                gated: counts.gated,
+                ..SightingUse::default()
+            },
+        }
+    }
+
+    #[test]
+    fn a_run_without_a_used_sighting_or_odometry_record_is_refused_with_the_counts() {
+        let gated = AssociationCounts {
+            gated: 7,
+            ..AssociationCounts::default()
+        };
+        let err = inputs(10, 7, gated)
+            .check_used("run.txt")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            err,
+            "run.txt: none of the 7 landmark sightings could be used (7 outside the innovation gate)"
+        );
+        let refused = AssociationCounts {
+            odometry_refused: 4,
+            updates: 3,
+            ..AssociationCounts::default()
+        };
+        let err = inputs(4, 3, refused)
+            .check_used("r")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.starts_with("r: none of the 4 odometry records could be used (4 refused"),
+            "{err}"
+        );
+        let none = AssociationCounts::default();
+        let err = inputs(5, 0, none).check_used("r").unwrap_err().to_string();
+        assert_eq!(err, "r: no landmark sighting: nothing to map");
+        let used = AssociationCounts {
+            updates: 1,
+            gated: 6,
+            ..AssociationCounts::default()
+        };
+        inputs(5, 7, used).check_used("r").unwrap();
+    }
+}
