@@ -79,7 +79,13 @@ impl RosMap {
             let (k, v) = (k.trim(), v.trim());
             let bad = |what: &str| error(yaml, format!("line {}: field `{k}`: {what}", n + 1));
             match k {
-                "image" => image = Some(v.trim_matches(['"', '\'']).to_string()),
+                "image" => {
+                    let name = v.trim_matches(['"', '\'']);
+                    if name.is_empty() {
+                        return Err(bad("names no image file"));
+                    }
+                    image = Some(name.to_string());
+                }
                 "resolution" => {
                     let r: f32 = v.parse().map_err(|_| bad("not a number"))?;
                     if !(r.is_finite() && r > 0.0) {
@@ -133,7 +139,12 @@ impl RosMap {
         let resolution = resolution.ok_or_else(|| missing("resolution"))?;
         let (origin_x, origin_y) = origin.ok_or_else(|| missing("origin"))?;
         let pgm_path = yaml.parent().unwrap_or(Path::new(".")).join(image);
-        let bytes = std::fs::read(&pgm_path).map_err(|e| error(&pgm_path, e.to_string()))?;
+        let bytes = std::fs::read(&pgm_path).map_err(|e| {
+            error(
+                &pgm_path,
+                format!("{e} (the field `image` of {})", yaml.display()),
+            )
+        })?;
         let pgm = parse_pgm(&bytes).map_err(|m| error(&pgm_path, m))?;
         let (width, height) = (pgm.width, pgm.height);
         let unit = f64::from(log_odds.nats_per_unit());
@@ -412,6 +423,24 @@ mod tests {
             ),
             "{error}"
         );
+    }
+
+    #[test]
+    fn an_image_field_naming_no_file_is_refused_with_its_line() {
+        let pgm = b"P5\n1 1\n255\n\0";
+        let yaml = "image:\nresolution: 0.05\norigin: [0, 0, 0]\n";
+        let error = RosMap::read(&files("no-image", yaml, pgm), &LogOdds::SYMMETRIC)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            error.contains("m.yaml: line 1: field `image`: names no image file"),
+            "{error}"
+        );
+        let yaml = "image: .\nresolution: 0.05\norigin: [0, 0, 0]\n";
+        let error = RosMap::read(&files("image-folder", yaml, pgm), &LogOdds::SYMMETRIC)
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains("(the field `image` of "), "{error}");
     }
 
     #[test]
