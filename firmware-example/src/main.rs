@@ -163,8 +163,8 @@ mod grid {
     use microslam::slam::keyframes::NorFlashStorage;
     use static_cell::StaticCell;
 
-    /// The estimator (maps, pose graph, workspace: 112 KB), zero bytes but for the
-    /// graph's unit noise, handed out once.
+    /// The estimator (maps, pose graph, workspace: 112 KB), all zero bytes (`.bss`: no
+    /// initial image in flash), handed out once.
     static SLAM: ConstStaticCell<Slam> = ConstStaticCell::new(Slam::zeroed());
 
     /// Where its keyframes and its map image go: the flash stand-ins.

@@ -22,12 +22,12 @@ pub(crate) type ShiftSearch =
     fn(&GridView<'_>, &Pose2<f32>, &[ScanPoint], u8, &mut [u32; MAX_SHIFTS]) -> ShiftScore;
 use super::prediction::{arc_between, drive_arc};
 use super::resampling::resample;
+use super::rng::Xoshiro128PlusPlus;
 use super::{FilterConfig, PfError};
 use crate::geometry::Pose2;
 use crate::grid::GridView;
 use rand_core::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
-use rand_xoshiro::Xoshiro128PlusPlus;
 
 /// `P` weighted pose hypotheses with their own random number generator.
 ///
@@ -63,6 +63,22 @@ pub struct UpdateReport {
 }
 
 impl<const P: usize> ParticleFilter<P> {
+    /// A filter of zero bytes, for a `static` (`.bss`): not a filter yet (zero settings,
+    /// zero weights, an unseeded generator); [`ParticleFilter::new`] builds one to replace it.
+    pub(crate) const fn zeroed() -> Self {
+        const ORIGIN: Pose2<f32> = Pose2::new(0.0, 0.0, 0.0);
+        Self {
+            poses: [ORIGIN; P],
+            log_weights: [0.0; P],
+            scratch: [ORIGIN; P],
+            rng: Xoshiro128PlusPlus::ZEROED,
+            config: FilterConfig::ZEROED,
+            last_neff: 0.0,
+            resamples: 0,
+            updates: 0,
+        }
+    }
+
     /// `P` particles at `start` with equal weights, the generator seeded from `config.seed`.
     pub fn new(config: FilterConfig, start: Pose2<f32>) -> Result<Self, PfError> {
         if !config.is_valid() {

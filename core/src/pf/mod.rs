@@ -2,8 +2,9 @@
 //! correlation and a local shift search.
 //!
 //! - [`ParticleFilter`]: `P` poses with log-weights and a seeded generator
-//!   (`rand_xoshiro`'s Xoshiro128++, Gaussians from `rand_distr`, math in `f32` and through `libm`,
-//!   so the same inputs and seed give the same output on every target).
+//!   (Xoshiro128++, bit for bit `rand_xoshiro`'s, Gaussians from `rand_distr`, math in
+//!   `f32` and through `libm`, so the same inputs and seed give the same output on every
+//!   target).
 //! - [`correlation`]: the observation model and the fast shift search, with its
 //!   brute-force reference.
 //! - [`prediction`]: the differential-drive model with noise on the inputs.
@@ -33,6 +34,7 @@ mod localizer;
 pub mod orientation;
 pub mod prediction;
 pub mod resampling;
+mod rng;
 mod slam;
 
 pub use correlation::{ScanPoint, ScanPoints, ShiftScore};
@@ -79,6 +81,25 @@ pub struct FilterConfig {
 }
 
 impl FilterConfig {
+    /// Every setting zero (the first resampling scheme, discriminant 0): not valid, only
+    /// the zero bytes of a filter in a `static` until its settings replace it.
+    pub(crate) const ZEROED: Self = Self {
+        motion_noise: MotionNoise {
+            distance_std: 0.0,
+            distance_std_per_metre: 0.0,
+            distance_std_per_radian: 0.0,
+            heading_std: 0.0,
+            heading_std_per_radian: 0.0,
+            heading_std_per_metre: 0.0,
+            sideways_std_per_metre: 0.0,
+        },
+        shift_window_cells: 0,
+        log_likelihood_per_unit: 0.0,
+        resample_neff_fraction: 0.0,
+        resampling: Resampling::Stratified,
+        seed: 0,
+    };
+
     /// `true` when every setting is finite and in range.
     pub fn is_valid(&self) -> bool {
         self.invalid_setting().is_none()
@@ -132,6 +153,24 @@ pub struct GridPfConfig {
 }
 
 impl GridPfConfig {
+    /// Every setting zero ([`FilterConfig::ZEROED`]): not valid, only the zero bytes of an
+    /// estimator in a `static` until its settings replace it.
+    pub(crate) const ZEROED: Self = Self {
+        resolution: 0.0,
+        log_odds: LogOdds {
+            hit: 0,
+            miss: 0,
+            occupied_above: 0,
+            free_below: 0,
+            min: 0,
+            max: 0,
+        },
+        beam_decimation: 0,
+        range_weight_exponent: 0.0,
+        filter: FilterConfig::ZEROED,
+        shift_prior_std_cells: 0.0,
+    };
+
     /// The grid filter as published, before any tuning: it reproduces the settings of
     /// Du (n.d.) exactly. 0.05 m cells, ±log 4 ([`LogOdds::SYMMETRIC`]), 9 × 9 shifts,
     /// range weighting γ = 2, the untempered likelihood `weight ∝ exp(corr)`, stratified

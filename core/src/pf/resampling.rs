@@ -19,8 +19,9 @@ use rand_distr::{Distribution, StandardUniform};
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum Resampling {
-    /// One uniform draw per stratum (as in Du n.d.).
-    Stratified,
+    /// One uniform draw per stratum (as in Du n.d.). Discriminant 0: the scheme of zero
+    /// bytes (a filter in `.bss` before its settings replace them).
+    Stratified = 0,
     /// One uniform draw shared by all strata.
     Systematic,
 }

@@ -221,10 +221,11 @@ impl<const B: usize> Default for BeamDirections<B> {
 }
 
 impl<const B: usize> BeamDirections<B> {
-    /// An empty table (prepared on first use).
+    /// An empty table (prepared on first use), of all zero bytes (a `static` of it lives
+    /// in `.bss`).
     pub const fn new() -> Self {
         Self {
-            directions: [(0.0, 1.0); B],
+            directions: [(0.0, 0.0); B],
             len: 0,
             key: None,
         }

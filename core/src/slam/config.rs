@@ -186,6 +186,57 @@ impl GraphSlamConfig {
         },
     };
 
+    /// Every setting zero: not valid, only the zero bytes of [`super::GraphSlam::zeroed`]
+    /// (a `static` in `.bss`) until [`super::GraphSlam::init`] replaces them.
+    pub(crate) const ZEROED: Self = Self {
+        grid: GridPfConfig::ZEROED,
+        keyframes: KeyframeSpacing {
+            distance_m: 0.0,
+            turn_rad: 0.0,
+        },
+        chain: ChainNoise {
+            position_std_m: 0.0,
+            position_std_per_m: 0.0,
+            heading_std_rad: 0.0,
+        },
+        loop_closure: LoopClosureConfig {
+            enabled: false,
+            min_age_keyframes: 0,
+            candidate_radius_m: 0.0,
+            submap_radius_m: 0.0,
+            window: MatchWindow {
+                half_width_cells: 0,
+                half_angle: 0.0,
+                angle_step: 0.0,
+                min_hit_fraction: 0.0,
+                work_budget: 0,
+                distinct_cells: 0,
+                max_runner_up: 0.0,
+            },
+            old_keyframes_per_scan: 0,
+            old_map_dilation_cells: 0,
+            work_per_scan: 0,
+            position_std_floor_m: 0.0,
+            heading_std_floor_rad: 0.0,
+            solver: SolverSettings {
+                max_iterations: 0,
+                relative_tolerance: 0.0,
+            },
+        },
+        estimate_radius: EstimateRadius {
+            position_m: 0.0,
+            heading_rad: 0.0,
+        },
+        heading_search: HeadingSearchConfig {
+            span_rad: 0.0,
+            span_per_radian: 0.0,
+            max_span_rad: 0.0,
+            step_rad: 0.0,
+            coarse_steps: 0,
+            min_gain: 0.0,
+        },
+    };
+
     /// `true` when every setting is finite and in range.
     pub fn is_valid(&self) -> bool {
         self.invalid_setting().is_none()

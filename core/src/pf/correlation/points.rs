@@ -36,7 +36,7 @@ impl<const B: usize> Default for ScanPoints<B> {
 }
 
 impl<const B: usize> ScanPoints<B> {
-    /// No points.
+    /// No points; all zero bytes (a `static` of it lives in `.bss`).
     pub const fn new() -> Self {
         Self {
             points: [ScanPoint {

@@ -178,7 +178,7 @@ impl<
         &self,
         store: &KeyframeStore<S>,
     ) -> Result<(usize, f32, GridGeometry), SlamError> {
-        if self.filter.is_none() {
+        if !self.started {
             return Err(SlamError::NotStarted);
         }
         let n = self.graph.len().min(store.len() as usize);
@@ -261,7 +261,7 @@ impl<
         )
         .map_err(|_| SlamError::MapTooLarge)?;
         // From here on the local map is drawn over.
-        self.filter = None;
+        self.started = false;
         out.erase_all()?;
         let bitmap = occupancy_bytes(geometry.width, geometry.height);
         let bitmap_u32 = u32::try_from(bitmap).map_err(|_| SlamError::MapTooLarge)?;

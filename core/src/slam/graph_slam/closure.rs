@@ -11,12 +11,15 @@ use crate::slam::graph::LoopEdge;
 use crate::slam::keyframes::{KeyframeStorage, KeyframeStore};
 use crate::slam::matcher::{MAX_MATCH_POINTS, MatchProgress};
 
-/// A loop closure under way.
+/// A loop closure under way. `repr(u8)`: an explicit tag, `Idle` = 0, so that
+/// [`GraphSlam::zeroed`] is all zero bytes (without it the tag may hide in a `bool` of
+/// the match's state, where `Idle` would be a non-zero value).
 #[derive(Clone, Debug)]
 // Fixed memory, no heap: the match's state lives in the estimator (one of these).
 #[allow(clippy::large_enum_variant)]
+#[repr(u8)]
 pub(super) enum Pending {
-    /// None.
+    /// None (tag 0).
     Idle,
     /// The map of the old keyframes near keyframe `node` being drawn, from old keyframe
     /// `next` to `last` (those within the submap radius of `here`, its graph pose), for

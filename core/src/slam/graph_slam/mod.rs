@@ -184,8 +184,8 @@ struct Newest {
 /// - the keyframes' scans in a [`KeyframeStore`] the caller owns and lends to each step
 ///   (flash on a microcontroller).
 ///
-/// Built with [`GraphSlam::zeroed`] (zero bytes but for the graph's unit noise: a
-/// `static`) and started with [`GraphSlam::init`].
+/// Built with [`GraphSlam::zeroed`] (all zero bytes: a `static` of it lives in `.bss`)
+/// and started with [`GraphSlam::init`].
 #[derive(Clone, Debug)]
 pub struct GraphSlam<
     const P: usize,
@@ -199,7 +199,10 @@ pub struct GraphSlam<
     const SCRATCH: usize,
 > {
     map: LocalMap<NEAR, NEAR_BITS, FAR, FAR_BITS>,
-    filter: Option<ParticleFilter<P>>,
+    /// The particles: zero bytes until [`GraphSlam::init`] builds them (`started`).
+    filter: ParticleFilter<P>,
+    /// `true` once [`GraphSlam::init`] has built the filter and set the settings.
+    started: bool,
     points: ScanPoints<B>,
     /// The points of a stored keyframe (loop closure, imports, rebuilds).
     stored: ScanPoints<B>,
@@ -236,20 +239,22 @@ impl<
         "GraphSlam: SCRATCH must be at least scratch_len(NODES, LOOPS)"
     );
 
-    /// An estimator of zero bytes (but for the graph's unit noise), for a `static`;
-    /// [`GraphSlam::init`] starts it.
+    /// An estimator of all zero bytes, for a `static` (`.bss`: no initial image in
+    /// flash); [`GraphSlam::init`] starts it. Its settings are zero until then (not valid:
+    /// `init` replaces them).
     pub const fn zeroed() -> Self {
         let () = Self::SCRATCH_OK;
         Self {
             map: LocalMap::zeroed(),
-            filter: None,
+            filter: ParticleFilter::zeroed(),
+            started: false,
             points: ScanPoints::new(),
             stored: ScanPoints::new(),
             ranges: [0.0; B],
             graph: PoseGraph::new(),
             workspace: Workspace::zeroed(),
             pending: closure::Pending::Idle,
-            config: GraphSlamConfig::MICROCONTROLLER,
+            config: GraphSlamConfig::ZEROED,
             scans: 0,
             pose: Pose2::new(0.0, 0.0, 0.0),
             newest: None,
@@ -282,7 +287,8 @@ impl<
             start.x,
             start.y,
         )?;
-        self.filter = Some(filter);
+        self.filter = filter;
+        self.started = true;
         self.config = config;
         self.scans = 0;
         self.pose = start;
@@ -293,7 +299,7 @@ impl<
         Ok(())
     }
 
-    /// The settings.
+    /// The settings (all zero, not valid, before [`GraphSlam::init`]).
     pub fn config(&self) -> &GraphSlamConfig {
         &self.config
     }
@@ -310,7 +316,7 @@ impl<
 
     /// The particles (`None` before [`GraphSlam::init`]).
     pub fn filter(&self) -> Option<&ParticleFilter<P>> {
-        self.filter.as_ref()
+        self.started.then_some(&self.filter)
     }
 
     /// Counts over the run.
@@ -353,7 +359,11 @@ impl<
     }
 
     fn filter_mut(&mut self) -> Result<&mut ParticleFilter<P>, SlamError> {
-        self.filter.as_mut().ok_or(SlamError::NotStarted)
+        if self.started {
+            Ok(&mut self.filter)
+        } else {
+            Err(SlamError::NotStarted)
+        }
     }
 
     /// Prediction with the odometry poses before and after the step (only their
@@ -394,7 +404,10 @@ impl<
         store: &mut KeyframeStore<S>,
     ) -> Result<GraphStep, SlamError> {
         let search = const { crate::pf::slam_shift_search::<FAR, FAR_BITS>() };
-        let filter = self.filter.as_mut().ok_or(SlamError::NotStarted)?;
+        if !self.started {
+            return Err(SlamError::NotStarted);
+        }
+        let filter = &mut self.filter;
         let view = (self.scans > 0).then(|| (self.map.view(), search));
         let h = self.config.heading_search;
         let span = (h.span_rad + h.span_per_radian * self.turned).min(h.max_span_rad);
@@ -421,9 +434,9 @@ impl<
         // The estimate: the particles near the heaviest one, averaged (the heaviest alone
         // jumps from scan to scan by the shift search's whole cells).
         let r = self.config.estimate_radius;
-        self.pose = self.filter.as_ref().map_or(report.pose, |f| {
-            f.local_mean(&report.pose, r.position_m, r.heading_rad)
-        });
+        self.pose = self
+            .filter
+            .local_mean(&report.pose, r.position_m, r.heading_rad);
         self.scans = self.scans.saturating_add(1);
         self.map.follow(self.pose.x, self.pose.y);
         let mut step = GraphStep {

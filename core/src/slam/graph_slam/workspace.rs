@@ -20,15 +20,20 @@ pub(super) struct MatchBuffers {
 // The variants are meant to share one block of memory: that is the point of the enum
 // (both sides are sized for it, no heap to box one into).
 #[allow(clippy::large_enum_variant)]
+// `Solve` is the first variant: rustc gives it tag 0, so that `Workspace::zeroed` is all
+// zero bytes. Not a language guarantee (`.ci/firmware.sh` holds the building-slam
+// firmware's `.data` at 0 bytes, which a non-zero tag would fill); `#[repr(u8)]` would
+// guarantee it but makes `matching` build the match buffers on the stack (the
+// building-slam firmware's stack then overflows at its first loop closure).
 pub(super) enum Workspace<const S: usize> {
-    /// The matcher's map and levels.
-    Match(MatchBuffers),
     /// The pose graph solver's scratch.
     Solve([f32; S]),
+    /// The matcher's map and levels.
+    Match(MatchBuffers),
 }
 
 impl<const S: usize> Workspace<S> {
-    /// A workspace of zero bytes (the solver's side), for a `static`.
+    /// A workspace of zero bytes (the solver's side, zero floats), for a `static`.
     pub(super) const fn zeroed() -> Self {
         Self::Solve([0.0; S])
     }
