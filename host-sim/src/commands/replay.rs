@@ -321,43 +321,6 @@ pub(crate) fn metrics_json(
     doc
 }
 
-/// What a grid run read, used and lost of each input stream, with the reason, and a
-/// warning for each stream whose lost share is above `threshold` (`metrics.json`'s
-/// `input_loss`).
-pub(crate) fn input_loss(run: &GridRun, threshold: f64) -> serde_json::Value {
-    let read = run.trajectory.len();
-    let mut warnings = Vec::new();
-    let mut stream = |name: &str, lost: usize, verb: &str, reason: &str| {
-        let share = lost as f64 / read.max(1) as f64;
-        if share > threshold {
-            warnings.push(format!(
-                "{lost} of {read} {name} ({:.1} %) {verb}: {reason}; more than the settings' loss_warning_fraction {threshold}",
-                100.0 * share
-            ));
-        }
-        serde_json::json!({
-            "read": read,
-            "used": read - lost.min(read),
-            verb: lost,
-            "reason": reason,
-            "share": share,
-        })
-    };
-    let scans = stream("scans", run.skipped_scans, "skipped", "no usable beam");
-    let odometry = stream(
-        "odometry poses",
-        run.refused_odometry,
-        "refused",
-        "not finite",
-    );
-    serde_json::json!({
-        "warning_fraction": threshold,
-        "scans": scans,
-        "odometry": odometry,
-        "warnings": warnings,
-    })
-}
-
 /// Where [`score_and_write`] writes a run's outputs.
 pub(crate) struct RunOutputs<'a> {
     /// The output folder.
@@ -387,7 +350,12 @@ pub(crate) fn score_and_write(
         run,
         grid,
     )?;
-    let loss = input_loss(run, lidar.loss_warning);
+    let back = lidar.log.lasers().filter(|l| !l.rear).map(|l| l.stamp);
+    let loss = crate::metrics::inputs::input_loss(
+        run,
+        lidar.loss_warning,
+        crate::metrics::inputs::stamps_going_back(back),
+    );
     for warning in loss["warnings"].as_array().into_iter().flatten() {
         eprintln!(
             "warning: {}: {}",

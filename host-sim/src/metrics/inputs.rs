@@ -9,6 +9,7 @@
 
 use crate::domain::recording::Recording;
 use crate::drivers::ekf::ReplayRun;
+use crate::drivers::grid_run::GridRun;
 use anyhow::{Result, bail};
 use serde::Serialize;
 
@@ -160,6 +161,59 @@ pub fn check_scored(recording: &Recording, metrics: &super::Metrics) -> Result<(
     Ok(())
 }
 
+/// What a grid run read, used and lost of each input stream, with the reason, and a
+/// warning for each stream whose lost share is above `threshold` (`metrics.json`'s
+/// `input_loss`); `stamps_back` is how many of the front scans' stamps went back before
+/// the previous scan's (taken in file order, as the format plays them, and counted:
+/// `scans.stamps_going_back`).
+pub fn input_loss(run: &GridRun, threshold: f64, stamps_back: usize) -> serde_json::Value {
+    let read = run.trajectory.len();
+    let mut warnings = Vec::new();
+    let mut stream = |name: &str, lost: usize, verb: &str, reason: &str| {
+        let share = lost as f64 / read.max(1) as f64;
+        if share > threshold {
+            warnings.push(format!(
+                "{lost} of {read} {name} ({:.1} %) {verb}: {reason}; more than the settings' loss_warning_fraction {threshold}",
+                100.0 * share
+            ));
+        }
+        serde_json::json!({
+            "read": read,
+            "used": read - lost.min(read),
+            verb: lost,
+            "reason": reason,
+            "share": share,
+        })
+    };
+    let mut scans = stream("scans", run.skipped_scans, "skipped", "no usable beam");
+    scans["stamps_going_back"] = stamps_back.into();
+    let odometry = stream(
+        "odometry poses",
+        run.refused_odometry,
+        "refused",
+        "not finite",
+    );
+    serde_json::json!({
+        "warning_fraction": threshold,
+        "scans": scans,
+        "odometry": odometry,
+        "warnings": warnings,
+    })
+}
+
+/// How many of `stamps` go back before the one before them (equal stamps are in order).
+pub fn stamps_going_back(stamps: impl IntoIterator<Item = f64>) -> usize {
+    let mut previous = f64::NEG_INFINITY;
+    stamps
+        .into_iter()
+        .filter(|&t| {
+            let back = t < previous;
+            previous = t;
+            back
+        })
+        .count()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -180,6 +234,12 @@ mod tests {
                 ..SightingUse::default()
             },
         }
+    }
+
+    #[test]
+    fn stamps_going_back_are_counted_once_each() {
+        assert_eq!(stamps_going_back([1.0, 2.0, 2.0, 1.5, 3.0, 2.9, 2.95]), 2);
+        assert_eq!(stamps_going_back([]), 0);
     }
 
     #[test]
