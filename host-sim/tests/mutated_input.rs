@@ -493,6 +493,85 @@ fn a_mutated_mrclam_folder_fails_naming_the_file_or_is_used_whole() {
     });
 }
 
+/// A grid settings file setting most keys (the values `microcontroller` has), with loop
+/// closure.
+const GRID_SETTINGS: &str = "base = \"microcontroller\"\n\
+    resolution = 0.05\n\
+    hit = 4\n\
+    miss = 1\n\
+    range_weight_exponent = 0.0\n\
+    resample_neff_fraction = 0.5\n\
+    seed = 3\n\
+    shift_window_cells = 4\n\
+    beam_decimation = 2\n\
+    distance_std = 0.01\n\
+    heading_std_per_radian = 0.1\n\
+    loss_warning_fraction = 0.2\n\
+    [loop_closure]\n\
+    keyframe_distance_m = 0.1\n\
+    candidate_radius_m = 3.0\n\
+    min_hit_fraction = 0.5\n";
+
+#[test]
+fn a_mutated_grid_settings_file_fails_naming_it_or_is_used() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log.clf");
+    std::fs::write(&log, carmen_log()).unwrap();
+    let dataset = format!("carmen:{}", log.display());
+    let config = dir.path().join("grid.toml");
+    run_cases(128, &mutation(), |m| {
+        std::fs::write(&config, apply(GRID_SETTINGS, &m)).unwrap();
+        let out = dir.path().join("out");
+        let r = run(
+            &[
+                "replay",
+                "--filter",
+                "grid-slam",
+                "--particles",
+                "8",
+                "--config",
+                config.to_str().unwrap(),
+                "--dataset",
+                &dataset,
+            ],
+            &out,
+        );
+        holds(&r, &out, &carmen_log(), &["grid.toml"], scans_accounted)
+    });
+}
+
+#[test]
+fn a_mutated_landmark_settings_file_fails_naming_it_or_is_used() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("run.txt");
+    std::fs::write(&log, LANDMARK_LOG).unwrap();
+    let dataset = format!("landmarks:{}", log.display());
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/landmarks.toml");
+    let base = std::fs::read_to_string(shipped).unwrap();
+    let config = dir.path().join("settings.toml");
+    run_cases(128, &mutation(), |m| {
+        std::fs::write(&config, apply(&base, &m)).unwrap();
+        let out = dir.path().join("out");
+        let r = run(
+            &[
+                "replay",
+                "--config",
+                config.to_str().unwrap(),
+                "--dataset",
+                &dataset,
+            ],
+            &out,
+        );
+        holds(
+            &r,
+            &out,
+            LANDMARK_LOG,
+            &["settings.toml"],
+            records_accounted,
+        )
+    });
+}
+
 #[test]
 fn the_unmutated_inputs_are_used_whole() {
     let dir = tempfile::tempdir().unwrap();

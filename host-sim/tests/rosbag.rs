@@ -400,3 +400,170 @@ fn an_odometry_pose_beyond_100_km_is_refused_with_its_message_and_field() {
         "{e}"
     );
 }
+
+/// One field of one message of a small bag made wrong (structure-aware fuzzing, issue 62):
+/// the bag itself is well formed, the message decodes, its content is what is wrong.
+#[derive(Clone, Debug)]
+enum BagMutation {
+    /// One more or one fewer range than the angle span holds.
+    RangesOffByOne(bool),
+    /// A geometry field of a scan set to a value (`angle_min`, `angle_max`,
+    /// `angle_increment`, `range_min`, `range_max` by index).
+    Geometry(usize, f32),
+    /// One range set to a value.
+    Range(usize, f32),
+    /// A scan's header stamp moved by seconds.
+    ScanStamp(f64),
+    /// An odometry position coordinate set to a value.
+    OdometryPosition(bool, f64),
+    /// An odometry orientation set to a non-unit or non-finite quaternion component.
+    OdometryOrientation(f64),
+    /// A scan in another frame.
+    Frame,
+}
+
+fn bag_mutation() -> impl proptest::strategy::Strategy<Value = BagMutation> {
+    use proptest::prelude::*;
+    let f32s = prop::sample::select(vec![f32::NAN, f32::INFINITY, -1.0, 0.0, 1e30, 1e-30, 7.0]);
+    let f64s = prop::sample::select(vec![f64::NAN, f64::INFINITY, -1e30, 1e6, 5e3, 0.0]);
+    prop_oneof![
+        any::<bool>().prop_map(BagMutation::RangesOffByOne),
+        (0usize..5, f32s.clone()).prop_map(|(i, v)| BagMutation::Geometry(i, v)),
+        (0usize..5, f32s).prop_map(|(i, v)| BagMutation::Range(i, v)),
+        prop::sample::select(vec![-10.0, -0.5, 1e9, f64::MAX]).prop_map(BagMutation::ScanStamp),
+        (any::<bool>(), f64s.clone()).prop_map(|(x, v)| BagMutation::OdometryPosition(x, v)),
+        f64s.prop_map(BagMutation::OdometryOrientation),
+        Just(BagMutation::Frame),
+    ]
+}
+
+/// A bag of 8 scans (every 0.1 s) with odometry moving 2 cm between them; `mutation`
+/// applied to message `which` (of the scans or of the odometry).
+fn mutated_bag(path: &Path, which: usize, mutation: &BagMutation) {
+    let mut bag = McapFile::create(path, "ros2").unwrap();
+    for i in 0..8usize {
+        let t = 1.0 + 0.1 * i as f64;
+        let mut odom = msg::Odometry {
+            child_frame_id: "base_link".into(),
+            ..Default::default()
+        };
+        odom.header.stamp = msg::Time::from_seconds(t);
+        odom.pose.pose.orientation.w = 1.0;
+        odom.pose.pose.position.x = 0.02 * i as f64;
+        let mut s = msg::LaserScan {
+            header: msg::Header {
+                stamp: msg::Time::from_seconds(t),
+                frame_id: "laser".into(),
+            },
+            ..scan()
+        };
+        if i == which % 8 {
+            match *mutation {
+                BagMutation::RangesOffByOne(more) => {
+                    if more {
+                        s.ranges.push(2.0);
+                    } else {
+                        s.ranges.pop();
+                    }
+                }
+                BagMutation::Geometry(field, v) => match field {
+                    0 => s.angle_min = v,
+                    1 => s.angle_max = v,
+                    2 => s.angle_increment = v,
+                    3 => s.range_min = v,
+                    _ => s.range_max = v,
+                },
+                BagMutation::Range(k, v) => {
+                    let n = s.ranges.len();
+                    s.ranges[k % n] = v;
+                }
+                BagMutation::ScanStamp(dt) => {
+                    s.header.stamp = msg::Time::from_seconds((t + dt).clamp(0.0, 4e9));
+                }
+                BagMutation::OdometryPosition(x, v) => {
+                    if x {
+                        odom.pose.pose.position.x = v;
+                    } else {
+                        odom.pose.pose.position.y = v;
+                    }
+                }
+                BagMutation::OdometryOrientation(v) => odom.pose.pose.orientation.z = v,
+                BagMutation::Frame => s.header.frame_id = "other_laser".into(),
+            }
+        }
+        write_ros(&mut bag, "/odom", odometry_schema, t, &odom).unwrap();
+        write_ros(&mut bag, "/scan", laser_scan_schema, t + 0.01, &s).unwrap();
+    }
+    bag.finish().unwrap();
+}
+
+#[test]
+fn a_bag_with_one_wrong_message_fails_naming_it_or_is_used_whole() {
+    use proptest::test_runner::{Config, RngAlgorithm, TestCaseError, TestRng, TestRunner};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("wrong.mcap");
+    let dataset = format!("rosbag:{}", path.display());
+    let mut runner = TestRunner::new_with_rng(
+        Config {
+            cases: 128,
+            failure_persistence: None,
+            ..Config::default()
+        },
+        TestRng::deterministic_rng(RngAlgorithm::ChaCha),
+    );
+    let outcomes = std::cell::RefCell::new([0u32; 2]);
+    runner
+        .run(&(0usize..8, bag_mutation()), |(which, m)| {
+            mutated_bag(&path, which, &m);
+            let out = dir.path().join("out");
+            let o = host_sim()
+                .args([
+                    "replay",
+                    "--quiet",
+                    "--no-plots",
+                    "--particles",
+                    "8",
+                    "--dataset",
+                ])
+                .arg(&dataset)
+                .arg("--out")
+                .arg(&out)
+                .output()
+                .unwrap();
+            let err = String::from_utf8_lossy(&o.stderr);
+            if o.status.code() == Some(101) {
+                return Err(TestCaseError::fail(format!("panicked: {err}")));
+            }
+            if o.status.success() {
+                let json = std::fs::read_to_string(out.join("metrics.json")).unwrap();
+                if json.contains("null") {
+                    return Err(TestCaseError::fail(format!("a null figure: {json}")));
+                }
+                let m: serde_json::Value = serde_json::from_str(&json).unwrap();
+                let scans = &m["input_loss"]["scans"];
+                if scans["read"] != 8
+                    || scans["used"]
+                        .as_u64()
+                        .zip(scans["skipped"].as_u64())
+                        .map(|(u, s)| u + s)
+                        != Some(8)
+                {
+                    return Err(TestCaseError::fail(format!(
+                        "8 scans not accounted for: {scans}"
+                    )));
+                }
+            } else if !err.contains("wrong.mcap") {
+                return Err(TestCaseError::fail(format!(
+                    "the error names no bag: {err}"
+                )));
+            }
+            outcomes.borrow_mut()[usize::from(o.status.success())] += 1;
+            Ok(())
+        })
+        .unwrap();
+    let [refused, used] = *outcomes.borrow();
+    assert!(
+        refused > 0 && used > 0,
+        "{used} bags used, {refused} refused"
+    );
+}
