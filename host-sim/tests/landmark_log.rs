@@ -123,3 +123,54 @@ fn export_landmarks_writes_a_log_that_reads_back() {
         2
     );
 }
+
+#[test]
+fn a_run_that_loses_a_large_share_says_so_and_a_bad_threshold_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    // One of the three velocity records is implausible (90 m/s): 33 % of the odometry.
+    let lossy = CAR
+        .replace("ackermann 1.0 2.0 0.0", "velocity 1.0 90 0.0")
+        .replace("ackermann 0.0 2.0 0.0", "velocity 0.0 2.0 0.0")
+        .replace("ackermann 2.0 2.0 0.0", "velocity 2.0 2.0 0.0");
+    let out = replay(dir.path(), &lossy);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let expected = "1 of 3 odometry records refused (not finite, implausible, or by the filter) (33.3 %), more than the settings' loss_warning_fraction 0.1";
+    assert!(
+        err.contains(&format!("warning: run.txt: {expected}")) || err.contains(expected),
+        "{err}"
+    );
+    let metrics: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("out/metrics.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(metrics["inputs"]["warnings"][0], expected);
+    // A threshold outside 0 ..= 1 is refused naming the file and the key.
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/landmarks.toml");
+    let settings = dir.path().join("loss.toml");
+    std::fs::write(
+        &settings,
+        format!(
+            "loss_warning_fraction = 2.0\n{}",
+            std::fs::read_to_string(shipped).unwrap()
+        ),
+    )
+    .unwrap();
+    let log = dir.path().join("run.txt");
+    let out = host_sim()
+        .args(["replay", "--quiet", "--no-plots", "--config"])
+        .arg(&settings)
+        .arg("--dataset")
+        .arg(format!("landmarks:{}", log.display()))
+        .arg("--out")
+        .arg(dir.path().join("out2"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("loss.toml")
+            && err.contains("loss_warning_fraction = 2 must be within 0 ..= 1"),
+        "{err}"
+    );
+}

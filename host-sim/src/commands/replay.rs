@@ -192,6 +192,10 @@ pub fn run_and_report(
             let _ = std::fs::remove_file(out.join("groundtruth.tum"));
             return Err(e);
         }
+        metrics.inputs.warn_above(settings.loss_warning_fraction);
+        for warning in &metrics.inputs.warnings {
+            eprintln!("warning: {}: {warning}", recording.name);
+        }
         metrics.faults = faults;
         crate::output::write_all(out, recording, &run, &mut metrics, plots, started)?;
         if let Some((file, prefix)) = mcap {

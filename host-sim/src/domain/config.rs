@@ -46,6 +46,16 @@ pub struct Settings {
     /// Simulator scenario (only in `sim.toml`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scenario: Option<Scenario>,
+    /// Share of the odometry records, or of the sightings that reach the filter, a run may
+    /// lose (refused as implausible, out of range, refused by the filter) before it says
+    /// so on stderr and in `metrics.json` (`inputs.warnings`); a top-level key, default
+    /// [`crate::domain::grid::LOSS_WARNING_FRACTION`] (10 %), as in the grid settings.
+    #[serde(default = "loss_warning_fraction")]
+    pub loss_warning_fraction: f64,
+}
+
+fn loss_warning_fraction() -> f64 {
+    crate::domain::grid::LOSS_WARNING_FRACTION
 }
 
 /// Noise of odometry increments (`microslam::motion::IncrementNoise`; see
@@ -312,6 +322,12 @@ impl Settings {
     /// Checks ranges of values that TOML types cannot; the error names the setting as the
     /// settings file spells it.
     pub fn validate(&self) -> Result<()> {
+        if !(0.0..=1.0).contains(&self.loss_warning_fraction) {
+            bail!(
+                "loss_warning_fraction = {} must be within 0 ..= 1",
+                self.loss_warning_fraction
+            );
+        }
         let o = &self.odometry;
         let s = &self.sighting;
         let a = &self.association;

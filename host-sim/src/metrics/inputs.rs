@@ -57,6 +57,10 @@ pub struct EkfInputs {
     pub odometry: OdometryUse,
     /// The landmark sightings.
     pub sightings: SightingUse,
+    /// A line for each stream that lost more than the settings' `loss_warning_fraction`
+    /// ([`EkfInputs::warn_above`]; left out when none did).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 impl EkfInputs {
@@ -85,6 +89,37 @@ impl EkfInputs {
                     .saturating_sub(used + c.dropped + c.gated + c.ambiguous),
                 used,
             },
+            warnings: Vec::new(),
+        }
+    }
+
+    /// Fills [`EkfInputs::warnings`]: the odometry records refused (implausible, or by the
+    /// filter) and the sightings that reached the filter but were refused or out of range,
+    /// each against `fraction` of its stream. Sightings the reader dropped by design (of the
+    /// other robots) and those the association turned down are not losses.
+    pub fn warn_above(&mut self, fraction: f64) {
+        let o = &self.odometry;
+        let s = &self.sightings;
+        let offered = s.read.saturating_sub(s.reader_dropped);
+        for (lost, of, what) in [
+            (
+                o.refused_implausible + o.refused_by_filter,
+                o.read,
+                "odometry records refused (not finite, implausible, or by the filter)",
+            ),
+            (
+                s.out_of_range + s.refused,
+                offered,
+                "sightings out of range or refused by the filter",
+            ),
+        ] {
+            let share = lost as f64 / of.max(1) as f64;
+            if share > fraction {
+                self.warnings.push(format!(
+                    "{lost} of {of} {what} ({:.1} %), more than the settings' loss_warning_fraction {fraction}",
+                    100.0 * share
+                ));
+            }
         }
     }
 
@@ -233,7 +268,31 @@ mod tests {
                 gated: counts.gated,
                 ..SightingUse::default()
             },
+            warnings: Vec::new(),
         }
+    }
+
+    #[test]
+    fn a_large_loss_is_a_warning_and_a_small_one_is_not() {
+        let mut lossy = inputs(
+            10,
+            20,
+            AssociationCounts {
+                odometry_refused: 2,
+                updates: 20,
+                ..AssociationCounts::default()
+            },
+        );
+        lossy.warn_above(0.1);
+        assert_eq!(
+            lossy.warnings,
+            [
+                "2 of 10 odometry records refused (not finite, implausible, or by the filter) (20.0 %), more than the settings' loss_warning_fraction 0.1"
+            ]
+        );
+        lossy.warnings.clear();
+        lossy.warn_above(0.2);
+        assert!(lossy.warnings.is_empty());
     }
 
     #[test]
