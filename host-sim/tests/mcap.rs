@@ -63,6 +63,7 @@ fn an_intel_grid_slam_recording_reads_back() {
         lidar: carmen_lidar(180),
         loop_closure: None,
         grid_origin: None,
+        max_odometry_step_m: host_sim::domain::grid::MAX_ODOMETRY_STEP_M,
     };
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("intel.mcap");

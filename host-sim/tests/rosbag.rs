@@ -62,6 +62,7 @@ fn the_intel_bag_replays_like_the_carmen_log() {
         lidar,
         loop_closure: None,
         grid_origin: None,
+        max_odometry_step_m: host_sim::domain::grid::MAX_ODOMETRY_STEP_M,
     };
     let from_bag: Vec<&LaserMessage> = bag.scans.iter().collect();
     let a = run_slam::<GRID_CELLS, GRID_BITMAP>(

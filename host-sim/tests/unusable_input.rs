@@ -218,3 +218,61 @@ fn a_stamp_that_is_not_finite_is_refused_with_the_file_and_line() {
     );
     assert!(err.contains(&expected), "{err}");
 }
+
+#[test]
+fn an_odometry_jump_is_taken_as_a_reset_and_counted() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("jump.clf");
+    // Half-way the odometry jumps 5 km (a restarted odometry node, a corrupt pose).
+    write_log(&log, "2.0", |i| {
+        let x = 0.02 * i as f64 + if i < SCANS / 2 { 0.0 } else { 5000.0 };
+        format!("{x:.3} 0 0")
+    });
+    let out = dir.path().join("out");
+    let run = succeeds(
+        host_sim()
+            .args(["replay", "--quiet", "--no-plots", "--filter", "grid-slam"])
+            .args(["--particles", "16", "--dataset", &carmen(&log), "--out"])
+            .arg(&out),
+    );
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        err.contains("1 odometry steps longer than the settings' max_odometry_step_m, taken as odometry resets"),
+        "{err}"
+    );
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(metrics["input_loss"]["odometry"]["resets"], 1, "{metrics}");
+    // The map stays where the robot is: no end point off the grid, the estimate within
+    // a metre of where the 19 good steps of 2 cm take it.
+    assert_eq!(metrics["grid"]["off_grid_end_points"], 0, "{metrics}");
+    let tum = std::fs::read_to_string(out.join("trajectory.tum")).unwrap();
+    let last: Vec<f64> = tum
+        .lines()
+        .last()
+        .unwrap()
+        .split_whitespace()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!(last[1].abs() < 1.0 && last[2].abs() < 1.0, "{last:?}");
+    // A limit that is not a positive length is refused naming the file.
+    let config = dir.path().join("grid.toml");
+    std::fs::write(&config, "max_odometry_step_m = 0.0\n").unwrap();
+    let err = fails(
+        dir.path(),
+        &[
+            "replay",
+            "--filter",
+            "grid-slam",
+            "--config",
+            config.to_str().unwrap(),
+            "--dataset",
+            &carmen(&log),
+        ],
+    );
+    assert!(
+        err.contains("grid.toml")
+            && err.contains("`max_odometry_step_m` = 0 must be a positive number of metres"),
+        "{err}"
+    );
+}

@@ -36,6 +36,7 @@ fn intel_run(particles: usize, config: GridPfConfig) -> (f64, f64, usize) {
         lidar: carmen_lidar(180),
         loop_closure: None,
         grid_origin: None,
+        max_odometry_step_m: host_sim::domain::grid::MAX_ODOMETRY_STEP_M,
     };
     let inputs = carmen_inputs(&front_scans(&log));
     let run =
@@ -94,6 +95,7 @@ fn sim_slam(rec: &LidarRecording, particles: usize, config: GridPfConfig) -> gri
         lidar: rec.lidar,
         loop_closure: None,
         grid_origin: None,
+        max_odometry_step_m: host_sim::domain::grid::MAX_ODOMETRY_STEP_M,
     };
     let start = f32_pose(&rec.scans[0].truth);
     grid::run_slam::<SIM_GRID_CELLS, SIM_GRID_BITMAP>(&sim_inputs(rec), start, &options, &|_| {})

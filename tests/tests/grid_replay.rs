@@ -50,6 +50,7 @@ fn intel_slam_closing(
         lidar: carmen_lidar(180),
         loop_closure,
         grid_origin: None,
+        max_odometry_step_m: host_sim::domain::grid::MAX_ODOMETRY_STEP_M,
     };
     let run = run_slam::<GRID_CELLS, GRID_BITMAP>(
         &carmen_inputs(scans),

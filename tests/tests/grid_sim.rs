@@ -33,6 +33,7 @@ fn options(rec: &LidarRecording, particles: usize, config: GridPfConfig) -> Grid
         lidar: rec.lidar,
         loop_closure: None,
         grid_origin: None,
+        max_odometry_step_m: host_sim::domain::grid::MAX_ODOMETRY_STEP_M,
     }
 }
 

@@ -29,6 +29,7 @@ fn device_localizer_on_the_intel_slam_map_meets_the_relation_error_bar() {
         lidar: carmen_lidar(180),
         loop_closure: None,
         grid_origin: None,
+        max_odometry_step_m: host_sim::domain::grid::MAX_ODOMETRY_STEP_M,
     };
     let slam = run_slam::<GRID_CELLS, GRID_BITMAP>(
         &carmen_inputs(&front_scans(&log)),

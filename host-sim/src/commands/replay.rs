@@ -258,6 +258,7 @@ pub(crate) fn options_for_beams(
         loop_closure: loop_closure_settings(config, grid.loop_closure, grid.role)?,
         // Placed on the recording's odometry by grid SLAM's replay (`GridPlacement`).
         grid_origin: None,
+        max_odometry_step_m: crate::domain::grid::max_odometry_step_m(config)?,
     })
 }
 
@@ -501,7 +502,10 @@ fn grid_replay(args: &ReplayOptions, quiet: bool) -> Result<()> {
             pb.set_position(i as u64);
         }
     };
-    let extent = OdometryExtent::of(inputs.iter().map(|input| input.odometry));
+    let extent = OdometryExtent::of(crate::drivers::scan_odometry::chained(
+        inputs.iter().map(|input| input.odometry),
+        options.max_odometry_step_m,
+    ));
     let placement = GridPlacement::for_extent(extent.as_ref(), options.config.resolution);
     placement_note(
         extent.as_ref(),

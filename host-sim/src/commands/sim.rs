@@ -229,6 +229,7 @@ pub fn run_and_write(
         loop_closure,
         // The simulated world lies around its start.
         grid_origin: None,
+        max_odometry_step_m: crate::domain::grid::MAX_ODOMETRY_STEP_M,
     };
     let animation = AnimationSettings::default();
     let every = animate.map_or(0, |_| animation.snapshot_every(inputs.len()));

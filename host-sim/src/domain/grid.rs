@@ -236,6 +236,33 @@ pub struct GridToml {
     /// says so on stderr and in `metrics.json` (`input_loss`); default
     /// [`LOSS_WARNING_FRACTION`].
     loss_warning_fraction: Option<f64>,
+    /// The longest odometry step between two consecutive scans taken as motion, metres;
+    /// a longer one is an odometry reset (default [`MAX_ODOMETRY_STEP_M`]).
+    max_odometry_step_m: Option<f32>,
+}
+
+/// The longest odometry step between two consecutive scans a grid run takes as motion
+/// (10 m): a longer one is taken as an odometry reset (the odometry node restarted, a
+/// corrupt pose), counted, and the filter re-anchored on the new odometry frame without
+/// moving. The shared logs' longest step is 1.54 m (ACES, whose scans are 0.5 m apart).
+pub const MAX_ODOMETRY_STEP_M: f32 = 10.0;
+
+/// The `max_odometry_step_m` of the settings file `config` (else [`MAX_ODOMETRY_STEP_M`]);
+/// refused unless positive and finite, naming the file.
+pub fn max_odometry_step_m(config: Option<&Path>) -> Result<f32> {
+    let Some(path) = config else {
+        return Ok(MAX_ODOMETRY_STEP_M);
+    };
+    let m = GridToml::read(path)?
+        .max_odometry_step_m
+        .unwrap_or(MAX_ODOMETRY_STEP_M);
+    if !(m.is_finite() && m > 0.0) {
+        bail!(
+            "in {}: `max_odometry_step_m` = {m} must be a positive number of metres",
+            path.display()
+        );
+    }
+    Ok(m)
 }
 
 /// Share of an input stream a grid run may skip or refuse without a warning (10 %), unless

@@ -10,6 +10,7 @@
 //! the host's (the device keeps only its local map and the keyframes).
 
 use super::grid_run::{GraphSummary, GridInput, GridRun, GridRunOptions};
+use super::scan_odometry::{OdometryStep, ScanOdometry};
 use crate::domain::grid::ScanSpacing;
 use anyhow::{Result, anyhow, bail};
 use microslam::geometry::Pose2;
@@ -144,15 +145,14 @@ fn run_p<const N: usize, const BITMAP: usize, const P: usize>(
     // Per scan: the newest keyframe then and the filter's motion since it.
     let mut offsets: Vec<Option<(u16, Pose2<f32>)>> = Vec::with_capacity(inputs.len());
     let t0 = Instant::now();
-    let mut previous: Option<Pose2<f32>> = None;
+    let mut odometry = ScanOdometry::new(options.max_odometry_step_m);
     for (i, input) in inputs.iter().enumerate() {
         let odom = input.odometry;
-        if !odom.is_finite() {
-            run.refused_odometry += 1;
-        } else if let Some(from) = previous.replace(odom) {
-            slam.predict_odometry(&from, &odom)
+        if let OdometryStep::Move(from, to) = odometry.step(odom) {
+            slam.predict_odometry(&from, &to)
                 .map_err(|e| anyhow!("scan {i}: {e}"))?;
         }
+        (run.refused_odometry, run.odometry_resets) = (odometry.refused, odometry.resets);
         let scan = LidarScan::new(input.ranges, lidar);
         run.non_finite_beams += scan.census().1;
         match slam.observe(&scan, &mut store) {

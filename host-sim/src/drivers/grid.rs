@@ -5,7 +5,8 @@
 //! The filter is predicted with the odometry pose increment between consecutive scans in
 //! **input order** (never with stamp differences: the Intel log's stamps go backwards).
 //! An odometry pose that is not finite is refused and counted
-//! ([`GridRun::refused_odometry`]), and the next good one predicts the whole motion; a scan
+//! ([`GridRun::refused_odometry`]), and the next good one predicts the whole motion; a step
+//! longer than `max_odometry_step_m` is an odometry reset ([`super::scan_odometry`]); a scan
 //! with no usable beam is counted ([`GridRun::skipped_scans`]) and the pose held.
 
 use super::graph_slam::run_graph_slam;
@@ -13,6 +14,7 @@ use super::grid_run::changes;
 pub use super::grid_run::{
     GraphSummary, GridInput, GridRun, GridRunOptions, LocalizerSummary, MapChanges,
 };
+use super::scan_odometry::{OdometryStep, ScanOdometry};
 use crate::domain::grid::{MAX_BEAMS, SUPPORTED_PARTICLES, ScanSpacing};
 use crate::inputs::readers::carmen::LaserMessage;
 use crate::inputs::sim::lidar_world::LidarRecording;
@@ -114,7 +116,7 @@ fn drive(
     snapshot_every: usize,
 ) -> Result<()> {
     let lidar = &options.lidar;
-    let mut previous: Option<Pose2<f32>> = None;
+    let mut odometry = ScanOdometry::new(options.max_odometry_step_m);
     let mut shadow = Vec::new();
     if snapshot_every > 0 {
         shadow = vec![0; filter.cells().len()];
@@ -123,13 +125,12 @@ fn drive(
     run.scan_spacing = ScanSpacing::of(inputs.iter().map(|input| input.odometry));
     for (i, input) in inputs.iter().enumerate() {
         let odom = input.odometry;
-        if !odom.is_finite() {
-            run.refused_odometry += 1;
-        } else if let Some(from) = previous.replace(odom) {
+        if let OdometryStep::Move(from, to) = odometry.step(odom) {
             filter
-                .predict_odometry(&from, &odom)
+                .predict_odometry(&from, &to)
                 .map_err(|e| anyhow!("scan {i}: {e}"))?;
         }
+        (run.refused_odometry, run.odometry_resets) = (odometry.refused, odometry.resets);
         let scan = LidarScan::new(input.ranges, *lidar);
         run.non_finite_beams += scan.census().1;
         match filter.observe(&scan) {

@@ -35,6 +35,9 @@ pub struct GridRunOptions {
     /// Grid SLAM's map: the world position of its lower-left corner, metres
     /// ([`crate::domain::grid::GridPlacement`]); `None`: centred on the start.
     pub grid_origin: Option<[f32; 2]>,
+    /// The longest odometry step between consecutive scans taken as motion, metres
+    /// ([`crate::domain::grid::MAX_ODOMETRY_STEP_M`] unless the settings say otherwise).
+    pub max_odometry_step_m: f32,
 }
 
 /// Result of a run: the estimate at each processed scan, the map, and timing.
@@ -55,6 +58,9 @@ pub struct GridRun {
     pub skipped_scans: usize,
     /// Odometry poses refused (not finite): the prediction waits for the next good one.
     pub refused_odometry: usize,
+    /// Odometry steps longer than [`GridRunOptions::max_odometry_step_m`]: taken as
+    /// odometry resets (the filter re-anchored, not moved).
+    pub odometry_resets: usize,
     /// Ranges that were NaN or ±∞ in the processed scans (skipped beam by beam).
     pub non_finite_beams: usize,
     /// End points off the grid: for grid SLAM those that fell off it and were not written,
@@ -148,6 +154,7 @@ impl GridRun {
             observer_time_s: 0.0,
             skipped_scans: 0,
             refused_odometry: 0,
+            odometry_resets: 0,
             non_finite_beams: 0,
             off_grid_end_points: 0,
             scans_off_grid: 0,

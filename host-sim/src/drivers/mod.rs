@@ -8,6 +8,8 @@
 //!   delayed by the odometry's latency), for [`ekf`].
 //! - [`grid`]: lidar scans with odometry → grid SLAM or the grid localizer (the one grid
 //!   drive loop of `replay`, `localize` and `sim`).
+//! - [`scan_odometry`]: a scan's odometry pose → the step to predict (refused poses
+//!   bridged, odometry resets re-anchored), for [`grid`] and [`graph_slam`].
 //! - [`graph_slam`]: the device's building-scale grid SLAM (local map, keyframes, pose
 //!   graph, loop closure) over lidar scans.
 //! - [`detections`]: sign detections → range/bearing → EKF-SLAM with class hints.
@@ -27,4 +29,5 @@ pub mod hil;
 pub mod hil_localizer;
 pub mod hil_slam;
 pub mod odometry;
+pub mod scan_odometry;
 pub mod texture;

@@ -222,12 +222,21 @@ pub fn input_loss(run: &GridRun, threshold: f64, stamps_back: usize) -> serde_js
     };
     let mut scans = stream("scans", run.skipped_scans, "skipped", "no usable beam");
     scans["stamps_going_back"] = stamps_back.into();
-    let odometry = stream(
+    let mut odometry = stream(
         "odometry poses",
         run.refused_odometry,
         "refused",
         "not finite",
     );
+    // A reset is not lost input (the scan is used), but every one is reported: the
+    // odometry jumped further than any robot moves between two scans.
+    odometry["resets"] = run.odometry_resets.into();
+    if run.odometry_resets > 0 {
+        warnings.push(format!(
+            "{} odometry steps longer than the settings' max_odometry_step_m, taken as odometry resets (the filter re-anchored, not moved)",
+            run.odometry_resets
+        ));
+    }
     serde_json::json!({
         "warning_fraction": threshold,
         "scans": scans,
