@@ -7,6 +7,11 @@ use crate::scalar::Real;
 /// `(sin x, cos x)` in `f32` arithmetic only: [`crate::scalar::sin_cos_f32`], which the
 /// scalar type's own `sin_cos` uses too.
 pub use crate::scalar::sin_cos_f32;
+
+/// Largest |x| or |y| of a position the library works with, metres (100 km): beyond it
+/// an `f32` coordinate is coarser than 8 mm. The EKF refuses steps that would go further
+/// ([`crate::ekf::MAX_COORDINATE`]), and readers refuse positions and map origins beyond it.
+pub const MAX_COORDINATE_M: f64 = 1.0e5;
 use nalgebra::{Vector2, Vector3};
 
 /// Wraps an angle to (−π, π].

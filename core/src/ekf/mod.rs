@@ -183,7 +183,7 @@ pub const MAX_POSITION_VARIANCE: f64 = 1.0e4;
 /// coordinate is coarser than 8 mm, so landmark − robot differences lose the precision
 /// the observation model needs; predictions and new landmarks that would go further are
 /// refused ([`EkfError::NumericalFailure`]). Keep the map origin near the work area.
-pub const MAX_COORDINATE: f64 = 1.0e5;
+pub const MAX_COORDINATE: f64 = crate::geometry::MAX_COORDINATE_M;
 
 /// Bytes an `f32` filter uses beyond its mean and covariance factor (configuration,
 /// counters, the deferred predictions).

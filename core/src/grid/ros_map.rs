@@ -100,6 +100,16 @@ impl RosMap {
                         .map(|s| s.trim().parse::<f32>())
                         .collect();
                     match parts.map_err(|_| bad("expected [x, y, yaw]"))?[..] {
+                        [x, y] | [x, y, 0.0]
+                            if !(x.is_finite()
+                                && y.is_finite()
+                                && f64::from(x.abs().max(y.abs()))
+                                    <= crate::geometry::MAX_COORDINATE_M) =>
+                        {
+                            return Err(bad(
+                                "must be finite and within 100 km of the frame's origin",
+                            ));
+                        }
                         [x, y] | [x, y, 0.0] => origin = Some((x, y)),
                         [_, _, _] => return Err(bad("a rotated map (yaw ≠ 0) is not supported")),
                         _ => return Err(bad("expected [x, y, yaw]")),
@@ -423,6 +433,21 @@ mod tests {
             ),
             "{error}"
         );
+    }
+
+    #[test]
+    fn an_origin_not_finite_or_beyond_100_km_is_refused_with_its_line() {
+        let pgm = b"P5\n1 1\n255\n\0";
+        for origin in ["[nan, 0, 0]", "[0, 1e30, 0]", "[-2e5, 0]"] {
+            let yaml = format!("image: m.pgm\nresolution: 0.05\norigin: {origin}\n");
+            let error = RosMap::read(&files("origin", &yaml, pgm), &LogOdds::SYMMETRIC)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                error.contains("line 3: field `origin`: must be finite and within 100 km"),
+                "{origin}: {error}"
+            );
+        }
     }
 
     #[test]

@@ -129,7 +129,7 @@ const ODOM_FIELDS: [&str; 9] = [
 
 /// Farthest a pose may lie from the origin of its frame, metres, along either axis: the
 /// library refuses steps beyond 100 km (where `f32` coordinates are coarser than 8 mm).
-pub const MAX_COORDINATE_M: f64 = 1e5;
+pub const MAX_COORDINATE_M: f64 = microslam::geometry::MAX_COORDINATE_M;
 
 /// A pose coordinate, refused beyond [`MAX_COORDINATE_M`] (a non-finite one is kept: the
 /// replay refuses and counts such an odometry pose).
