@@ -15,11 +15,13 @@
 //! configuration below), so a run is reproducible; a failing case is printed whole, and
 //! kept inputs of the readers' byte fuzzers live in `fuzz/regressions/`.
 
+#[path = "common/cases.rs"]
+mod cases;
 mod common;
 
+use cases::run_cases;
 use common::{host_sim, succeeds};
 use proptest::prelude::*;
-use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 use std::path::Path;
 
 /// One way of making a well-formed input wrong.
@@ -179,41 +181,6 @@ fn holds(
         );
     }
     Ok(r.code)
-}
-
-/// Runs `cases` mutations from a fixed seed through `test`, then checks that both
-/// outcomes occurred (some mutated inputs used, some refused): a property that only
-/// ever saw one of them would check little.
-fn run_cases<T: std::fmt::Debug>(
-    cases: u32,
-    strategy: &impl Strategy<Value = T>,
-    test: impl Fn(T) -> Result<Option<i32>, TestCaseError>,
-) {
-    let outcomes = std::cell::RefCell::new([0u32; 2]);
-    runner(cases)
-        .run(strategy, |input| {
-            let code = test(input)?;
-            outcomes.borrow_mut()[usize::from(code == Some(0))] += 1;
-            Ok(())
-        })
-        .unwrap();
-    let [refused, used] = *outcomes.borrow();
-    assert!(
-        refused > 0 && used > 0,
-        "{used} inputs used, {refused} refused"
-    );
-}
-
-/// The runner: `cases` mutations from a fixed seed.
-fn runner(cases: u32) -> TestRunner {
-    TestRunner::new_with_rng(
-        Config {
-            cases,
-            failure_persistence: None,
-            ..Config::default()
-        },
-        TestRng::deterministic_rng(RngAlgorithm::ChaCha),
-    )
 }
 
 /// A CARMEN log of 12 front scans of 30 beams (2 m, one wall at 1 m), the robot moving 3 cm
