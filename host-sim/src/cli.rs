@@ -123,6 +123,17 @@ pub struct BagArgs {
     /// Lidar mount `x,y,yaw` (m, m, rad) in the robot frame; overrides /tf_static.
     #[arg(long, value_parser = mount, allow_negative_numbers = true)]
     pub lidar_mount: Option<[f64; 3]>,
+    /// Landmark detections topic (`ros2_aruco_interfaces/msg/ArucoMarkers` or
+    /// `vision_msgs/msg/Detection3DArray`); default: the one topic of either type.
+    #[arg(long)]
+    pub detections_topic: Option<String>,
+    /// Ground-truth topic of a landmark bag (`nav_msgs/msg/Odometry`, read when present).
+    #[arg(long, default_value = "/ground_truth")]
+    pub truth_topic: String,
+    /// What of the odometry drives a landmark bag's run: `twist` (velocities), `pose`
+    /// (increments between poses) or `auto` (the twist unless it is always zero).
+    #[arg(long, default_value = "auto")]
+    pub odom_motion: crate::inputs::readers::detections_bag::OdomMotion,
 }
 
 fn mount(text: &str) -> Result<[f64; 3], String> {
@@ -142,6 +153,9 @@ impl From<&BagArgs> for BagOptions {
             imu_topic: a.imu_topic.clone(),
             tf_static_topic: a.tf_static_topic.clone(),
             lidar_mount: a.lidar_mount,
+            detections_topic: a.detections_topic.clone(),
+            truth_topic: a.truth_topic.clone(),
+            odom_motion: a.odom_motion,
         }
     }
 }

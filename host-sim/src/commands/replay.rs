@@ -15,6 +15,7 @@ use crate::inputs::faults::{FaultRates, FaultReport};
 use crate::inputs::readers::carmen::{
     CarmenLog, LaserMessage, beam_count, front_scans, read_log, resolve_log,
 };
+use crate::inputs::readers::detections_bag;
 use crate::inputs::readers::rosbag::{self, BagOptions};
 use crate::inputs::readers::{DatasetSpec, thor};
 use crate::metrics::PosePairs;
@@ -65,10 +66,19 @@ pub struct ReplayOptions {
 /// `host-sim replay`.
 pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
     bag_options_apply(&args.dataset, &args.bag)?;
-    let lidar = matches!(
-        args.dataset,
-        DatasetSpec::Carmen(_) | DatasetSpec::Thor(_) | DatasetSpec::Rosbag(_)
-    );
+    // A bag with a detections topic is a landmark recording; one without is a lidar bag.
+    let landmark_bag = match &args.dataset {
+        DatasetSpec::Rosbag(file) if args.filter != Some(FilterKind::GridSlam) => {
+            let path = resolve_log(file)?;
+            detections_bag::detections_topic(&path, &args.bag)?.map(|_| path)
+        }
+        _ => None,
+    };
+    let lidar = landmark_bag.is_none()
+        && matches!(
+            args.dataset,
+            DatasetSpec::Carmen(_) | DatasetSpec::Thor(_) | DatasetSpec::Rosbag(_)
+        );
     let grid = args.filter == Some(FilterKind::GridSlam) || (args.filter.is_none() && lidar);
     let lidar_log = matches!(
         args.dataset,
@@ -86,17 +96,25 @@ pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
     }
     if lidar {
         bail!(
-            "the landmark EKF-SLAM needs range-bearing sightings (mrclam:<dir>); a {} replay has none: use --filter grid-slam",
+            "the landmark EKF-SLAM needs range-bearing sightings (mrclam:<dir>, landmarks:<file>, or rosbag:<bag> with ArucoMarkers or Detection3DArray detections); a {} replay has none: use --filter grid-slam",
             args.dataset.family()
         );
     }
     let started = Instant::now();
-    let settings = Settings::load_for(
-        args.dataset.family(),
-        args.config.as_deref(),
-        args.association,
-    )?;
-    let mut recording = crate::inputs::readers::read(&args.dataset, args.robot)?;
+    // A bag of one's own robot starts from the plain landmark log's settings.
+    let family = match args.dataset {
+        DatasetSpec::Rosbag(_) => "landmarks",
+        _ => args.dataset.family(),
+    };
+    let settings = Settings::load_for(family, args.config.as_deref(), args.association)?;
+    let mut recording = match &landmark_bag {
+        Some(path) => {
+            let mount = settings.sighting.mount;
+            let given = mount.iter().any(|v| *v != 0.0).then_some(mount);
+            detections_bag::read(path, &args.bag, given)?.recording
+        }
+        None => crate::inputs::readers::read(&args.dataset, args.robot)?,
+    };
     let faults = args.faults.filter(|f| !f.is_none()).map(|rates| {
         let (events, counts) =
             crate::inputs::faults::inject(&recording.events, &rates, args.fault_seed);
@@ -664,6 +682,9 @@ pub(crate) fn bag_options_apply(spec: &DatasetSpec, bag: &BagOptions) -> Result<
             "--tf-static-topic",
             bag.tf_static_topic != d.tf_static_topic,
         ),
+        ("--detections-topic", bag.detections_topic.is_some()),
+        ("--truth-topic", bag.truth_topic != d.truth_topic),
+        ("--odom-motion", bag.odom_motion != d.odom_motion),
     ]
     .into_iter()
     .filter_map(|(name, set)| set.then_some(name))

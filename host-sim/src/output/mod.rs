@@ -2,6 +2,7 @@
 //! ROS `map_server` maps, PNG pictures, MCAP recordings and ROS 2 bags.
 
 pub mod animation;
+pub mod detections_bag;
 pub mod figure;
 pub mod floor_texture;
 pub mod grid_map;

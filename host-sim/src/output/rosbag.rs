@@ -13,15 +13,15 @@ use anyhow::Result;
 use microslam::sensors::lidar::LidarGeometry;
 use std::path::Path;
 
-const SEPARATOR: &str =
+pub(crate) const SEPARATOR: &str =
     "================================================================================\n";
-const HEADER: &str = "builtin_interfaces/Time stamp\nstring frame_id\n";
-const TIME: &str = "int32 sec\nuint32 nanosec\n";
-const QUATERNION: &str = "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n";
-const VECTOR3: &str = "float64 x\nfloat64 y\nfloat64 z\n";
+pub(crate) const HEADER: &str = "builtin_interfaces/Time stamp\nstring frame_id\n";
+pub(crate) const TIME: &str = "int32 sec\nuint32 nanosec\n";
+pub(crate) const QUATERNION: &str = "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n";
+pub(crate) const VECTOR3: &str = "float64 x\nfloat64 y\nfloat64 z\n";
 
 /// A `ros2msg` schema: the type's definition followed by its dependencies'.
-fn ros2msg(name: &str, text: &str, deps: &[(&str, &str)]) -> SchemaDef {
+pub(crate) fn ros2msg(name: &str, text: &str, deps: &[(&str, &str)]) -> SchemaDef {
     let mut data = text.to_owned();
     for (dep, def) in deps {
         data.push_str(SEPARATOR);

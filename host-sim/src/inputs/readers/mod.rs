@@ -5,6 +5,7 @@
 
 pub mod bag_storage;
 pub mod carmen;
+pub mod detections_bag;
 pub mod landmarks;
 pub mod map;
 pub mod mrclam;

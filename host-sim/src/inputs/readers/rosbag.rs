@@ -292,6 +292,14 @@ pub struct BagOptions {
     pub tf_static_topic: String,
     /// Lidar mount `(x, y, yaw)` in the robot frame: overrides `/tf_static` when given.
     pub lidar_mount: Option<[f64; 3]>,
+    /// Landmark detections topic (`ArucoMarkers` or `Detection3DArray`); `None`: the one
+    /// topic of either type.
+    pub detections_topic: Option<String>,
+    /// `nav_msgs/msg/Odometry` topic of the ground truth of a landmark run (read when
+    /// present).
+    pub truth_topic: String,
+    /// What of the odometry drives a landmark run.
+    pub odom_motion: super::detections_bag::OdomMotion,
 }
 
 impl Default for BagOptions {
@@ -302,6 +310,9 @@ impl Default for BagOptions {
             imu_topic: "/imu".into(),
             tf_static_topic: "/tf_static".into(),
             lidar_mount: None,
+            detections_topic: None,
+            truth_topic: "/ground_truth".into(),
+            odom_motion: super::detections_bag::OdomMotion::Auto,
         }
     }
 }
@@ -354,7 +365,7 @@ impl RosBag {
 }
 
 /// Checks that `topic` carries `expected` messages in CDR.
-fn check_type(path: &Path, topic: &str, ch: &Channel, expected: &str) -> Result<()> {
+pub(crate) fn check_type(path: &Path, topic: &str, ch: &Channel, expected: &str) -> Result<()> {
     if ch.schema != expected {
         bail!(
             "{}: topic {topic} carries `{}`, expected `{expected}`",
