@@ -8,7 +8,7 @@ use common::{host_sim, succeeds};
 use host_sim::domain::datasets::dataset_path;
 use host_sim::inputs::readers::detections_bag::{self, msg};
 use host_sim::inputs::readers::mrclam;
-use host_sim::inputs::readers::rosbag::{BagOptions, msg as ros};
+use host_sim::inputs::readers::rosbag::{BagOptions, MountSource, msg as ros};
 use host_sim::output::detections_bag::{
     CameraMount, DetectionFormat, aruco_markers_schema, export,
 };
@@ -248,6 +248,22 @@ fn a_good_small_bag_reads_in_the_robot_frame() {
     let s = sightings[0];
     assert_eq!(s.identity, microslam::event::Identity::Unique(3));
     let (x, y) = (2.1_f64, -0.1_f64);
+    assert!((s.z.range - x.hypot(y)).abs() < 1e-9, "{:?}", s.z);
+    assert!((s.z.bearing - y.atan2(x)).abs() < 1e-9, "{:?}", s.z);
+    // The settings' mount wins: the sighting is taken in the camera's frame (x forward),
+    // the filter mounts it.
+    let bag = detections_bag::read(&path, &BagOptions::default(), Some([0.3, 0.0, 0.0])).unwrap();
+    assert_eq!(bag.mount_source, MountSource::Settings);
+    let s = bag
+        .recording
+        .events
+        .iter()
+        .find_map(|e| match e.kind {
+            microslam::event::EventKind::Sighting(s) => Some(s),
+            _ => None,
+        })
+        .unwrap();
+    let (x, y) = (1.9_f64, -0.1_f64);
     assert!((s.z.range - x.hypot(y)).abs() < 1e-9, "{:?}", s.z);
     assert!((s.z.bearing - y.atan2(x)).abs() < 1e-9, "{:?}", s.z);
 }

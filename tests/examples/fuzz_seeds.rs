@@ -109,6 +109,89 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     println!("wrote {} frames to {}", messages.len(), root.display());
     rosbag_seeds(&root.join("rosbag_reader"))?;
+    detections_bag_seeds(&root.join("detections_bag_reader"))?;
+    Ok(())
+}
+
+/// A short run past two markers (velocity odometry, sightings, ground truth) written as a
+/// bag of detections: ArucoMarkers (first byte 0: the MCAP file itself; 1: its messages
+/// structured into SQLite) and Detection3DArray (2 and 3).
+fn detections_bag_seeds(dir: &std::path::Path) -> Result<(), Box<dyn std::error::Error>> {
+    use host_sim::domain::recording::{Recording, TruePose};
+    use host_sim::output::detections_bag::{CameraMount, DetectionFormat, export};
+    use microslam::event::{Event, EventKind, Identity, Sighting};
+    use microslam::geometry::Pose2;
+    use microslam::sensors::range_bearing::RangeBearing;
+    std::fs::create_dir_all(dir)?;
+    let mut events = Vec::new();
+    let mut ground_truth = Vec::new();
+    for k in 0..4 {
+        let t = 100.0 + f64::from(k);
+        events.push(Event::new(
+            t,
+            EventKind::Velocity {
+                v: 0.2,
+                omega: 0.05,
+            },
+        ));
+        for (id, r, b) in [(3, 2.0 - 0.2 * f64::from(k), 0.2), (7, 3.0, -0.3)] {
+            events.push(Event::new(
+                t,
+                EventKind::Sighting(Sighting {
+                    identity: Identity::Unique(id),
+                    z: RangeBearing::new(r, b),
+                    covariance: None,
+                }),
+            ));
+        }
+        ground_truth.push(TruePose {
+            stamp: t,
+            pose: Pose2::new(0.2 * f64::from(k), 0.0, 0.05 * f64::from(k)),
+        });
+    }
+    let recording = Recording {
+        name: "seed".into(),
+        events,
+        ground_truth,
+        ..Recording::default()
+    };
+    let mount = CameraMount {
+        position: [0.1, 0.02, 0.3],
+        rpy: [0.0, 0.05, 0.1],
+    };
+    let topics = ["/detections", "/odom", "/tf_static", "/ground_truth"];
+    let work = tempfile::tempdir()?;
+    for (mode, name, format) in [
+        (0u8, "aruco", DetectionFormat::Aruco),
+        (
+            2u8,
+            "detection3d",
+            DetectionFormat::Detection3d {
+                class: "sign".into(),
+            },
+        ),
+    ] {
+        let bag = work.path().join(format!("{name}.mcap"));
+        export(&bag, &recording, &format, &mount)?;
+        let bytes = std::fs::read(&bag)?;
+        let mut file = vec![mode];
+        file.extend_from_slice(&bytes);
+        std::fs::write(dir.join(format!("seed-{name}-mcap-bag")), &file)?;
+        let mut structured = vec![mode | 1];
+        for m in mcap::MessageStream::new(&bytes)? {
+            let m = m?;
+            let topic = topics
+                .iter()
+                .position(|t| *t == m.channel.topic)
+                .ok_or("an unexpected topic")?;
+            structured.push(topic as u8);
+            structured.extend_from_slice(&(m.log_time as i64).to_le_bytes());
+            structured.extend_from_slice(&u16::try_from(m.data.len())?.to_le_bytes());
+            structured.extend_from_slice(&m.data);
+        }
+        std::fs::write(dir.join(format!("seed-{name}-structured-db3")), &structured)?;
+    }
+    println!("wrote 4 detection bags to {}", dir.display());
     Ok(())
 }
 

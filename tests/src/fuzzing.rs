@@ -557,9 +557,9 @@ const BAG_TOPICS: [(&str, &str); 5] = [
 ];
 
 /// Writes the messages encoded in `data` into a rosbag2 SQLite file at `path` (the oldest
-/// tables): per message a topic byte (mod 5, [`BAG_TOPICS`]), a receive time (`i64`, LE),
+/// tables): per message a topic byte (modulo the number of `topics`, e.g. [`BAG_TOPICS`]), a receive time (`i64`, LE),
 /// a length (`u16`, LE) and that many bytes of data; a message cut short ends the list.
-fn structured_db3(path: &std::path::Path, mut data: &[u8]) {
+fn structured_db3(path: &std::path::Path, topics: &[(&str, &str)], mut data: &[u8]) {
     let db = rusqlite::Connection::open(path).expect("create the fuzz bag");
     db.execute_batch(
         "PRAGMA journal_mode = OFF; PRAGMA synchronous = OFF; BEGIN;
@@ -569,7 +569,7 @@ fn structured_db3(path: &std::path::Path, mut data: &[u8]) {
              timestamp INTEGER NOT NULL, data BLOB NOT NULL);",
     )
     .expect("create the fuzz bag's tables");
-    for (k, (name, kind)) in BAG_TOPICS.iter().enumerate() {
+    for (k, (name, kind)) in topics.iter().enumerate() {
         db.execute(
             "INSERT INTO topics (id, name, type, serialization_format) VALUES (?1, ?2, ?3, 'cdr')",
             rusqlite::params![k as i64 + 1, name, kind],
@@ -587,7 +587,11 @@ fn structured_db3(path: &std::path::Path, mut data: &[u8]) {
         let (blob, rest) = rest.split_at(len);
         db.execute(
             "INSERT INTO messages (topic_id, timestamp, data) VALUES (?1, ?2, ?3)",
-            rusqlite::params![i64::from(topic % 5) + 1, i64::from_le_bytes(*stamp), blob],
+            rusqlite::params![
+                (usize::from(topic) % topics.len()) as i64 + 1,
+                i64::from_le_bytes(*stamp),
+                blob
+            ],
         )
         .expect("insert a message");
         data = rest;
@@ -605,7 +609,7 @@ pub fn rosbag_reader(data: &[u8]) {
     let dir = tempfile::tempdir().expect("temporary folder");
     let path = dir.path().join("fuzzed-bag");
     match data.split_first() {
-        Some((mode, rest)) if mode % 2 == 1 => structured_db3(&path, rest),
+        Some((mode, rest)) if mode % 2 == 1 => structured_db3(&path, &BAG_TOPICS, rest),
         Some((_, rest)) => std::fs::write(&path, rest).expect("write fuzz file"),
         None => std::fs::write(&path, data).expect("write fuzz file"),
     }
@@ -616,6 +620,73 @@ pub fn rosbag_reader(data: &[u8]) {
             let beams = bag.lidar_beams();
             assert!(bag.scans.iter().all(|s| s.ranges.len() == beams));
             assert!(bag.lidar.is_valid(), "{:?}", bag.lidar);
+        }
+        Err(e) => {
+            let text = format!("{e:#}");
+            assert!(
+                text.contains("fuzzed-bag"),
+                "error without the file: {text}"
+            );
+        }
+    }
+}
+
+/// The topics of the structured bags of [`detections_bag_reader`] (the first one's type
+/// chosen by the mode byte; the last one a topic the reader does not read).
+fn detection_topics(detection3d: bool) -> [(&'static str, &'static str); 5] {
+    use host_sim::inputs::readers::detections_bag::msg;
+    [
+        (
+            "/detections",
+            if detection3d {
+                msg::DETECTION3D_ARRAY
+            } else {
+                msg::ARUCO_MARKERS
+            },
+        ),
+        ("/odom", "nav_msgs/msg/Odometry"),
+        ("/tf_static", "tf2_msgs/msg/TFMessage"),
+        ("/ground_truth", "nav_msgs/msg/Odometry"),
+        ("/chatter", "std_msgs/msg/String"),
+    ]
+}
+
+/// Fuzzes the ROS 2 bag reader of landmark detections (`host-sim --dataset rosbag:` for
+/// the landmark EKF). The first byte: bit 0 set, the rest lists messages stored into a
+/// rosbag2 SQLite file (`structured_db3`, topics [`detection_topics`]), else it is the
+/// bag file itself; bit 1, the detections are `Detection3DArray` (else `ArucoMarkers`);
+/// bit 2, the settings give the camera mount. No panic; an error names the file; a bag
+/// read has at least one sighting, every sighting a finite positive range and a finite
+/// bearing, and its events in time order.
+pub fn detections_bag_reader(data: &[u8]) {
+    use host_sim::inputs::readers::detections_bag;
+    use microslam::event::EventKind;
+    let dir = tempfile::tempdir().expect("temporary folder");
+    let path = dir.path().join("fuzzed-bag");
+    let mode = data.first().copied().unwrap_or(0);
+    let rest = data.get(1..).unwrap_or(&[]);
+    if mode & 1 == 1 {
+        structured_db3(&path, &detection_topics(mode & 2 == 2), rest);
+    } else {
+        std::fs::write(&path, rest).expect("write fuzz file");
+    }
+    let options = host_sim::inputs::readers::rosbag::BagOptions::default();
+    let mount = (mode & 4 == 4).then_some([0.1, 0.0, 0.05]);
+    match detections_bag::read(&path, &options, mount) {
+        Ok(bag) => {
+            let events = &bag.recording.events;
+            let mut sightings = 0;
+            for e in events {
+                if let EventKind::Sighting(s) = e.kind {
+                    sightings += 1;
+                    assert!(
+                        s.z.range.is_finite() && s.z.range > 0.0 && s.z.bearing.is_finite(),
+                        "{s:?}"
+                    );
+                }
+            }
+            assert!(sightings > 0, "a bag read without a sighting");
+            assert!(events.windows(2).all(|w| w[0].stamp <= w[1].stamp));
         }
         Err(e) => {
             let text = format!("{e:#}");
@@ -638,6 +709,7 @@ pub const TARGETS: &[(&str, FuzzCheck)] = &[
     ("npz_reader", npz_reader),
     ("map_reader", map_reader),
     ("rosbag_reader", rosbag_reader),
+    ("detections_bag_reader", detections_bag_reader),
     ("ekf_steps", ekf_steps),
     ("wire_session", wire_session),
     ("wire_decoder", wire_decoder),
