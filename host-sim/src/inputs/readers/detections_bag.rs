@@ -443,7 +443,10 @@ pub fn read(
                     last.stamp
                 )));
             }
-            robot_frame.get_or_insert(o.child_frame_id.trim_start_matches('/').to_owned());
+            let child = o.child_frame_id.trim_start_matches('/');
+            if !child.is_empty() {
+                robot_frame.get_or_insert(child.to_owned());
+            }
             odom.push(read);
         } else if t == topic {
             let (stamp, frame, items) = if kind == msg::ARUCO_MARKERS {
