@@ -358,7 +358,8 @@ pub struct ReplayArgs {
     /// Dataset: `mrclam:<dir>` (landmarks), `carmen:<log>` or `rosbag:<bag>` (lidar; a
     /// ROS 2 bag: an `.mcap` or `.db3` file, plain or zstd-compressed, or a rosbag2 bag
     /// folder, its topics:
-    /// `--scan-topic`, `--odom-topic`) or `thor:<dir>`
+    /// `--scan-topic`, `--odom-topic`; a bag with ArucoMarkers or Detection3DArray
+    /// detections is a landmark recording: `--detections-topic`) or `thor:<dir>`
     /// (encoders + IMU): a path, or a name under `$SLAM_DATASETS/<family>`, e.g.
     /// `mrclam:dataset6`, `carmen:intel/intel-raw-part.clf`, `thor:thor`;
     /// `mrclam:dataset6/robot3` picks the robot (overrides `--robot`).

@@ -32,8 +32,9 @@ pub enum DatasetSpec {
     Carmen(String),
     /// THOR `.npz` files: a folder, or a name under the datasets folder (`thor:thor`).
     Thor(String),
-    /// A ROS 2 bag with `sensor_msgs/msg/LaserScan` and `nav_msgs/msg/Odometry` messages:
-    /// an MCAP or SQLite 3 file, or a rosbag2 bag folder (`rosbag:<bag>`).
+    /// A ROS 2 bag with `sensor_msgs/msg/LaserScan` and `nav_msgs/msg/Odometry` messages
+    /// ([`rosbag`]), or with landmark detections and odometry ([`detections_bag`]): an
+    /// MCAP or SQLite 3 file, or a rosbag2 bag folder (`rosbag:<bag>`).
     Rosbag(String),
     /// A plain landmark log ([`landmarks`], documented in docs/guide.md): a file.
     Landmarks(String),
