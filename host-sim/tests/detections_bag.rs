@@ -71,7 +71,7 @@ fn an_mrclam_run_as_an_aruco_bag_replays_as_the_files_do() {
         &[],
     );
     let (a, b) = (ate(&files), ate(&from_bag));
-    println!("ATE MRCLAM files {a:.4} m, ArucoMarkers bag (twist) {b:.4} m");
+    println!("ATE MRCLAM files {a:.6} m, ArucoMarkers bag (twist) {b:.6} m");
     assert!((a - b).abs() < 0.005, "files {a} m, bag {b} m");
     assert_eq!(
         files["inputs"]["sightings"]["used"], from_bag["inputs"]["sightings"]["used"],

@@ -108,11 +108,7 @@ pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
     };
     let settings = Settings::load_for(family, args.config.as_deref(), args.association)?;
     let mut recording = match &landmark_bag {
-        Some(path) => {
-            let mount = settings.sighting.mount;
-            let given = mount.iter().any(|v| *v != 0.0).then_some(mount);
-            detections_bag::read(path, &args.bag, given)?.recording
-        }
+        Some(path) => detections_bag::recording(path, &args.bag, settings.sighting.mount)?,
         None => crate::inputs::readers::read(&args.dataset, args.robot)?,
     };
     let faults = args.faults.filter(|f| !f.is_none()).map(|rates| {

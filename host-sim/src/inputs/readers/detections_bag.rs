@@ -375,6 +375,13 @@ fn optical_to_body(p: [f64; 3]) -> [f64; 3] {
     [p[2], -p[0], -p[1]]
 }
 
+/// The recording of a landmark bag replayed with the settings' `[sighting] mount`: the
+/// camera mount when it is not zero, else the bag's (`read`).
+pub fn recording(path: &Path, options: &BagOptions, mount: [f64; 3]) -> Result<Recording> {
+    let given = mount.iter().any(|v| *v != 0.0).then_some(mount);
+    Ok(read(path, options, given)?.recording)
+}
+
 /// Reads a bag's landmark detections and odometry. `settings_mount` is the settings'
 /// `[sighting] mount` when it is not zero: the detections are then taken in the camera's
 /// frame (turned from an optical frame to x forward) and the EKF mounts them; otherwise
