@@ -131,7 +131,8 @@ pub struct BagArgs {
     #[arg(long, default_value = "/ground_truth")]
     pub truth_topic: String,
     /// What of the odometry drives a landmark bag's run: `twist` (velocities), `pose`
-    /// (increments between poses) or `auto` (the twist unless it is always zero).
+    /// (increments between poses), `pose-rates` (the velocities between poses) or `auto`
+    /// (the twist, unless it is always zero: then `pose-rates`).
     #[arg(long, default_value = "auto")]
     pub odom_motion: crate::inputs::readers::detections_bag::OdomMotion,
 }

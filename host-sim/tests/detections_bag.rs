@@ -50,10 +50,15 @@ fn ate(m: &serde_json::Value) -> f64 {
 }
 
 fn mrclam_bag(dir: &Path, format: &DetectionFormat) -> PathBuf {
+    mrclam_bag_as(dir, format, true, "run.mcap")
+}
+
+/// [`mrclam_bag`], its odometry with the twist or with the poses only.
+fn mrclam_bag_as(dir: &Path, format: &DetectionFormat, twist: bool, name: &str) -> PathBuf {
     let folder = dataset_path("mrclam/dataset6").unwrap();
     let recording = mrclam::read(&folder, 1).unwrap();
-    let path = dir.join("run.mcap");
-    export(&path, &recording, format, &MOUNT).unwrap();
+    let path = dir.join(name);
+    export(&path, &recording, format, &MOUNT, twist).unwrap();
     path
 }
 
@@ -87,6 +92,17 @@ fn an_mrclam_run_as_an_aruco_bag_replays_as_the_files_do() {
     let c = ate(&poses);
     println!("ATE ArucoMarkers bag, pose increments {c:.4} m");
     assert!(c.is_finite() && c < 1.2, "{c}");
+    // An odometry that publishes no twist: the velocities between its poses drive the
+    // filter, as the twist would.
+    let pose_only = mrclam_bag_as(dir.path(), &DetectionFormat::Aruco, false, "poses.mcap");
+    let from_poses = replay(
+        &format!("rosbag:{}", pose_only.display()),
+        &dir.path().join("pose-only"),
+        &[],
+    );
+    let d = ate(&from_poses);
+    println!("ATE ArucoMarkers bag, poses only (velocities between them) {d:.6} m");
+    assert!((a - d).abs() < 0.005, "files {a} m, poses-only bag {d} m");
 }
 
 /// Every landmark of one class (Detection3DArray): JCBB decides which landmark.

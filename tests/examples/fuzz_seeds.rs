@@ -172,7 +172,7 @@ fn detections_bag_seeds(dir: &std::path::Path) -> Result<(), Box<dyn std::error:
         ),
     ] {
         let bag = work.path().join(format!("{name}.mcap"));
-        export(&bag, &recording, &format, &mount)?;
+        export(&bag, &recording, &format, &mount, true)?;
         let bytes = std::fs::read(&bag)?;
         let mut file = vec![mode];
         file.extend_from_slice(&bytes);

@@ -163,12 +163,14 @@ fn drive(p: Pose2<f64>, v: f64, omega: f64, dt: f64) -> Pose2<f64> {
 }
 
 /// Writes `recording` (velocity odometry and sightings) as a ROS 2 bag of detections at
-/// `path`. Returns the messages written.
+/// `path`; with `twist` the odometry messages carry the velocities too, else their poses
+/// only (as an odometry source that publishes no twist). Returns the messages written.
 pub fn export(
     path: &Path,
     recording: &Recording,
     format: &DetectionFormat,
     mount: &CameraMount,
+    twist: bool,
 ) -> Result<u64> {
     let mut bag = McapFile::create(path, "ros2")?;
     let first = recording.events.first().map_or(0.0, |e| e.stamp);
@@ -220,6 +222,7 @@ pub fn export(
                     pose = drive(pose, v0, w0, e.stamp - t0);
                 }
                 last = Some((e.stamp, v, omega));
+                let (v, omega) = if twist { (v, omega) } else { (0.0, 0.0) };
                 let o = odometry(e.stamp, "odom", pose, v, omega);
                 write_ros(&mut bag, "/odom", odometry_schema, e.stamp, &o)?;
                 i += 1;

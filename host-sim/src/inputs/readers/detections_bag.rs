@@ -106,13 +106,17 @@ pub mod msg {
 #[serde(rename_all = "snake_case")]
 pub enum OdomMotion {
     /// The twist, unless every message's twist is zero while the poses move: then the
-    /// poses.
+    /// velocities between consecutive poses (the arc each step draws), so that the
+    /// settings' latency and scale states act on them as on a twist.
     #[default]
     Auto,
     /// The twist: velocities `v`, `ω` held until the next message.
     Twist,
     /// The poses: the increment between consecutive ones.
     Pose,
+    /// The poses: the speed and turn rate of the arc between consecutive ones, held from
+    /// the first's stamp as a twist is (what `auto` takes when the twist is all zero).
+    PoseRates,
 }
 
 impl std::str::FromStr for OdomMotion {
@@ -122,7 +126,8 @@ impl std::str::FromStr for OdomMotion {
             "auto" => Ok(Self::Auto),
             "twist" => Ok(Self::Twist),
             "pose" => Ok(Self::Pose),
-            _ => Err(format!("`{s}`: expected auto, twist or pose")),
+            "pose-rates" => Ok(Self::PoseRates),
+            _ => Err(format!("`{s}`: expected auto, twist, pose or pose-rates")),
         }
     }
 }
@@ -313,6 +318,30 @@ fn odom_numbers(o: &ros::Odometry) -> Result<Odom> {
 }
 
 /// A transform as an isometry, refusing non-finite numbers and a zero quaternion.
+/// The constant speed and turn rate that drive `a`'s pose to `b`'s on an arc in the time
+/// between their stamps (the inverse of the arc model the velocity path integrates:
+/// forward `Δx = v/ω · sin(ωΔt)`, so `v = Δx · Δθ / (Δt · sin Δθ)`); an increment when the
+/// stamps are equal or the step turns more than 3 rad (no plausible arc between two
+/// odometry messages; near half a turn `sin Δθ` vanishes).
+fn arc_rates(a: &Odom, b: &Odom) -> EventKind<f64> {
+    let d = a.pose.between(&b.pose);
+    let dt = b.stamp - a.stamp;
+    let turn = microslam::geometry::wrap_angle(d.theta);
+    if dt.is_nan() || dt <= 0.0 || turn.abs() > 3.0 {
+        return EventKind::Increment(d);
+    }
+    // Δθ / sin Δθ, → 1 for a straight step.
+    let stretch = if turn.abs() < 1e-6 {
+        1.0 + turn * turn / 6.0
+    } else {
+        turn / turn.sin()
+    };
+    EventKind::Velocity {
+        v: d.x * stretch / dt,
+        omega: turn / dt,
+    }
+}
+
 fn isometry(t: &ros::Transform) -> Option<Isometry3<f64>> {
     let (v, q) = (t.translation, t.rotation);
     let all = [v.x, v.y, v.z, q.x, q.y, q.z, q.w];
@@ -555,7 +584,7 @@ pub fn read(
             let still = odom.iter().all(|o| o.v == 0.0 && o.omega == 0.0);
             let moves = odom.windows(2).any(|w| w[0].pose != w[1].pose);
             if still && moves {
-                OdomMotion::Pose
+                OdomMotion::PoseRates
             } else {
                 OdomMotion::Twist
             }
@@ -563,15 +592,19 @@ pub fn read(
         m => m,
     };
     let mut events: Vec<(usize, Event<f64>)> = Vec::with_capacity(odom.len() + detected.len());
-    let mut previous: Option<Pose2<f64>> = None;
-    for o in &odom {
+    for (k, o) in odom.iter().enumerate() {
+        let previous = k.checked_sub(1).and_then(|j| odom.get(j));
         let kind = match motion {
             OdomMotion::Pose => {
-                let d = previous.map_or(Pose2::IDENTITY, |p| p.between(&o.pose));
-                previous = Some(o.pose);
-                EventKind::Increment(d)
+                EventKind::Increment(previous.map_or(Pose2::IDENTITY, |p| p.pose.between(&o.pose)))
             }
-            _ => EventKind::Velocity {
+            // The velocity that drives this pose to the next one, held from this stamp
+            // (as a twist is); the last message stops the robot.
+            OdomMotion::PoseRates => match odom.get(k + 1) {
+                Some(next) => arc_rates(o, next),
+                None => EventKind::Velocity { v: 0.0, omega: 0.0 },
+            },
+            OdomMotion::Auto | OdomMotion::Twist => EventKind::Velocity {
                 v: o.v,
                 omega: o.omega,
             },
