@@ -653,7 +653,7 @@ fn detection_topics(detection3d: bool) -> [(&'static str, &'static str); 5] {
 
 /// Fuzzes the ROS 2 bag reader of landmark detections (`host-sim --dataset rosbag:` for
 /// the landmark EKF). The first byte: bit 0 set, the rest lists messages stored into a
-/// rosbag2 SQLite file (`structured_db3`, topics [`detection_topics`]), else it is the
+/// rosbag2 SQLite file (`structured_db3`, topics of `detection_topics`), else it is the
 /// bag file itself; bit 1, the detections are `Detection3DArray` (else `ArucoMarkers`);
 /// bit 2, the settings give the camera mount. No panic; an error names the file; a bag
 /// read has at least one sighting, every sighting a finite positive range and a finite
