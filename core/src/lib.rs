@@ -65,6 +65,7 @@
 )]
 
 pub mod association;
+mod checksum;
 #[cfg(feature = "wire")]
 pub mod device;
 pub mod ekf;

@@ -419,7 +419,7 @@ fn the_length_check_sees_a_long_file_and_leaves_tests_out() {
 /// modules on lower levels. `testing` (the unit tests' worlds, compiled for tests only)
 /// and the unit tests themselves are left out: a test may drive any layer.
 const CORE_LEVELS: &[&[&str]] = &[
-    &["scalar", "log"],
+    &["scalar", "log", "checksum"],
     &["geometry", "gate", "error"],
     &["sensors"],
     &["motion", "event"],

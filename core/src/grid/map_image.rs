@@ -63,7 +63,7 @@ pub const SECTION_FREE: u32 = 3;
 /// with the firmware's code fits the STM32F411's 512 KB of flash (6 levels would not).
 pub const DEFAULT_LAYER_LEVELS: u8 = 5;
 
-static CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+use crate::checksum::CRC32;
 const CRC_AT: usize = 36;
 
 /// Why a map image was refused.
@@ -222,6 +222,24 @@ fn image_crc(bytes: &[u8]) -> Option<u32> {
 }
 
 impl<'a> MapImage<'a> {
+    /// The image at the start of `region`, a flash region longer than the image (where
+    /// a device writes its map): the bytes its header says it holds, checked as
+    /// [`MapImage::parse`] checks them. An erased region is refused with
+    /// [`MapImageError::BadMagic`].
+    pub fn parse_at_start(region: &'a [u8]) -> Result<Self, MapImageError> {
+        let header = region
+            .get(..MAP_IMAGE_HEADER_LEN)
+            .ok_or(MapImageError::Truncated)?;
+        if header.get(..4) != Some(&MAP_IMAGE_MAGIC[..]) {
+            return Err(MapImageError::BadMagic);
+        }
+        let payload = u32_at(header, 32).ok_or(MapImageError::Truncated)? as usize;
+        let total = MAP_IMAGE_HEADER_LEN
+            .checked_add(payload)
+            .ok_or(MapImageError::Truncated)?;
+        Self::parse(region.get(..total).ok_or(MapImageError::Truncated)?)
+    }
+
     /// Checks `bytes` (magic, version, header, length, CRC-32, geometry, sections) and
     /// borrows the map from them.
     pub fn parse(bytes: &'a [u8]) -> Result<Self, MapImageError> {
@@ -550,6 +568,34 @@ mod tests {
         assert_eq!(image.section(0x101), None);
         assert_eq!(image.len_bytes(), bytes.len());
         assert_eq!(bytes.len() % 4, 0);
+    }
+
+    #[test]
+    fn an_image_is_read_from_the_start_of_a_longer_flash_region() {
+        let (cells, g) = sample();
+        let bytes = encode_map_image(&cells, &g, 20, -20, &[]).unwrap();
+        let mut region = vec![0xFF_u8; bytes.len() + 1000];
+        assert_eq!(
+            MapImage::parse_at_start(&region).err(),
+            Some(MapImageError::BadMagic)
+        );
+        region[..bytes.len()].copy_from_slice(&bytes);
+        let image = MapImage::parse_at_start(&region).unwrap();
+        assert_eq!(image.len_bytes(), bytes.len());
+        assert_eq!(
+            image.checksum(),
+            MapImage::parse(&bytes).unwrap().checksum()
+        );
+        // The image cut by the region's end, or a byte of it changed, is refused.
+        assert_eq!(
+            MapImage::parse_at_start(&bytes[..bytes.len() - 4]).err(),
+            Some(MapImageError::Truncated)
+        );
+        region[bytes.len() - 1] ^= 1;
+        assert_eq!(
+            MapImage::parse_at_start(&region).err(),
+            Some(MapImageError::ChecksumMismatch)
+        );
     }
 
     #[test]

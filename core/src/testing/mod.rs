@@ -1,5 +1,6 @@
 //! Helpers shared by the unit tests (compiled only for `cargo test`).
 
+pub mod flash;
 pub mod world;
 
 use crate::error::InvalidSetting;

@@ -37,7 +37,7 @@ pub(super) const CRC_BYTES: usize = 4;
 const HEADER_CRC_AT: usize = 52;
 
 /// CRC-32 (ISO-HDLC, as zlib's) of headers and records.
-pub(super) static CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+pub(super) use crate::checksum::CRC32;
 
 /// Bytes of one record of `beams` ranges, without the padding to its slot:
 /// `32 + 2 · beams + 4` (90 beams: 216; 73 beams: 182).

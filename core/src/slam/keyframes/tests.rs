@@ -1,6 +1,6 @@
 //! Tests of the keyframe store: round trips, sizes, header checks, a full store, the
 //! storage adapters. Power loss is in `tests/power_loss.rs`, property tests in
-//! `tests/properties.rs`; `tests/mock.rs` is the NOR flash they run on.
+//! `tests/properties.rs`; `crate::testing::flash` is the NOR flash they run on.
 
 use super::*;
 use crate::geometry::Pose2;
@@ -8,11 +8,10 @@ use crate::pf::ScanPoints;
 use crate::sensors::lidar::{Beam, LidarGeometry, LidarScan};
 use core::cell::Cell;
 
-mod mock;
 mod power_loss;
 mod properties;
 
-use mock::MockFlash;
+use crate::testing::flash::MockFlash;
 
 /// A lidar with a mount offset, 0.1–30 m, no return from 31 m.
 pub(super) fn lidar() -> LidarGeometry {

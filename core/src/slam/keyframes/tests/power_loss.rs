@@ -3,9 +3,9 @@
 //! exactly the keyframes completed before the cut, never a torn one, and appending goes
 //! on without programming any flash word twice.
 
-use super::mock::{Cut, MockFlash};
 use super::{append_k, assert_keyframe, image, lidar};
 use crate::slam::keyframes::*;
+use crate::testing::flash::{Cut, MockFlash};
 
 /// 73 beams (scans of 146 at decimation 2): records of 182 bytes in 184-byte slots, so
 /// the last flash word of a record is padded.

@@ -1,4 +1,4 @@
-//! A NOR flash in RAM for the tests: erase sets `0xFF`, programming only clears bits,
+//! A NOR flash in RAM for the tests (the keyframe store's, the saved pose's): erase sets `0xFF`, programming only clears bits,
 //! each `W`-byte word is programmed at most once between erases (as on flash with ECC),
 //! reads and writes must be aligned, and power can be cut after a number of bytes.
 
