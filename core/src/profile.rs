@@ -144,6 +144,11 @@ pub const SLAM_KEYFRAME_BYTES: u32 = 256 * 1024;
 /// maps up to 1 024 × 1 024 cells (51.2 m square at 5 cm); the Intel lab's takes 102 456.
 pub const SLAM_MAP_BYTES: u32 = 256 * 1024;
 
+/// Bytes of each of the two flash sectors the robot's saved pose takes
+/// ([`crate::device::PoseStore`], feature `wire`): 128 records of 32 bytes a sector at
+/// 4 KB (on an STM32F411, whose smallest sectors are 16 KB, 512).
+pub const SLAM_POSE_SECTOR_BYTES: u32 = 4 * 1024;
+
 /// [`Slam`] with the storage `S` of its keyframes, as a grid estimator
 /// ([`crate::pf::GridEstimator`]): what a wire session drives.
 pub type SlamEstimator<'a, S> = crate::slam::WithKeyframes<

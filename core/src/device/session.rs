@@ -141,6 +141,8 @@ pub struct Session<'a, const N: usize, const P: usize, const L: usize> {
     ranges: [f32; MAX_SCAN_BEAMS],
     active: EstimatorKind,
     status: Status,
+    /// A [`Command::Restart`] was answered: the firmware resets the processor.
+    restart_requested: bool,
 }
 
 impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
@@ -162,6 +164,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             ranges: [0.0; MAX_SCAN_BEAMS],
             active: EstimatorKind::Ekf,
             status: Status::default(),
+            restart_requested: false,
         };
         session.reset(Pose2::new(0.0, 0.0, 0.0));
         session
@@ -203,6 +206,23 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
     pub fn with_map_checksum(mut self, checksum: Option<u32>) -> Self {
         self.map_checksum = checksum;
         self
+    }
+
+    /// The same session running the localizer from `pose` (a pose kept in flash across a
+    /// reset, [`super::PoseStore`]) instead of the EKF: what a firmware that finds a
+    /// saved map and pose at boot starts with. Without a localizer it stays on the EKF.
+    pub fn localizing_from(mut self, pose: Pose2<f32>) -> Self {
+        if self.localizer.is_ok() {
+            self.active = EstimatorKind::Localizer;
+            self.reset(pose);
+        }
+        self
+    }
+
+    /// `true` once a [`Command::Restart`] has been answered: the firmware sends the
+    /// reply, then resets the processor (a host running the session starts a new one).
+    pub fn restart_requested(&self) -> bool {
+        self.restart_requested
     }
 
     /// The grid estimator or localizer the active mode feeds, with the setup.
@@ -449,6 +469,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
                                 seq,
                                 bytes: saved.bytes,
                                 checksum: saved.checksum,
+                                pose: [saved.pose.x, saved.pose.y, saved.pose.theta],
                             };
                         }
                         Some(Err(_)) => Refusal::MapNotWritten,
@@ -483,6 +504,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
                 };
             }
             Command::ReportStatus => {}
+            Command::Restart => self.restart_requested = true,
             Command::ConfigureEkf(settings) => {
                 if let Some(field) = settings.invalid_field() {
                     self.status.rejected = self.status.rejected.saturating_add(1);

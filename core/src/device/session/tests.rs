@@ -561,6 +561,42 @@ fn localizer_mode_matches_direct_calls_and_refusals_are_explicit() {
     assert_eq!(after_scan.pose, [pose.x, pose.y, pose.theta]);
     assert_eq!(after_scan.covariance, twin.filter().pose_covariance());
 
+    // A session started on the localizer from a pose (kept in flash across a reset)
+    // answers the same scan as one told to reset there, and names the localizer at once.
+    let mut loc = GridLocalizer::<16, 40>::new(view, config, start)
+        .unwrap()
+        .with_layers(layers, RelocalizationConfig::DEFAULT)
+        .unwrap();
+    let mut resumed = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32)
+        .with_localizer(Ok(&mut loc), setup)
+        .localizing_from(Pose2::new(0.05, 0.0, 0.0));
+    assert_eq!(resumed.active(), EstimatorKind::Localizer);
+    let scan = frames(&[chunk(4, 0), chunk(4, 32)]);
+    let replies_resumed: std::vec::Vec<_> =
+        scan.iter().filter_map(|&b| resumed.receive(b)).collect();
+    assert_eq!(localization(&replies_resumed[1]).0.pose, after_scan.pose);
+    assert!(!resumed.restart_requested());
+    let restart = frames(&[command(9, Command::Restart)]);
+    let answer: std::vec::Vec<_> = restart.iter().filter_map(|&b| resumed.receive(b)).collect();
+    assert!(
+        matches!(
+            answer[..],
+            [ToHost::Status {
+                seq: 9,
+                estimator: EstimatorKind::Localizer,
+                ..
+            }]
+        ),
+        "{answer:?}"
+    );
+    assert!(resumed.restart_requested());
+    drop(resumed);
+    // Without a localizer a session cannot start on it: it stays on the EKF.
+    let plain = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32)
+        .localizing_from(Pose2::new(1.0, 0.0, 0.0));
+    assert_eq!(plain.active(), EstimatorKind::Ekf);
+    drop(plain);
+
     // Relocalize: answered with a status; the next scan runs the global search.
     assert!(matches!(replies[6], ToHost::Status { seq: 6, .. }));
     let (_, report) = localization(&replies[8]);
