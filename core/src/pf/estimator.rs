@@ -48,13 +48,16 @@ pub trait GridEstimator {
 }
 
 /// A map image an estimator wrote ([`GridEstimator::save_map`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SavedMap {
     /// Length of the image, bytes.
     pub bytes: u32,
     /// Its CRC-32 (`microslam::grid::MapImage::checksum`).
     pub checksum: u32,
+    /// Where the robot is in the map, at the end of the run: where a localizer on it
+    /// starts.
+    pub pose: Pose2<f32>,
 }
 
 /// The methods both filters forward to their inherent methods of the same name (or to

@@ -112,6 +112,11 @@ pub enum Command {
         /// Byte offset into the image.
         offset: u32,
     },
+    /// Restart the device, as its reset button would: answered with a
+    /// [`ToHost::Status`], after which the firmware resets the processor
+    /// ([`crate::device::Session::restart_requested`]). What it keeps in flash (a saved
+    /// map and pose) decides what it runs after the reset. Since protocol 5.
+    Restart,
 }
 
 /// Bytes of the map image a [`ToHost::MapChunk`] carries at most.
@@ -554,7 +559,7 @@ impl core::fmt::Display for Refusal {
 /// message of either direction changes. [`ToHost::Status`] keeps its variant index (1)
 /// and its first two fields (`seq`, `protocol`) in every version, so a host can always
 /// tell which version a device speaks.
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 
 /// Messages from the device to the host.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -604,6 +609,9 @@ pub enum ToHost {
         bytes: u32,
         /// Its CRC-32 (`microslam::grid::MapImage::checksum`).
         checksum: u32,
+        /// Where the robot is in the map (x, y in m, heading in rad): where a localizer
+        /// on it starts, and what a firmware keeps in flash beside it (since protocol 5).
+        pose: [f32; 3],
     },
     /// The answer to [`Command::ReadMap`]: `len` bytes of the saved map image from
     /// `offset`, in `bytes` (row by row of 32; the rest zero). Since protocol 4.

@@ -90,6 +90,10 @@ fn samples() -> std::vec::Vec<ToDevice> {
             seq: 10,
             command: Command::ReadMap { offset: u32::MAX },
         },
+        ToDevice::Command {
+            seq: 11,
+            command: Command::Restart,
+        },
     ]
 }
 

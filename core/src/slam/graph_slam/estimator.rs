@@ -294,6 +294,9 @@ impl<
             return Some(Err(PfError::Slam));
         };
         let free_below = self.slam.config().grid.log_odds.free_below;
+        // Where the robot is in the map drawn (the graph's frame, which the drawing
+        // does not move).
+        let pose = self.slam.pose();
         let written = self
             .slam
             .write_map_image(store, out, free_below)
@@ -304,6 +307,7 @@ impl<
                 Ok(crate::pf::SavedMap {
                     bytes: u32::try_from(summary.bytes).unwrap_or(u32::MAX),
                     checksum,
+                    pose,
                 })
             });
         Some(match written {
