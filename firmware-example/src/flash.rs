@@ -1,6 +1,9 @@
 //! A NOR flash stand-in in QEMU's SRAM ([`SramFlash`]): where the building-scale SLAM's
-//! keyframes go under QEMU (the `building-slam` firmware and the `cost_slam` probe), as
-//! they would go to a board's flash sectors.
+//! keyframes, its map image and the robot's saved pose go under QEMU (the
+//! `building-slam` firmware and the `cost_slam` probe), as they would go to a board's
+//! flash sectors. The firmware's start-up code never touches these bytes (they are
+//! outside the RAM the linker knows), and QEMU keeps its RAM through a system reset, so
+//! they survive a reset as flash does.
 
 /// A NOR flash stand-in in QEMU's SRAM: mps2-an386 has 4 MB of SRAM at `0x2000_0000`, of
 /// which the linker uses the first 128 KB (`memory-qemu.x`, the board's RAM); the bytes
@@ -21,6 +24,10 @@ impl SramFlash {
     /// Where the second stand-in starts ([`SramFlash::take_map`]): 2 MB into QEMU's SRAM.
     pub const MAP_BASE: usize = 0x2020_0000;
 
+    /// Where the third stand-in starts ([`SramFlash::take_poses`]): 3.5 MB into QEMU's
+    /// SRAM.
+    pub const POSE_BASE: usize = 0x2038_0000;
+
     /// The stand-in for the keyframes, `len` bytes (at most 1 MB: it ends where the
     /// map's begins), handed out once; `None` after.
     pub fn take(len: u32) -> Option<Self> {
@@ -29,10 +36,29 @@ impl SramFlash {
     }
 
     /// A second stand-in from [`SramFlash::MAP_BASE`], for the map image the SLAM writes
-    /// at the end of a run: `len` bytes (at most 2 MB), handed out once; `None` after.
+    /// at the end of a run: `len` bytes (at most 1.5 MB), handed out once; `None` after.
     pub fn take_map(len: u32) -> Option<Self> {
         static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
-        Self::take_at(Self::MAP_BASE, len, 2 << 20, &TAKEN)
+        Self::take_at(Self::MAP_BASE, len, 3 << 19, &TAKEN)
+    }
+
+    /// A third stand-in from [`SramFlash::POSE_BASE`], for the robot's saved pose
+    /// (`microslam::device::PoseStore`): `len` bytes (at most 512 KB), handed out once;
+    /// `None` after.
+    pub fn take_poses(len: u32) -> Option<Self> {
+        static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+        Self::take_at(Self::POSE_BASE, len, 1 << 19, &TAKEN)
+    }
+
+    /// What the stand-in holds now.
+    pub fn bytes(&self) -> &[u8] {
+        self.bytes
+    }
+
+    /// What the stand-in holds, as a board's flash is read through its address (a map
+    /// image a localizer borrows), for the rest of the program: no more writes.
+    pub fn into_bytes(self) -> &'static [u8] {
+        self.bytes
     }
 
     fn take_at(
@@ -47,8 +73,9 @@ impl SramFlash {
         }
         // SAFETY: QEMU's mps2-an386 maps SRAM at 0x2000_0000..0x2040_0000; nothing the
         // linker places reaches BASE (RAM ends at 0x2002_0000); the keyframes' region
-        // (BASE, at most 1 MB) ends where the map's (MAP_BASE, at most 2 MB) begins, which
-        // ends at the SRAM's end; each flag hands its region out once, so this is the only
+        // (BASE, at most 1 MB) ends where the map's (MAP_BASE, at most 1.5 MB) begins,
+        // which ends where the poses' (POSE_BASE, at most 512 KB) begins, which ends at
+        // the SRAM's end; each flag hands its region out once, so this is the only
         // reference to these bytes.
         let bytes = unsafe { core::slice::from_raw_parts_mut(base as *mut u8, len) };
         Some(Self { bytes })

@@ -49,7 +49,10 @@ pub const HEARTBEAT_EVENTS: u32 = 64;
 
 /// Runs the device forever: reads bytes from `serial`, feeds them to `session`, writes
 /// every reply as one frame, toggles `led` every [`HEARTBEAT_EVENTS`] replies. Status
-/// replies carry the stack high-water mark from `stack_peak_bytes`.
+/// replies carry the stack high-water mark from `stack_peak_bytes`. Every reply is shown
+/// to `after_reply` once it is written (the firmware keeps the robot's pose in flash
+/// there). After the reply to a `Restart` command the processor is reset (SYSRESETREQ),
+/// as by the board's reset button.
 ///
 /// Nothing waits for the host: replies are written as soon as a frame is complete, and
 /// the host streams frames without waiting for them.
@@ -58,6 +61,7 @@ pub fn serve<S, L, const N: usize, const P: usize, const IDS: usize>(
     serial: &mut S,
     led: &mut L,
     stack_peak_bytes: impl Fn() -> u32,
+    mut after_reply: impl FnMut(&ToHost),
 ) -> !
 where
     S: Read + Write,
@@ -84,6 +88,12 @@ where
             if let Ok(frame) = encode_frame(&reply, &mut tx) {
                 // A write error cannot be reported anywhere but the line itself.
                 let _ = serial.write_all(frame);
+            }
+            after_reply(&reply);
+            if session.restart_requested() {
+                let _ = serial.flush();
+                defmt::info!("restart requested: resetting");
+                cortex_m::peripheral::SCB::sys_reset();
             }
             replies = replies.wrapping_add(1);
             if replies.is_multiple_of(HEARTBEAT_EVENTS) {

@@ -26,6 +26,7 @@ use firmware_example::config::{EKF_LANDMARKS, Ekf};
 use firmware_example::config::{SLAM_EKF_LANDMARKS as EKF_LANDMARKS, SlamEkf as Ekf};
 use firmware_example::{board, serve, stack};
 use microslam::device::Session;
+use microslam::wire::ToHost;
 use panic_probe as _;
 use static_cell::ConstStaticCell;
 
@@ -44,12 +45,18 @@ type FirmwareSession = Session<
 #[entry]
 fn main() -> ! {
     let (mut serial, mut led) = board::init();
-    let mut session = grid::session(EKF.take());
+    let (mut session, after_reply) = grid::session(EKF.take());
     defmt::info!(
         "microslam firmware: EKF with {} landmarks, waiting for frames",
         EKF_LANDMARKS
     );
-    serve(&mut session, &mut serial, &mut led, stack::peak_bytes)
+    serve(
+        &mut session,
+        &mut serial,
+        &mut led,
+        stack::peak_bytes,
+        after_reply,
+    )
 }
 
 /// The grid SLAM (firmware built without a map).
@@ -67,7 +74,8 @@ mod grid {
     static GRID_SLAM: StaticCell<GridEstimator<'static>> = StaticCell::new();
 
     /// The session with the EKF and the grid SLAM; localizer requests are refused (no map).
-    pub fn session(ekf: &'static mut Ekf) -> FirmwareSession {
+    /// Nothing is kept in flash.
+    pub fn session(ekf: &'static mut Ekf) -> (FirmwareSession, impl FnMut(&ToHost)) {
         let grid = GRID.take();
         if grid
             .init_centred(GRID_CONFIG.resolution, GRID_CONFIG.log_odds)
@@ -81,7 +89,10 @@ mod grid {
             board::halt(4)
         };
         defmt::info!("grid estimator: {} particles", GRID_PARTICLES);
-        Session::with_grid(ekf, EKF_CONFIG, GRID_SLAM.init(slam), GRID_SETUP)
+        (
+            Session::with_grid(ekf, EKF_CONFIG, GRID_SLAM.init(slam), GRID_SETUP),
+            |_: &ToHost| {},
+        )
     }
 }
 
@@ -102,7 +113,8 @@ mod grid {
     static LOCALIZER: StaticCell<Localizer<'static>> = StaticCell::new();
 
     /// The session with the EKF and the localizer, or with the reason the map was refused.
-    pub fn session(ekf: &'static mut Ekf) -> FirmwareSession {
+    /// Nothing is kept in flash (the map is part of the firmware).
+    pub fn session(ekf: &'static mut Ekf) -> (FirmwareSession, impl FnMut(&ToHost)) {
         let image = MapImage::parse(MAP_IMAGE);
         let checksum = image.as_ref().ok().map(|image| image.checksum());
         let localizer = match image {
@@ -145,27 +157,46 @@ mod grid {
             }
         };
         defmt::info!("localizer: {} particles", LOCALIZER_PARTICLES);
-        Session::new(ekf, EKF_CONFIG)
-            .with_localizer(localizer, GRID_SETUP)
-            .with_map_checksum(checksum)
+        (
+            Session::new(ekf, EKF_CONFIG)
+                .with_localizer(localizer, GRID_SETUP)
+                .with_map_checksum(checksum),
+            |_: &ToHost| {},
+        )
     }
 }
 
-/// The building-scale grid SLAM with loop closure (feature `building-slam`).
+/// The building-scale grid SLAM with loop closure (feature `building-slam`), and the
+/// localizer on the map it saved once the board is reset.
 #[cfg(feature = "building-slam")]
 mod grid {
     use super::*;
+    use core::mem::ManuallyDrop;
     use firmware_example::config::{
-        SLAM_CONFIG, SLAM_KEYFRAME_BYTES, SLAM_MAP_BYTES, SLAM_NODES, Slam, SlamEstimator,
+        LOCALIZER_CONFIG, Localizer, SLAM_CONFIG, SLAM_KEYFRAME_BYTES, SLAM_MAP_BYTES, SLAM_NODES,
+        SLAM_POSE_SECTOR_BYTES, Slam, SlamEstimator,
     };
     use firmware_example::flash::SramFlash;
+    use microslam::device::{LocalizerEstimator, PoseKeeping, PoseStore};
     use microslam::geometry::Pose2;
+    use microslam::grid::MapImage;
+    use microslam::pf::PfError;
     use microslam::slam::keyframes::NorFlashStorage;
     use static_cell::StaticCell;
 
-    /// The estimator (maps, pose graph, workspace: 112 KB), all zero bytes (`.bss`: no
-    /// initial image in flash), handed out once.
-    static SLAM: ConstStaticCell<Slam> = ConstStaticCell::new(Slam::zeroed());
+    /// The RAM of the grid estimator: the SLAM (maps, pose graph, workspace: 112 KB)
+    /// while the board maps, or the localizer on the map the SLAM saved (a few KB) after
+    /// a reset that found one. Never both: the same bytes serve either.
+    union GridMemory {
+        slam: ManuallyDrop<Slam>,
+        localizer: ManuallyDrop<Result<Localizer<'static>, PfError>>,
+    }
+
+    /// The grid estimator's RAM, all zero bytes at reset (`.bss`: no initial image in
+    /// flash), handed out once.
+    static MEMORY: ConstStaticCell<GridMemory> = ConstStaticCell::new(GridMemory {
+        slam: ManuallyDrop::new(Slam::zeroed()),
+    });
 
     /// Where its keyframes and its map image go: the flash stand-ins.
     type Storage = NorFlashStorage<SramFlash>;
@@ -173,9 +204,126 @@ mod grid {
     /// The SLAM with its keyframe storage, as the session's grid estimator.
     static ESTIMATOR: StaticCell<SlamEstimator<'static, Storage>> = StaticCell::new();
 
-    /// The session with the small EKF and the building-scale SLAM; localizer requests
-    /// are refused (no map).
-    pub fn session(ekf: &'static mut Ekf) -> FirmwareSession {
+    /// The session, and what keeps the robot's pose in flash after each reply.
+    ///
+    /// At boot the map region is read: when it holds a valid map image and the pose store
+    /// a pose in it (the SLAM saved both at `SaveMap`), the board localizes in that map
+    /// from that pose (the session starts on the localizer, and the pose is kept every
+    /// half metre, `PoseKeeping`); otherwise it maps with the building-scale SLAM, and a
+    /// `SaveMap` keeps the map and the pose for the next boot.
+    pub fn session(ekf: &'static mut Ekf) -> (FirmwareSession, impl FnMut(&ToHost)) {
+        let memory = MEMORY.take();
+        let store = SramFlash::take_poses(2 * SLAM_POSE_SECTOR_BYTES)
+            .and_then(|flash| PoseStore::open(flash, 0, SLAM_POSE_SECTOR_BYTES).ok());
+        if store.is_none() {
+            defmt::error!("pose store refused: poses are not kept");
+        }
+        let Some(map_flash) = SramFlash::take_map(SLAM_MAP_BYTES) else {
+            defmt::error!("map flash stand-in taken");
+            board::halt(4)
+        };
+        let saved = match (MapImage::parse_at_start(map_flash.bytes()), &store) {
+            (Ok(image), Some(store)) => store.latest_in(image.checksum()),
+            (Err(e), _) => {
+                defmt::info!("no saved map ({}): mapping", e);
+                None
+            }
+            _ => None,
+        };
+        let session = match saved {
+            Some(pose) => localize(ekf, memory, map_flash.into_bytes(), pose),
+            None => map(ekf, memory, map_flash),
+        };
+        let mut keeping = PoseKeeping::new(session.1, saved);
+        let mut store = store;
+        let after_reply = move |reply: &ToHost| {
+            if let (Some((pose, map)), Some(store)) = (keeping.after(reply), store.as_mut())
+                && let Err(e) = store.save(pose, map)
+            {
+                defmt::warn!("pose not kept: {}", e);
+            }
+        };
+        (session.0, after_reply)
+    }
+
+    /// The localizer on the map image at the start of `region` (the map flash) from
+    /// `pose`, in `memory`; the map's checksum. Not inlined, nor is [`map`]: the 10 KB
+    /// localizer passes through this function's stack frame on its way into `memory`,
+    /// and a frame holding both paths would not fit beside the SLAM's 112 KB.
+    #[inline(never)]
+    fn localize(
+        ekf: &'static mut Ekf,
+        memory: &'static mut GridMemory,
+        region: &'static [u8],
+        pose: Pose2<f32>,
+    ) -> (FirmwareSession, Option<u32>) {
+        // The bytes read at boot, not written since.
+        let Ok(image) = MapImage::parse_at_start(region) else {
+            defmt::error!("saved map changed during boot");
+            board::halt(4)
+        };
+        let g = image.geometry();
+        defmt::info!(
+            "saved map: {} x {} cells, crc {:#010x}; localizing from ({}, {}, {})",
+            g.width,
+            g.height,
+            image.checksum(),
+            pose.x,
+            pose.y,
+            pose.theta
+        );
+        let localizer = place_localizer(memory, &image, pose);
+        let checksum = image.checksum();
+        let session = Session::new(ekf, EKF_CONFIG)
+            .with_localizer(Ok(localizer as &mut dyn LocalizerEstimator), GRID_SETUP)
+            .with_map_checksum(Some(checksum))
+            .localizing_from(pose);
+        (session, Some(checksum))
+    }
+
+    /// The localizer on `image` from `pose`, made in `memory`. In a function of its own,
+    /// so that its frame is gone before the session is made.
+    #[inline(never)]
+    fn place_localizer(
+        memory: &'static mut GridMemory,
+        image: &MapImage<'static>,
+        pose: Pose2<f32>,
+    ) -> &'static mut Localizer<'static> {
+        // Made where it stays: `new`'s result is written straight into the union (the
+        // return slot is the static's address), not built on the stack and copied.
+        let slot = (&raw mut memory.localizer).cast::<Result<Localizer<'static>, PfError>>();
+        // SAFETY: `slot` points into the union, valid for a write of its `localizer`
+        // field's type and aligned for it; the SLAM was never started, so nothing of it
+        // is lost; `memory` is the one `&'static mut` to the union (ConstStaticCell::take).
+        #[allow(unsafe_code)]
+        unsafe {
+            slot.write(Localizer::new(image.view(), LOCALIZER_CONFIG, pose));
+        }
+        // SAFETY: the field was written just above and is the only one used from here on.
+        #[allow(unsafe_code)]
+        let made = unsafe { &mut *memory.localizer };
+        match made {
+            Ok(localizer) => localizer,
+            Err(_) => {
+                defmt::error!("localizer configuration invalid");
+                board::halt(4)
+            }
+        }
+    }
+
+    /// The building-scale SLAM in `memory`, with the small EKF, its map image to be
+    /// written into `map_flash`; localizer requests are refused (no map yet).
+    #[inline(never)]
+    fn map(
+        ekf: &'static mut Ekf,
+        memory: &'static mut GridMemory,
+        map_flash: SramFlash,
+    ) -> (FirmwareSession, Option<u32>) {
+        // SAFETY: the union was made with its `slam` field (all zero bytes, what
+        // `Slam::zeroed` is), and it is the only field used from here on; `memory` is
+        // the one `&'static mut` to the union (ConstStaticCell::take).
+        #[allow(unsafe_code)]
+        let slam: &'static mut Slam = unsafe { &mut memory.slam };
         let Some(flash) = SramFlash::take(SLAM_KEYFRAME_BYTES) else {
             defmt::error!("flash stand-in taken");
             board::halt(4)
@@ -184,16 +332,11 @@ mod grid {
             defmt::error!("keyframe storage refused");
             board::halt(4)
         };
-        let Some(map_flash) = SramFlash::take_map(SLAM_MAP_BYTES) else {
-            defmt::error!("map flash stand-in taken");
-            board::halt(4)
-        };
         let Ok(map_storage) = Storage::new(map_flash, 0, SLAM_MAP_BYTES) else {
             defmt::error!("map storage refused");
             board::halt(4)
         };
-        let Ok(slam) =
-            SlamEstimator::new(SLAM.take(), storage, SLAM_CONFIG, Pose2::new(0.0, 0.0, 0.0))
+        let Ok(slam) = SlamEstimator::new(slam, storage, SLAM_CONFIG, Pose2::new(0.0, 0.0, 0.0))
         else {
             defmt::error!("building-scale SLAM configuration invalid");
             board::halt(4)
@@ -205,7 +348,10 @@ mod grid {
             SLAM_NODES,
             SLAM_KEYFRAME_BYTES
         );
-        Session::with_grid(ekf, EKF_CONFIG, ESTIMATOR.init(slam), GRID_SETUP)
+        (
+            Session::with_grid(ekf, EKF_CONFIG, ESTIMATOR.init(slam), GRID_SETUP),
+            None,
+        )
     }
 }
 
