@@ -534,6 +534,12 @@ pub struct HilArgs {
     /// With `carmen:`: stream only the first N scans.
     #[arg(long)]
     pub scans: Option<usize>,
+    /// With `carmen:` and no `--map` (the building-scale SLAM firmware): after N scans,
+    /// save the map into the device's flash (`SaveMap`) and restart the device
+    /// (`Restart`); it boots on the map and pose it kept and localizes the rest of the
+    /// log, compared with the host bit for bit.
+    #[arg(long, value_name = "N")]
+    pub restart_after: Option<usize>,
     /// Robot whose log is streamed (1–5 in MRCLAM).
     #[arg(long, default_value_t = 1)]
     pub robot: u8,
@@ -714,6 +720,7 @@ impl From<&HilArgs> for HilOptions {
             scans: a.scans,
             reference: a.reference.clone(),
             reference_offset: a.reference_offset,
+            restart_after: a.restart_after,
             mcap: a.mcap.clone(),
         }
     }

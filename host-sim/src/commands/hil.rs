@@ -102,6 +102,9 @@ pub struct HilOptions {
     pub reference: Option<PathBuf>,
     /// Seconds added to the reference's stamps.
     pub reference_offset: f64,
+    /// With a `carmen:` dataset and no `map`: save the map and restart the device after
+    /// this many scans (it localizes in its own map for the rest).
+    pub restart_after: Option<usize>,
 }
 
 /// `host-sim hil`.
@@ -129,11 +132,18 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
             timeout_s: args.timeout_s,
             reference: args.reference.as_deref(),
             reference_offset: args.reference_offset,
+            restart_after: args.restart_after,
         };
         return run_cli(&options, quiet);
     }
     if args.reference.is_some() {
         bail!("--reference scores the building-scale SLAM (a carmen: log without --map)");
+    }
+    if args.restart_after.is_some() {
+        bail!(
+            "--restart-after restarts the building-scale SLAM firmware on the map it saved (a \
+             carmen: log without --map)"
+        );
     }
     if let DatasetSpec::Carmen(log) = &args.dataset {
         use crate::commands::hil_localizer::{LocalizerHilOptions, run_cli};

@@ -14,12 +14,12 @@ use std::time::Duration;
 
 use anyhow::{Result, bail};
 use microslam::geometry::Pose2;
-use microslam::wire::{EstimatorKind, ToHost};
+use microslam::wire::{EstimatorKind, ToDevice, ToHost};
 use serde::Serialize;
 
-use crate::drivers::hil::{Device, Expected, compare};
+use crate::drivers::hil::{Device, Expected, Phase, compare};
 use crate::drivers::hil_localizer::lidar_messages;
-use crate::drivers::hil_slam::host_slam_replies;
+use crate::drivers::hil_slam::{host_restart_replies, host_slam_replies};
 use crate::inputs::readers::carmen::{LaserMessage, front_scans, read_log, resolve_log};
 use crate::metrics::reference::ReferenceAte;
 use crate::output::tum_text;
@@ -58,6 +58,9 @@ pub struct SlamHil {
     /// The map written: whose copy it is.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub map: Option<String>,
+    /// With `--restart-after`: the restart and the localizer's part.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub restart: Option<RestartReport>,
     /// The full comparison (pose and covariance differences, first differing message).
     pub comparison: crate::drivers::hil::Comparison,
 }
@@ -104,23 +107,92 @@ pub struct SlamHilOptions<'a> {
     pub reference: Option<&'a Path>,
     /// Seconds added to the reference's stamps.
     pub reference_offset: f64,
+    /// Save the map and restart the device after this many scans: it then localizes in
+    /// its saved map from its saved pose for the rest.
+    pub restart_after: Option<usize>,
 }
 
-/// The device's trajectory: the estimate after each scan's last chunk, at the scan's
-/// stamp.
+/// The device's trajectory: the estimate after each scan's last chunk (the reply of
+/// index `scan_replies[k]` for scan `k`: the SLAM's, or after a restart the
+/// localizer's), at the scan's stamp.
 fn trajectory(
     replies: &[ToHost],
     scans: &[&LaserMessage],
-    last_chunks: &[usize],
+    scan_replies: &[usize],
 ) -> Vec<(f64, [f64; 3])> {
     scans
         .iter()
-        .zip(last_chunks)
+        .zip(scan_replies)
         .filter_map(|(laser, &i)| match replies.get(i) {
-            Some(ToHost::Estimate(estimate)) => Some((laser.stamp, estimate.pose.map(f64::from))),
+            Some(ToHost::Estimate(estimate) | ToHost::Localization { estimate, .. }) => {
+                Some((laser.stamp, estimate.pose.map(f64::from)))
+            }
             _ => None,
         })
         .collect()
+}
+
+/// The run's bytes in parts and the host's replies, with the reply that ends each scan:
+/// one part, or with `--restart-after` two (the device restarts between them).
+struct Plan {
+    parts: Vec<(Vec<u8>, Vec<ToHost>)>,
+    scan_replies: Vec<usize>,
+    counters: microslam::slam::GraphCounters,
+    restart: Option<RestartReport>,
+}
+
+/// What `--restart-after` did.
+#[derive(Debug, Serialize)]
+pub struct RestartReport {
+    /// Scans mapped before the map was saved and the device restarted.
+    pub after_scans: usize,
+    /// Where the localizer started after the restart: the pose saved with the map, m, m,
+    /// rad.
+    pub resumed_from: [f32; 3],
+    /// Scans the localizer tracked after the restart.
+    pub localized_scans: usize,
+    /// Poses the firmware wrote into its flash while localizing (every half metre or
+    /// half radian).
+    pub poses_kept: usize,
+}
+
+fn plan(
+    messages: &[ToDevice],
+    last_chunks: &[usize],
+    restart_after: Option<usize>,
+) -> Result<Plan> {
+    let Some(n) = restart_after else {
+        let host = host_slam_replies(messages, true)?;
+        return Ok(Plan {
+            parts: vec![(host.bytes, host.replies)],
+            scan_replies: last_chunks.to_vec(),
+            counters: host.counters,
+            restart: None,
+        });
+    };
+    let host = host_restart_replies(messages, last_chunks, n)?;
+    let cut = last_chunks[n - 1] + 1;
+    let before = host.mapping.replies.len();
+    // After the restart: the handshake's answer, then one reply per message from `cut`.
+    let scan_replies = last_chunks
+        .iter()
+        .map(|&i| if i < cut { i } else { before + 1 + (i - cut) })
+        .collect();
+    let p = host.resumed_from;
+    Ok(Plan {
+        restart: Some(RestartReport {
+            after_scans: n,
+            resumed_from: [p.x, p.y, p.theta],
+            localized_scans: last_chunks.len() - n,
+            poses_kept: host.poses_kept,
+        }),
+        counters: host.mapping.counters,
+        parts: vec![
+            (host.mapping.bytes, host.mapping.replies),
+            (host.localizing_bytes, host.localizing_replies),
+        ],
+        scan_replies,
+    })
 }
 
 /// `host-sim hil --dataset carmen:<log>` (no `--map`).
@@ -132,25 +204,36 @@ pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
         scans.truncate(n);
     }
     let (messages, last_chunks) = lidar_messages(&scans, Pose2::IDENTITY, EstimatorKind::Grid);
-    let host = host_slam_replies(&messages, true)?;
-    let bytes = host.bytes.clone();
+    let plan = plan(&messages, &last_chunks, args.restart_after)?;
+    let host_replies: Vec<ToHost> = plan.parts.iter().flat_map(|(_, r)| r.clone()).collect();
     if !quiet {
         println!(
             "{}: {} scans → {} frames ({} bytes, the map read back included), building-scale \
-             grid SLAM",
+             grid SLAM{}",
             path.display(),
             scans.len(),
-            host.replies.len(),
-            bytes.len(),
+            host_replies.len(),
+            plan.parts.iter().map(|(b, _)| b.len()).sum::<usize>(),
+            plan.restart.as_ref().map_or_else(String::new, |r| format!(
+                "; the map saved and the device restarted after {} scans, the localizer on \
+                 it from the saved pose for the other {}",
+                r.after_scans, r.localized_scans
+            )),
         );
     }
-    let run = args.device.run(
-        bytes,
-        Expected::host(&host.replies),
-        Duration::from_secs(args.timeout_s),
-    )?;
-    let comparison = compare(host.replies.len(), &run, &host.replies);
-    let traj = trajectory(&run.replies, &scans, &last_chunks);
+    let phases = plan
+        .parts
+        .iter()
+        .map(|(bytes, replies)| Phase {
+            bytes: bytes.clone(),
+            expected: Expected::host(replies),
+        })
+        .collect();
+    let run = args
+        .device
+        .run_phases(phases, Duration::from_secs(args.timeout_s))?;
+    let comparison = compare(host_replies.len(), &run, &host_replies);
+    let traj = trajectory(&run.replies, &scans, &plan.scan_replies);
     let relation_error = match crate::metrics::relations::find_relations(&path, None) {
         Ok(r) => {
             let rels = crate::metrics::relations::read(&r)?;
@@ -197,7 +280,7 @@ pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
         }
         None => None,
     };
-    let c = host.counters;
+    let c = plan.counters;
     let report = SlamHil {
         replies_identical: comparison.identical,
         replies_expected: comparison.expected,
@@ -217,6 +300,7 @@ pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
         relation_error,
         reference,
         map,
+        restart: plan.restart,
         comparison,
     };
     let json = args.out.join("hil.json");
@@ -268,7 +352,7 @@ pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
                 format!(
                     "the first difference is the reply to message {i} of {}: is the firmware \
                      built with --features building-slam?",
-                    host.replies.len()
+                    host_replies.len()
                 )
             },
         );

@@ -345,6 +345,60 @@ fn exchange<W: Write + Send + 'static>(
     Ok((run, writer))
 }
 
+/// How long a device is given to reset and boot after it answered `Restart`, before the
+/// next part of a run is sent ([`Phase`]).
+const RESTART_BOOT: Duration = Duration::from_millis(500);
+
+/// One part of a run over a link: the bytes, and the replies expected to them. A run of
+/// several parts restarts the device between them (each part but the last ends with
+/// `Command::Restart`); each part opens with the [`handshake`], which the device answers
+/// once it has booted.
+pub struct Phase<'h> {
+    /// The bytes to send.
+    pub bytes: Vec<u8>,
+    /// The replies expected to them.
+    pub expected: Expected<'h>,
+}
+
+/// [`exchange`] for each of `phases` in turn on the same link: a part is sent once every
+/// reply to the one before has arrived (the device has restarted by then). Stops after
+/// the first part whose replies did not all arrive within `timeout` (counted from the
+/// start). The replies of all parts, in order.
+fn exchange_phases<W: Write + Send + 'static>(
+    mut link: W,
+    rx: &mpsc::Receiver<Vec<u8>>,
+    phases: Vec<Phase<'_>>,
+    timeout: Duration,
+) -> Result<(LinkRun, thread::JoinHandle<W>)> {
+    let start = Instant::now();
+    let mut total = LinkRun {
+        replies: Vec::new(),
+        bad_frames: 0,
+        elapsed: Duration::ZERO,
+    };
+    let parts = phases.len();
+    for (k, phase) in phases.into_iter().enumerate() {
+        let left = timeout.saturating_sub(start.elapsed());
+        let (run, writer) = exchange(link, rx, phase.bytes, phase.expected, left)
+            .with_context(|| format!("part {} of {parts} of the run", k + 1))?;
+        let complete = run.replies.len() >= phase.expected.replies;
+        total.replies.extend(run.replies);
+        total.bad_frames += run.bad_frames;
+        total.elapsed = start.elapsed();
+        if k + 1 == parts || !complete {
+            return Ok((total, writer));
+        }
+        // Every reply arrived, so the device has read every byte: the writer is done.
+        link = writer
+            .join()
+            .map_err(|_| anyhow::anyhow!("the thread writing to the device panicked"))?;
+        // The device answers `Restart` before it resets: a byte sent at once could reach
+        // its UART just before the reset clears it. Let it reset and boot first.
+        thread::sleep(RESTART_BOOT);
+    }
+    bail!("a run of no parts")
+}
+
 /// Reads `source` on a thread of its own and passes what arrives on the channel it
 /// returns. The thread ends, and drops `source` (closing a serial port), when the source
 /// ends or fails, or when the receiver is dropped: a read that times out (a serial port
@@ -429,6 +483,17 @@ pub fn run_qemu_on(
     expected: Expected<'_>,
     timeout: Duration,
 ) -> Result<LinkRun> {
+    run_qemu_phases(machine, elf, vec![Phase { bytes, expected }], timeout)
+}
+
+/// [`run_qemu_on`] for a run in parts ([`Phase`]), the device restarted between them
+/// (QEMU keeps its RAM through the reset, where the firmware's flash stand-in is).
+pub fn run_qemu_phases(
+    machine: QemuMachine,
+    elf: &Path,
+    phases: Vec<Phase<'_>>,
+    timeout: Duration,
+) -> Result<LinkRun> {
     let semihosting_log = elf.with_extension("semihosting.log");
     let mut child: Child = Command::new("qemu-system-arm")
         .args(machine.args())
@@ -457,7 +522,7 @@ pub fn run_qemu_on(
         // (the mps2 UART does not): let the firmware boot first.
         thread::sleep(NETDUINO_BOOT);
     }
-    let exchanged = exchange(stdin, &rx, bytes, expected, timeout);
+    let exchanged = exchange_phases(stdin, &rx, phases, timeout);
     let _ = child.kill();
     let _ = child.wait();
     let (run, writer) = exchanged?;
@@ -506,6 +571,15 @@ impl<'a> Device<'a> {
             Self::Serial { port, baud } => run_serial(port, baud, bytes, expected, timeout),
         }
     }
+
+    /// Streams a run in parts ([`Phase`]), the device restarting between them, and
+    /// collects the replies of all.
+    pub fn run_phases(&self, phases: Vec<Phase<'_>>, timeout: Duration) -> Result<LinkRun> {
+        match *self {
+            Self::Qemu(elf) => run_qemu_phases(QemuMachine::Mps2An386, elf, phases, timeout),
+            Self::Serial { port, baud } => run_serial_phases(port, baud, phases, timeout),
+        }
+    }
 }
 
 /// Opens a board's serial port (8N1, `baud`), writes `bytes` and collects `expected`
@@ -517,13 +591,24 @@ pub fn run_serial(
     expected: Expected<'_>,
     timeout: Duration,
 ) -> Result<LinkRun> {
+    run_serial_phases(port, baud, vec![Phase { bytes, expected }], timeout)
+}
+
+/// [`run_serial`] for a run in parts ([`Phase`]): the board restarts between them (its
+/// USB serial bridge stays open: an ST-LINK's virtual COM port is on the probe's chip).
+pub fn run_serial_phases(
+    port: &str,
+    baud: u32,
+    phases: Vec<Phase<'_>>,
+    timeout: Duration,
+) -> Result<LinkRun> {
     let link = serialport::new(port, baud)
         .timeout(Duration::from_millis(200))
         .open()
         .with_context(|| format!("opening serial port {port}"))?;
     let reader = link.try_clone().context("cloning the serial port")?;
     let rx = reader_thread(reader);
-    let (run, writer) = exchange(link, &rx, bytes, expected, timeout)?;
+    let (run, writer) = exchange_phases(link, &rx, phases, timeout)?;
     drop(writer.join());
     Ok(run)
 }

@@ -6,8 +6,9 @@
 //! ([`Command::SaveMap`], [`Command::ReadMap`]).
 
 use anyhow::{Result, anyhow, bail};
-use microslam::device::Session;
+use microslam::device::{PoseKeeping, Session};
 use microslam::geometry::Pose2;
+use microslam::grid::MapImage;
 use microslam::profile;
 use microslam::slam::{GraphCounters, GraphSlam};
 use microslam::wire::{Command, MAP_CHUNK_BYTES, ToDevice, ToHost};
@@ -73,6 +74,16 @@ pub fn host_slam_replies(messages: &[ToDevice], save_map: bool) -> Result<HostSl
 /// to `bytes`, then, with `save_map_seq`, the map saved and read back with commands
 /// numbered from it.
 pub fn host_slam_session(bytes: Vec<u8>, save_map_seq: Option<u32>) -> Result<HostSlam> {
+    host_slam_session_then(bytes, save_map_seq, false)
+}
+
+/// [`host_slam_session`], ending with [`Command::Restart`] when `restart` (after the map
+/// was saved and read back, with the next sequence number).
+fn host_slam_session_then(
+    bytes: Vec<u8>,
+    save_map_seq: Option<u32>,
+    restart: bool,
+) -> Result<HostSlam> {
     let mut ekf = Box::new(profile::SlamEkf::new(profile::EKF_CONFIG));
     let mut slam: Box<profile::Slam> = Box::new(GraphSlam::zeroed());
     let storage = VecStorage::new(profile::SLAM_KEYFRAME_BYTES as usize);
@@ -117,13 +128,20 @@ pub fn host_slam_session(bytes: Vec<u8>, save_map_seq: Option<u32>) -> Result<Ho
                 seq = seq.wrapping_add(reads.len() as u32);
             }
             // The stream ends with a status, as every stream does (the device's stack
-            // peak, now with the map's drawing in it).
-            let status = encode_all(&[ToDevice::Command {
+            // peak, now with the map's drawing in it); then, when asked, the restart.
+            let mut last = vec![ToDevice::Command {
                 seq,
                 command: Command::ReportStatus,
-            }]);
-            replies.extend(status.iter().filter_map(|&b| session.receive(b)));
-            bytes.extend_from_slice(&status);
+            }];
+            if restart {
+                last.push(ToDevice::Command {
+                    seq: seq.wrapping_add(1),
+                    command: Command::Restart,
+                });
+            }
+            let last = encode_all(&last);
+            replies.extend(last.iter().filter_map(|&b| session.receive(b)));
+            bytes.extend_from_slice(&last);
         }
     }
     let map_image = map_from_replies(&replies)?;
@@ -132,6 +150,96 @@ pub fn host_slam_session(bytes: Vec<u8>, save_map_seq: Option<u32>) -> Result<Ho
         replies,
         map_image,
         counters: estimator.slam().counters(),
+    })
+}
+
+/// The host reference of a run with a restart ([`host_restart_replies`]): the
+/// building-scale SLAM on the first scans, its map saved, the device restarted, and the
+/// localizer on that map from the saved pose on the rest.
+pub struct HostRestart {
+    /// Before the restart: the SLAM's part (ends with the map read back, a status and
+    /// [`Command::Restart`]).
+    pub mapping: HostSlam,
+    /// After it: the bytes (the [`super::hil::handshake`], then the rest of the scans
+    /// and a closing status) and the localizer's replies.
+    pub localizing_bytes: Vec<u8>,
+    /// Its replies, one per message.
+    pub localizing_replies: Vec<ToHost>,
+    /// Where the localizer starts: the pose [`ToHost::MapSaved`] gave (kept in flash).
+    pub resumed_from: Pose2<f32>,
+    /// Poses the firmware writes into its flash after the restart ([`PoseKeeping`]).
+    pub poses_kept: usize,
+}
+
+/// The reference for `messages` (from [`super::hil_localizer::lidar_messages`], with
+/// `last_chunks`) cut after `restart_after` scans: the SLAM's part with `SaveMap`, the
+/// map read back and `Restart`; then the firmware's boot on the saved map and pose (the
+/// session starts on the localizer there: `Session::localizing_from`), fed the rest.
+pub fn host_restart_replies(
+    messages: &[ToDevice],
+    last_chunks: &[usize],
+    restart_after: usize,
+) -> Result<HostRestart> {
+    let cut = match restart_after
+        .checked_sub(1)
+        .and_then(|k| last_chunks.get(k))
+    {
+        Some(&i) if restart_after < last_chunks.len() => i + 1,
+        _ => bail!(
+            "--restart-after {restart_after}: give a number of scans between 1 and {} (the \
+             scans streamed less one)",
+            last_chunks.len().saturating_sub(1)
+        ),
+    };
+    let next_seq = messages
+        .iter()
+        .map(|m| m.seq().wrapping_add(1))
+        .max()
+        .unwrap_or(0);
+    let mapping = host_slam_session_then(encode_all(&messages[..cut]), Some(next_seq), true)?;
+    let resumed_from = mapping
+        .replies
+        .iter()
+        .find_map(|r| match r {
+            ToHost::MapSaved { pose, .. } => Some(Pose2::new(pose[0], pose[1], pose[2])),
+            _ => None,
+        })
+        .ok_or_else(|| anyhow!("the SLAM did not save its map after {restart_after} scans"))?;
+    let image = mapping
+        .map_image
+        .as_deref()
+        .ok_or_else(|| anyhow!("no map image was read back"))?;
+    let map = MapImage::parse(image).map_err(|e| anyhow!("the saved map image: {e}"))?;
+    let mut localizing = vec![super::hil::handshake()];
+    localizing.extend_from_slice(&messages[cut..]);
+    let localizing_bytes = encode_all(&localizing);
+    let mut ekf = Box::new(profile::SlamEkf::new(profile::EKF_CONFIG));
+    let mut localizer = Box::new(
+        profile::Localizer::new(map.view(), profile::LOCALIZER_CONFIG, resumed_from)
+            .map_err(|e| anyhow!("the localizer on the saved map: {e}"))?,
+    );
+    let localizing_replies: Vec<ToHost> = {
+        let mut session =
+            Session::<_, _, { profile::SLAM_EKF_LANDMARKS }>::new(&mut ekf, profile::EKF_CONFIG)
+                .with_localizer(Ok(&mut *localizer), profile::GRID_SETUP)
+                .with_map_checksum(Some(map.checksum()))
+                .localizing_from(resumed_from);
+        localizing_bytes
+            .iter()
+            .filter_map(|&b| session.receive(b))
+            .collect()
+    };
+    let mut keeping = PoseKeeping::new(Some(map.checksum()), Some(resumed_from));
+    let poses_kept = localizing_replies
+        .iter()
+        .filter(|r| keeping.after(r).is_some())
+        .count();
+    Ok(HostRestart {
+        mapping,
+        localizing_bytes,
+        localizing_replies,
+        resumed_from,
+        poses_kept,
     })
 }
 
