@@ -48,13 +48,7 @@ impl<const W: usize, const H: usize, const BYTES: usize> OccupancyBitmap<W, H, B
         let () = Self::BYTES_OK;
         Self {
             bits: [0; BYTES],
-            geometry: GridGeometry {
-                width: 0,
-                height: 0,
-                resolution: 0.0,
-                origin_x: 0.0,
-                origin_y: 0.0,
-            },
+            geometry: GridGeometry::ZEROED,
             scroll: ScrollOrigin::new(0.0, 0.0),
             occupied_above: 0,
         }

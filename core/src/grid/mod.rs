@@ -66,6 +66,16 @@ pub struct GridGeometry {
 }
 
 impl GridGeometry {
+    /// `0 × 0` cells of size 0 at the origin: every cell off the map; the zero bytes of
+    /// a grid in a `static` until its geometry is set.
+    pub const ZEROED: Self = Self {
+        width: 0,
+        height: 0,
+        resolution: 0.0,
+        origin_x: 0.0,
+        origin_y: 0.0,
+    };
+
     /// A `width × height` grid of `resolution`-metre cells centred on the world origin.
     pub const fn centred(width: usize, height: usize, resolution: f32) -> Self {
         Self {
@@ -168,6 +178,17 @@ pub struct LogOdds {
 }
 
 impl LogOdds {
+    /// Every setting zero: not valid, only the zero bytes of a grid or estimator in a
+    /// `static` until its settings replace them.
+    pub const ZEROED: Self = Self {
+        hit: 0,
+        miss: 0,
+        occupied_above: 0,
+        free_below: 0,
+        min: 0,
+        max: 0,
+    };
+
     /// The symmetric model: ±log 4 per observation (a hit adds as much as a free ray
     /// takes away), thresholds ±2 log 4, in units of log 4 / 10; saturation at ±100
     /// (≈ ±13.9 nats; in hits needed to flip a cell, about the ±20 clamp of the numpy

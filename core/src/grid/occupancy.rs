@@ -124,21 +124,8 @@ impl<const W: usize, const H: usize, const BITMAP: usize> OccupancyGrid<W, H, BI
         Self {
             cells: [[0; W]; H],
             occupied: [0; BITMAP],
-            geometry: GridGeometry {
-                width: 0,
-                height: 0,
-                resolution: 0.0,
-                origin_x: 0.0,
-                origin_y: 0.0,
-            },
-            log_odds: LogOdds {
-                hit: 0,
-                miss: 0,
-                occupied_above: 0,
-                free_below: 0,
-                min: 0,
-                max: 0,
-            },
+            geometry: GridGeometry::ZEROED,
+            log_odds: LogOdds::ZEROED,
             off_grid: 0,
             scroll: ScrollOrigin::new(0.0, 0.0),
         }

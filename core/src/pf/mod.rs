@@ -157,14 +157,7 @@ impl GridPfConfig {
     /// estimator in a `static` until its settings replace it.
     pub(crate) const ZEROED: Self = Self {
         resolution: 0.0,
-        log_odds: LogOdds {
-            hit: 0,
-            miss: 0,
-            occupied_above: 0,
-            free_below: 0,
-            min: 0,
-            max: 0,
-        },
+        log_odds: LogOdds::ZEROED,
         beam_decimation: 0,
         range_weight_exponent: 0.0,
         filter: FilterConfig::ZEROED,
