@@ -147,7 +147,7 @@ pub const SLAM_MAP_BYTES: u32 = 256 * 1024;
 /// Bytes of each of the two flash sectors the robot's saved pose takes
 /// (`microslam::device::PoseStore`, feature `wire`): 128 records of 32 bytes a sector at
 /// 4 KB (on an STM32F411, whose smallest sectors are 16 KB, 512).
-pub const SLAM_POSE_SECTOR_BYTES: u32 = 4 * 1024;
+pub const POSE_SECTOR_BYTES: u32 = 4 * 1024;
 
 /// [`Slam`] with the storage `S` of its keyframes, as a grid estimator
 /// ([`crate::pf::GridEstimator`]): what a wire session drives.

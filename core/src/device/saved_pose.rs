@@ -240,11 +240,15 @@ impl<F: NorFlash> PoseStore<F> {
 ///   its pose, whenever it is [`PoseKeeping::MIN_DISTANCE_M`] or
 ///   [`PoseKeeping::MIN_TURN_RAD`] from the pose last written. A robot standing still
 ///   writes nothing (flash wears with every erase), a driving one about every half
-///   metre: a reset loses at most that much of its way.
+///   metre: a power cut loses at most that much of its way.
+/// - Before a reset it was told to make ([`PoseKeeping::before_restart`]): the newest
+///   tracked pose, so that nothing is lost.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PoseKeeping {
     map_checksum: Option<u32>,
     last: Option<Pose2<f32>>,
+    /// The newest tracked pose, written or not.
+    newest: Option<Pose2<f32>>,
 }
 
 impl PoseKeeping {
@@ -256,7 +260,21 @@ impl PoseKeeping {
     /// Keeping poses in the map with CRC-32 `map_checksum` (the map the localizer runs
     /// on; `None` while mapping), `last` the pose written last (loaded at boot).
     pub fn new(map_checksum: Option<u32>, last: Option<Pose2<f32>>) -> Self {
-        Self { map_checksum, last }
+        Self {
+            map_checksum,
+            last,
+            newest: last,
+        }
+    }
+
+    /// The pose to write before a reset the firmware was told to make (`Restart`): the
+    /// newest tracked pose when it was not written yet, so that the localizer starts
+    /// after the reset exactly where it stopped. `None` when nothing is to be written.
+    pub fn before_restart(&mut self) -> Option<(Pose2<f32>, u32)> {
+        let pose = self.newest.filter(|n| Some(*n) != self.last)?;
+        let checksum = self.map_checksum?;
+        self.last = Some(pose);
+        Some((pose, checksum))
     }
 
     /// The pose to write after `reply`, and the CRC-32 of the map it is in; `None` when
@@ -273,6 +291,7 @@ impl PoseKeeping {
             } if localizer.state == TrackingState::Tracking => {
                 let [x, y, theta] = estimate.pose;
                 let pose = Pose2::new(x, y, theta);
+                self.newest = Some(pose);
                 let far = self.last.is_none_or(|last| {
                     libm::hypotf(pose.x - last.x, pose.y - last.y) >= Self::MIN_DISTANCE_M
                         || libm::fabsf(wrap_angle(pose.theta - last.theta)) >= Self::MIN_TURN_RAD
@@ -282,6 +301,7 @@ impl PoseKeeping {
             _ => return None,
         };
         self.last = Some(pose);
+        self.newest = Some(pose);
         Some((pose, checksum))
     }
 }

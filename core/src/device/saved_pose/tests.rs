@@ -240,6 +240,15 @@ fn poses_are_kept_after_a_saved_map_and_every_half_metre_or_half_radian_of_track
     // Through ±π: a turn of 0.2 rad is not half a radian.
     let mut keeping = PoseKeeping::new(Some(7), Some(Pose2::new(0.0, 0.0, 3.1)));
     assert_eq!(keeping.after(&tracking(0.0, -3.08)), None);
+    // Before a commanded restart: the newest tracked pose, once.
+    let mut keeping = PoseKeeping::new(Some(7), Some(Pose2::new(0.0, 0.0, 0.0)));
+    assert_eq!(keeping.before_restart(), None);
+    assert_eq!(keeping.after(&tracking(0.3, 0.0)), None);
+    assert_eq!(
+        keeping.before_restart(),
+        Some((Pose2::new(0.3, 0.0, 0.0), 7))
+    );
+    assert_eq!(keeping.before_restart(), None);
     // Lost or relocalizing: its pose is not where the robot is known to be.
     let mut keeping = PoseKeeping::new(Some(7), None);
     assert_eq!(
