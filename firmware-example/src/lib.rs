@@ -22,6 +22,7 @@ pub mod config;
 pub mod cost;
 #[cfg(feature = "qemu")]
 pub mod flash;
+pub mod kept_pose;
 pub mod nb_io;
 pub mod stack;
 
@@ -50,9 +51,9 @@ pub const HEARTBEAT_EVENTS: u32 = 64;
 /// Runs the device forever: reads bytes from `serial`, feeds them to `session`, writes
 /// every reply as one frame, toggles `led` every [`HEARTBEAT_EVENTS`] replies. Status
 /// replies carry the stack high-water mark from `stack_peak_bytes`. Every reply is shown
-/// to `after_reply` once it is written (the firmware keeps the robot's pose in flash
-/// there). After the reply to a `Restart` command the processor is reset (SYSRESETREQ),
-/// as by the board's reset button.
+/// to `after_reply` once it is written, with whether the device resets next (the firmware
+/// keeps the robot's pose in flash there). After the reply to a `Restart` command the
+/// processor is reset (SYSRESETREQ), as by the board's reset button.
 ///
 /// Nothing waits for the host: replies are written as soon as a frame is complete, and
 /// the host streams frames without waiting for them.
@@ -61,7 +62,7 @@ pub fn serve<S, L, const N: usize, const P: usize, const IDS: usize>(
     serial: &mut S,
     led: &mut L,
     stack_peak_bytes: impl Fn() -> u32,
-    mut after_reply: impl FnMut(&ToHost),
+    mut after_reply: impl FnMut(&ToHost, bool),
 ) -> !
 where
     S: Read + Write,
@@ -89,7 +90,7 @@ where
                 // A write error cannot be reported anywhere but the line itself.
                 let _ = serial.write_all(frame);
             }
-            after_reply(&reply);
+            after_reply(&reply, session.restart_requested());
             if session.restart_requested() {
                 let _ = serial.flush();
                 defmt::info!("restart requested: resetting");

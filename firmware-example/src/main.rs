@@ -75,7 +75,7 @@ mod grid {
 
     /// The session with the EKF and the grid SLAM; localizer requests are refused (no map).
     /// Nothing is kept in flash.
-    pub fn session(ekf: &'static mut Ekf) -> (FirmwareSession, impl FnMut(&ToHost)) {
+    pub fn session(ekf: &'static mut Ekf) -> (FirmwareSession, impl FnMut(&ToHost, bool)) {
         let grid = GRID.take();
         if grid
             .init_centred(GRID_CONFIG.resolution, GRID_CONFIG.log_odds)
@@ -91,7 +91,7 @@ mod grid {
         defmt::info!("grid estimator: {} particles", GRID_PARTICLES);
         (
             Session::with_grid(ekf, EKF_CONFIG, GRID_SLAM.init(slam), GRID_SETUP),
-            |_: &ToHost| {},
+            |_: &ToHost, _: bool| {},
         )
     }
 }
@@ -112,9 +112,10 @@ mod grid {
     /// The localizer (particles, scan points), borrowing the map image in flash.
     static LOCALIZER: StaticCell<Localizer<'static>> = StaticCell::new();
 
-    /// The session with the EKF and the localizer, or with the reason the map was refused.
-    /// Nothing is kept in flash (the map is part of the firmware).
-    pub fn session(ekf: &'static mut Ekf) -> (FirmwareSession, impl FnMut(&ToHost)) {
+    /// The session with the EKF and the localizer, or with the reason the map was refused;
+    /// under QEMU the robot's pose is kept in flash, and a pose saved in this map before a
+    /// reset starts the session on the localizer there.
+    pub fn session(ekf: &'static mut Ekf) -> (FirmwareSession, impl FnMut(&ToHost, bool)) {
         let image = MapImage::parse(MAP_IMAGE);
         let checksum = image.as_ref().ok().map(|image| image.checksum());
         let localizer = match image {
@@ -157,12 +158,64 @@ mod grid {
             }
         };
         defmt::info!("localizer: {} particles", LOCALIZER_PARTICLES);
-        (
-            Session::new(ekf, EKF_CONFIG)
-                .with_localizer(localizer, GRID_SETUP)
-                .with_map_checksum(checksum),
-            |_: &ToHost| {},
-        )
+        let session = Session::new(ekf, EKF_CONFIG)
+            .with_localizer(localizer, GRID_SETUP)
+            .with_map_checksum(checksum);
+        kept_pose::resume(session, checksum)
+    }
+
+    /// Under QEMU the robot's pose is kept in the flash stand-in: a pose saved in this map
+    /// before a reset starts the session on the localizer there.
+    #[cfg(feature = "qemu")]
+    mod kept_pose {
+        use super::*;
+        use firmware_example::config::POSE_SECTOR_BYTES;
+        use firmware_example::flash::SramFlash;
+        use firmware_example::kept_pose::KeptPose;
+        use microslam::device::PoseStore;
+
+        pub fn resume(
+            session: FirmwareSession,
+            checksum: Option<u32>,
+        ) -> (FirmwareSession, impl FnMut(&ToHost, bool)) {
+            let store = SramFlash::take_poses(2 * POSE_SECTOR_BYTES)
+                .and_then(|flash| PoseStore::open(flash, 0, POSE_SECTOR_BYTES).ok());
+            let saved = checksum
+                .zip(store.as_ref())
+                .and_then(|(crc, s)| s.latest_in(crc));
+            let session = match saved {
+                Some(pose) => {
+                    defmt::info!(
+                        "saved pose ({}, {}, {}): localizing from it",
+                        pose.x,
+                        pose.y,
+                        pose.theta
+                    );
+                    session.localizing_from(pose)
+                }
+                None => session,
+            };
+            let mut kept = store.map(|store| KeptPose::new(store, checksum));
+            let after_reply = move |reply: &ToHost, restarting: bool| {
+                if let Some(kept) = kept.as_mut() {
+                    kept.after_reply(reply, restarting);
+                }
+            };
+            (session, after_reply)
+        }
+    }
+
+    /// On a board the flash driver is not wired yet: no pose is kept.
+    #[cfg(not(feature = "qemu"))]
+    mod kept_pose {
+        use super::*;
+
+        pub fn resume(
+            session: FirmwareSession,
+            _checksum: Option<u32>,
+        ) -> (FirmwareSession, impl FnMut(&ToHost, bool)) {
+            (session, |_: &ToHost, _: bool| {})
+        }
     }
 }
 
@@ -173,11 +226,12 @@ mod grid {
     use super::*;
     use core::mem::ManuallyDrop;
     use firmware_example::config::{
-        LOCALIZER_CONFIG, Localizer, SLAM_CONFIG, SLAM_KEYFRAME_BYTES, SLAM_MAP_BYTES, SLAM_NODES,
-        SLAM_POSE_SECTOR_BYTES, Slam, SlamEstimator,
+        LOCALIZER_CONFIG, Localizer, POSE_SECTOR_BYTES, SLAM_CONFIG, SLAM_KEYFRAME_BYTES,
+        SLAM_MAP_BYTES, SLAM_NODES, Slam, SlamEstimator,
     };
     use firmware_example::flash::SramFlash;
-    use microslam::device::{LocalizerEstimator, PoseKeeping, PoseStore};
+    use firmware_example::kept_pose::KeptPose;
+    use microslam::device::{LocalizerEstimator, PoseStore};
     use microslam::geometry::Pose2;
     use microslam::grid::MapImage;
     use microslam::pf::PfError;
@@ -211,10 +265,10 @@ mod grid {
     /// from that pose (the session starts on the localizer, and the pose is kept every
     /// half metre, `PoseKeeping`); otherwise it maps with the building-scale SLAM, and a
     /// `SaveMap` keeps the map and the pose for the next boot.
-    pub fn session(ekf: &'static mut Ekf) -> (FirmwareSession, impl FnMut(&ToHost)) {
+    pub fn session(ekf: &'static mut Ekf) -> (FirmwareSession, impl FnMut(&ToHost, bool)) {
         let memory = MEMORY.take();
-        let store = SramFlash::take_poses(2 * SLAM_POSE_SECTOR_BYTES)
-            .and_then(|flash| PoseStore::open(flash, 0, SLAM_POSE_SECTOR_BYTES).ok());
+        let store = SramFlash::take_poses(2 * POSE_SECTOR_BYTES)
+            .and_then(|flash| PoseStore::open(flash, 0, POSE_SECTOR_BYTES).ok());
         if store.is_none() {
             defmt::error!("pose store refused: poses are not kept");
         }
@@ -234,13 +288,10 @@ mod grid {
             Some(pose) => localize(ekf, memory, map_flash.into_bytes(), pose),
             None => map(ekf, memory, map_flash),
         };
-        let mut keeping = PoseKeeping::new(session.1, saved);
-        let mut store = store;
-        let after_reply = move |reply: &ToHost| {
-            if let (Some((pose, map)), Some(store)) = (keeping.after(reply), store.as_mut())
-                && let Err(e) = store.save(pose, map)
-            {
-                defmt::warn!("pose not kept: {}", e);
+        let mut kept = store.map(|store| KeptPose::new(store, session.1));
+        let after_reply = move |reply: &ToHost, restarting: bool| {
+            if let Some(kept) = kept.as_mut() {
+                kept.after_reply(reply, restarting);
             }
         };
         (session.0, after_reply)
