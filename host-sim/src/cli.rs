@@ -94,7 +94,9 @@ pub struct ExportLd06Args {
 /// Options of `host-sim export-landmarks`.
 #[derive(Debug, Clone, Args)]
 pub struct ExportLandmarksArgs {
-    /// The recording: `mrclam:<dir>` (e.g. `mrclam:dataset6/robot3`) or `landmarks:<file>`.
+    /// The recording: `mrclam:<dir>` (e.g. `mrclam:dataset6/robot3`), `landmarks:<file>`
+    /// or `rosbag:<bag>` (ArucoMarkers or Detection3DArray detections, mounted on the
+    /// robot through the bag's `/tf_static`).
     #[arg(long, short)]
     pub dataset: DatasetSpec,
     /// Robot whose log is written (MRCLAM; a `/robotN` in the dataset wins).
@@ -103,6 +105,9 @@ pub struct ExportLandmarksArgs {
     /// The plain landmark log to write.
     #[arg(long, short)]
     pub out: PathBuf,
+    /// Topics of a `rosbag:` dataset.
+    #[command(flatten)]
+    pub bag: BagArgs,
 }
 
 /// Topics and lidar mount of a ROS 2 bag (`rosbag:<bag>`, `export-rosbag`).
@@ -534,10 +539,11 @@ pub struct HilArgs {
     /// With `carmen:`: stream only the first N scans.
     #[arg(long)]
     pub scans: Option<usize>,
-    /// With `carmen:` and no `--map` (the building-scale SLAM firmware): after N scans,
-    /// save the map into the device's flash (`SaveMap`) and restart the device
-    /// (`Restart`); it boots on the map and pose it kept and localizes the rest of the
-    /// log, compared with the host bit for bit.
+    /// With `carmen:`: restart the device after N scans (`Restart`). Without `--map` (the
+    /// building-scale SLAM firmware) the map is saved into its flash first (`SaveMap`):
+    /// it boots on the map and pose it kept and localizes the rest of the log. With
+    /// `--map` (the localizer firmware) it resumes from the pose it kept. Compared with
+    /// the host bit for bit.
     #[arg(long, value_name = "N")]
     pub restart_after: Option<usize>,
     /// Robot whose log is streamed (1–5 in MRCLAM).
@@ -763,9 +769,13 @@ pub fn run(cli: &Cli) -> Result<()> {
         }
         Some(Command::Texture(args)) => texture::texture_cli(&args.into(), cli.quiet),
         Some(Command::Detections(args)) => detections::detections_cli(&args.into(), cli.quiet),
-        Some(Command::ExportLandmarks(a)) => {
-            crate::commands::export_landmarks::export_cli(&a.dataset, a.robot, &a.out, cli.quiet)
-        }
+        Some(Command::ExportLandmarks(a)) => crate::commands::export_landmarks::export_cli(
+            &a.dataset,
+            a.robot,
+            &(&a.bag).into(),
+            &a.out,
+            cli.quiet,
+        ),
         Some(Command::ExportLd06(a)) => {
             crate::commands::ld06::export_cli(&a.dataset, &a.out, a.scans, cli.quiet)
         }

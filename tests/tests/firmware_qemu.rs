@@ -82,6 +82,30 @@ fn run_equal_to_host_on(
     run
 }
 
+/// Runs `elf` under QEMU on a run in parts (the device restarted between them: `parts`,
+/// the bytes and the host's replies of each) and checks every reply bit for bit; the
+/// run, and the host's replies of all parts in order.
+fn run_parts_equal_to_host(
+    elf: &std::path::Path,
+    parts: &[(Vec<u8>, Vec<ToHost>)],
+    timeout: Duration,
+) -> (QemuRun, Vec<ToHost>) {
+    use host_sim::drivers::hil::{Phase, run_qemu_phases};
+    let run = run_qemu_phases(QemuMachine::Mps2An386, elf, Phase::of(parts), timeout)
+        .expect("qemu-system-arm runs");
+    let expected: Vec<ToHost> = parts.iter().flat_map(|(_, r)| r.iter().copied()).collect();
+    assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
+    assert_eq!(run.replies.len(), expected.len(), "every message answered");
+    for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
+        assert_eq!(
+            bits(got),
+            bits(want),
+            "reply {i} differs:\n{got:?}\n{want:?}"
+        );
+    }
+    (run, expected)
+}
+
 #[test]
 #[ignore = "needs qemu-system-arm and the firmware ELF: run by .ci/firmware.sh"]
 fn firmware_in_qemu_equals_host_bit_for_bit_on_a_synthetic_drive() {
@@ -418,6 +442,100 @@ fn intel_tracking(elf: &std::path::Path, map: &std::path::Path, n: usize) {
         messages.len(),
         run.replies.len(),
         run.elapsed.as_secs_f64()
+    );
+    let (_, _, stack_peak_bytes) = final_status(&run.replies);
+    println!("firmware stack peak with localizer: {stack_peak_bytes} bytes");
+}
+
+/// Scans of the Intel raw log the localizer's restart test streams, and where it restarts
+/// the device.
+const RESTART_SCANS: usize = 1500;
+const RESTART_AFTER: usize = 750;
+
+/// The localizer firmware (the Intel map in flash) keeps the robot's pose in flash: on
+/// the first [`RESTART_SCANS`] scans of the Intel raw log, restarted (`Restart`) after
+/// [`RESTART_AFTER`], it boots on the localizer from the pose it kept and tracks the rest,
+/// every reply bit-identical to the host's (the same session restarted from the same
+/// pose), with a relation error within 1.2× of the same scans without the restart.
+#[test]
+#[ignore = "needs qemu-system-arm, the localizer ELF, its map and the datasets: run by .ci/firmware.sh"]
+fn localizer_firmware_resumes_from_its_kept_pose_after_a_restart_on_intel() {
+    use host_sim::drivers::hil::{replies_across_restart, restart_cut};
+    use host_sim::drivers::hil_localizer::{
+        host_localizer_replies, host_localizer_restart, localizer_messages, map_image_of,
+    };
+    use host_sim::metrics::relations;
+    use microslam_replay_tests::firmware::{localizer_elf, localizer_map};
+    let elf = built(localizer_elf());
+    let log_path = host_sim::inputs::readers::carmen::resolve_log("intel/intel-raw-part.clf")
+        .expect("Intel log");
+    let log = host_sim::inputs::readers::carmen::read_log(&log_path).expect("Intel log reads");
+    let mut scans = host_sim::inputs::readers::carmen::front_scans(&log);
+    scans.truncate(RESTART_SCANS);
+    let image = map_image_of(&built(localizer_map())).expect("the map converts");
+    let (messages, last_chunks) = localizer_messages(&scans, microslam::geometry::Pose2::IDENTITY);
+    let (parts, resumed) = host_localizer_restart(&messages, &last_chunks, RESTART_AFTER, &image)
+        .expect("host reference");
+    let uninterrupted =
+        host_localizer_replies(&encode_all(&messages), &image).expect("host reference");
+    // After the restart the firmware answers the handshake on the localizer, at once.
+    assert!(matches!(
+        parts[1].1.first(),
+        Some(ToHost::Status {
+            estimator: EstimatorKind::Localizer,
+            ..
+        })
+    ));
+    let (run, _) = run_parts_equal_to_host(&elf, &parts, Duration::from_secs(600));
+    // The trajectories, restarted (the device's) and not (the host's), against the
+    // relations.
+    let (cut, _) = restart_cut(&messages, &last_chunks, RESTART_AFTER).expect("a cut");
+    let across = replies_across_restart(&last_chunks, cut, parts[0].1.len());
+    let pose_of = |replies: &[ToHost], i: usize| match replies.get(i) {
+        Some(ToHost::Localization { estimate, .. }) => Some(estimate.pose.map(f64::from)),
+        _ => None,
+    };
+    let restarted: Vec<(f64, [f64; 3])> = scans
+        .iter()
+        .zip(&across)
+        .filter_map(|(laser, &i)| Some((laser.stamp, pose_of(&run.replies, i)?)))
+        .collect();
+    let straight: Vec<(f64, [f64; 3])> = scans
+        .iter()
+        .zip(&last_chunks)
+        .filter_map(|(laser, &i)| Some((laser.stamp, pose_of(&uninterrupted, i)?)))
+        .collect();
+    assert_eq!(
+        restarted.len(),
+        scans.len(),
+        "every scan answered with an estimate"
+    );
+    let rels = relations::read(&relations::find_relations(&log_path, None).expect("relations"))
+        .expect("relations read");
+    let with = relations::evaluate(&restarted, &rels, 1e-3);
+    let without = relations::evaluate(&straight, &rels, 1e-3);
+    println!(
+        "localizer restarted after {RESTART_AFTER} of {RESTART_SCANS} scans from {resumed:?}: \
+         relation error {:.4} m over {} (without the restart {:.4} m over {}); {} replies in \
+         {:.2} s",
+        with.trans_mean_m,
+        with.used,
+        without.trans_mean_m,
+        without.used,
+        run.replies.len(),
+        run.elapsed.as_secs_f64()
+    );
+    assert!(
+        with.used > 100 && with.used == without.used,
+        "{} {}",
+        with.used,
+        without.used
+    );
+    assert!(
+        with.trans_mean_m <= 1.2 * without.trans_mean_m,
+        "{} {}",
+        with.trans_mean_m,
+        without.trans_mean_m
     );
     let (_, _, stack_peak_bytes) = final_status(&run.replies);
     println!("firmware stack peak with localizer: {stack_peak_bytes} bytes");
@@ -775,7 +893,6 @@ const SLAM_SCANS: usize = 3000;
 #[test]
 #[ignore = "needs qemu-system-arm, the building-slam ELF and the datasets: run by .ci/firmware.sh"]
 fn building_slam_firmware_in_qemu_equals_host_bit_for_bit_on_intel_and_localizes_after_a_restart() {
-    use host_sim::drivers::hil::{Phase, run_qemu_phases};
     use host_sim::drivers::hil_localizer::lidar_messages;
     use host_sim::drivers::hil_slam::host_restart_replies;
     use microslam::wire::TrackingState;
@@ -843,38 +960,14 @@ fn building_slam_firmware_in_qemu_equals_host_bit_for_bit_on_intel_and_localizes
     );
     assert!(not_tracking <= 215, "{not_tracking}");
 
-    let phases = vec![
-        Phase {
-            bytes: mapping.bytes.clone(),
-            expected: Expected::host(&mapping.replies),
-        },
-        Phase {
-            bytes: host.localizing_bytes.clone(),
-            expected: Expected::host(&host.localizing_replies),
-        },
+    let parts = [
+        (mapping.bytes.clone(), mapping.replies.clone()),
+        (
+            host.localizing_bytes.clone(),
+            host.localizing_replies.clone(),
+        ),
     ];
-    let run = run_qemu_phases(
-        QemuMachine::Mps2An386,
-        &elf,
-        phases,
-        Duration::from_secs(900),
-    )
-    .expect("qemu-system-arm runs");
-    let expected: Vec<ToHost> = mapping
-        .replies
-        .iter()
-        .chain(&host.localizing_replies)
-        .copied()
-        .collect();
-    assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
-    assert_eq!(run.replies.len(), expected.len(), "every message answered");
-    for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
-        assert_eq!(
-            bits(got),
-            bits(want),
-            "reply {i} differs:\n{got:?}\n{want:?}"
-        );
-    }
+    let (run, _) = run_parts_equal_to_host(&elf, &parts, Duration::from_secs(900));
     // The device's map image, sent back over the link, is the host's bit for bit (as
     // every reply is).
     let device_map = host_sim::drivers::hil_slam::map_from_replies(&run.replies)

@@ -139,10 +139,10 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
     if args.reference.is_some() {
         bail!("--reference scores the building-scale SLAM (a carmen: log without --map)");
     }
-    if args.restart_after.is_some() {
+    if args.restart_after.is_some() && !matches!(args.dataset, DatasetSpec::Carmen(_)) {
         bail!(
-            "--restart-after restarts the building-scale SLAM firmware on the map it saved (a \
-             carmen: log without --map)"
+            "--restart-after restarts a firmware with a lidar log (carmen:): the \
+             building-scale SLAM's (without --map) or the localizer's (with --map)"
         );
     }
     if let DatasetSpec::Carmen(log) = &args.dataset {
@@ -155,6 +155,7 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
             out: &args.out,
             timeout_s: args.timeout_s,
             mcap: args.mcap.as_deref(),
+            restart_after: args.restart_after,
         };
         return run_cli(&options, quiet);
     }

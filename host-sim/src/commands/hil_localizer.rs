@@ -19,9 +19,12 @@ use microslam::grid::MapImage;
 use microslam::wire::ToHost;
 use serde::Serialize;
 
-use crate::drivers::hil::{Device, Expected, compare, encode_all};
+use crate::drivers::hil::{
+    Device, Phase, compare, encode_all, replies_across_restart, restart_cut,
+};
 use crate::drivers::hil_localizer::{
-    host_localizer_replies, localizer_messages, map_image_of, map_image_with_levels,
+    host_localizer_replies, host_localizer_restart, localizer_messages, map_image_of,
+    map_image_with_levels,
 };
 use crate::inputs::readers::carmen::{LaserMessage, front_scans, read_log, resolve_log};
 use crate::output::tum_text;
@@ -67,6 +70,9 @@ pub struct LocalizerHil {
     /// Relation error of the device's trajectory (when a relations file was found).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub relation_error: Option<crate::metrics::relations::RelationError>,
+    /// With `--restart-after`: the restart, and the same log's relation error without it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub restart: Option<LocalizerRestart>,
     /// The localizer's state after the last scan (lost events, relocalizations).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub final_localizer: Option<microslam::wire::LocalizerReport>,
@@ -74,16 +80,29 @@ pub struct LocalizerHil {
     pub comparison: crate::drivers::hil::Comparison,
 }
 
-/// The device's trajectory: the estimate after each scan's last chunk, at the scan's
-/// stamp.
+/// A localizer run restarted part way (`--restart-after`).
+#[derive(Debug, Serialize)]
+pub struct LocalizerRestart {
+    /// Scans before the restart.
+    pub after_scans: usize,
+    /// The pose the firmware kept before the reset and started from after it.
+    pub resumed_from: [f32; 3],
+    /// The relation error of the same log without the restart (the host's session, the
+    /// same replies the device gives), for comparison.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub relation_error_uninterrupted: Option<crate::metrics::relations::RelationError>,
+}
+
+/// The device's trajectory: the estimate after each scan's last chunk (the reply of index
+/// `scan_replies[k]` for scan `k`), at the scan's stamp.
 fn trajectory(
     replies: &[ToHost],
     scans: &[&LaserMessage],
-    last_chunks: &[usize],
+    scan_replies: &[usize],
 ) -> Vec<(f64, [f64; 3])> {
     scans
         .iter()
-        .zip(last_chunks)
+        .zip(scan_replies)
         .filter_map(|(laser, &i)| match replies.get(i) {
             Some(ToHost::Localization { estimate, .. }) => {
                 Some((laser.stamp, estimate.pose.map(f64::from)))
@@ -110,6 +129,9 @@ pub struct LocalizerHilOptions<'a> {
     pub timeout_s: u64,
     /// Record the device's estimates (with the scans) into this MCAP file.
     pub mcap: Option<&'a Path>,
+    /// Restart the device after this many scans (`Restart`): it resumes from the pose it
+    /// kept in flash.
+    pub restart_after: Option<usize>,
 }
 
 /// `host-sim hil --dataset carmen:<log> --map <map.yaml>`.
@@ -126,39 +148,65 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
     }
     let image = map_image_of(map_yaml)?;
     let (messages, last_chunks) = localizer_messages(&scans, Pose2::IDENTITY);
-    let bytes = encode_all(&messages);
-    let host = host_localizer_replies(&bytes, &image)?;
+    let (parts, scan_replies, resumed) = match args.restart_after {
+        None => {
+            let bytes = encode_all(&messages);
+            let host = host_localizer_replies(&bytes, &image)?;
+            (vec![(bytes, host)], last_chunks.clone(), None)
+        }
+        Some(n) => {
+            let (parts, resumed) = host_localizer_restart(&messages, &last_chunks, n, &image)?;
+            let (cut, _) = restart_cut(&messages, &last_chunks, n)?;
+            let index = replies_across_restart(&last_chunks, cut, parts[0].1.len());
+            (parts, index, Some((n, resumed)))
+        }
+    };
+    let host: Vec<ToHost> = parts.iter().flat_map(|(_, r)| r.iter().copied()).collect();
     if !quiet {
         println!(
-            "{}: {} scans → {} frames ({} bytes), map image {} bytes",
+            "{}: {} scans → {} frames ({} bytes), map image {} bytes{}",
             path.display(),
             scans.len(),
-            messages.len(),
-            bytes.len(),
-            image.len()
+            host.len(),
+            parts.iter().map(|(b, _)| b.len()).sum::<usize>(),
+            image.len(),
+            resumed.map_or_else(String::new, |(n, p)| format!(
+                "; restarted after {n} scans, the localizer resuming from the pose it kept \
+                 ({:.3}, {:.3}, {:.3})",
+                p.x, p.y, p.theta
+            ))
         );
     }
-    let run = args.device.run(
-        bytes,
-        Expected::host(&host),
-        Duration::from_secs(args.timeout_s),
-    )?;
-    let comparison = compare(messages.len(), &run, &host);
+    let run = args
+        .device
+        .run_phases(Phase::of(&parts), Duration::from_secs(args.timeout_s))?;
+    let comparison = compare(host.len(), &run, &host);
+    // With a restart: the same log without it, on the host, for comparison.
+    let uninterrupted = match resumed {
+        Some(_) => Some(trajectory(
+            &host_localizer_replies(&encode_all(&messages), &image)?,
+            &scans,
+            &last_chunks,
+        )),
+        None => None,
+    };
     let relation_error = match crate::metrics::relations::find_relations(&path, None) {
         Ok(r) => {
             let rels = crate::metrics::relations::read(&r)?;
-            Some(crate::metrics::relations::evaluate(
-                &trajectory(&run.replies, &scans, &last_chunks),
-                &rels,
-                1e-3,
+            let score = |traj: &[(f64, [f64; 3])]| {
+                Some(crate::metrics::relations::evaluate(traj, &rels, 1e-3)).filter(|e| e.used > 0)
+            };
+            Some((
+                score(&trajectory(&run.replies, &scans, &scan_replies)),
+                uninterrupted.as_deref().and_then(score),
             ))
-            .filter(|e| e.used > 0)
         }
         Err(note) => {
             eprintln!("note: {note}");
             None
         }
     };
+    let (relation_error, relation_error_uninterrupted) = relation_error.unwrap_or((None, None));
     let report = LocalizerHil {
         replies_identical: comparison.identical,
         replies_expected: comparison.expected,
@@ -168,6 +216,11 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
         stack_peak_bytes: comparison.stack_peak_bytes,
         seconds: comparison.seconds,
         relation_error,
+        restart: resumed.map(|(n, p)| LocalizerRestart {
+            after_scans: n,
+            resumed_from: [p.x, p.y, p.theta],
+            relation_error_uninterrupted,
+        }),
         final_localizer: run.replies.iter().rev().find_map(|r| match r {
             ToHost::Localization { localizer, .. } => Some(*localizer),
             _ => None,
@@ -177,7 +230,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
     crate::output::create_folder(args.out)?;
     let json = args.out.join("hil.json");
     crate::output::write_report(&json, &report)?;
-    let poses = trajectory(&run.replies, &scans, &last_chunks)
+    let poses = trajectory(&run.replies, &scans, &scan_replies)
         .into_iter()
         .map(|(t, [x, y, th])| (t, Pose2::new(x, y, th)));
     std::fs::write(args.out.join("firmware.tum"), tum_text(poses))?;
@@ -185,7 +238,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
         // The estimate after each scan's last chunk, with its covariance and the scan.
         let (estimates, ranges): (Vec<_>, Vec<&[f32]>) = scans
             .iter()
-            .zip(&last_chunks)
+            .zip(&scan_replies)
             .filter_map(|(laser, &i)| match run.replies.get(i) {
                 Some(ToHost::Localization { estimate: e, .. }) => {
                     let [x, y, th] = e.pose.map(f64::from);

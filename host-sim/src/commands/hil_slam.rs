@@ -17,7 +17,7 @@ use microslam::geometry::Pose2;
 use microslam::wire::{EstimatorKind, ToDevice, ToHost};
 use serde::Serialize;
 
-use crate::drivers::hil::{Device, Expected, Phase, compare};
+use crate::drivers::hil::{Device, Phase, compare, replies_across_restart, restart_cut};
 use crate::drivers::hil_localizer::lidar_messages;
 use crate::drivers::hil_slam::{host_restart_replies, host_slam_replies};
 use crate::inputs::readers::carmen::{LaserMessage, front_scans, read_log, resolve_log};
@@ -171,13 +171,8 @@ fn plan(
         });
     };
     let host = host_restart_replies(messages, last_chunks, n)?;
-    let cut = last_chunks[n - 1] + 1;
-    let before = host.mapping.replies.len();
-    // After the restart: the handshake's answer, then one reply per message from `cut`.
-    let scan_replies = last_chunks
-        .iter()
-        .map(|&i| if i < cut { i } else { before + 1 + (i - cut) })
-        .collect();
+    let (cut, _) = restart_cut(messages, last_chunks, n)?;
+    let scan_replies = replies_across_restart(last_chunks, cut, host.mapping.replies.len());
     let p = host.resumed_from;
     Ok(Plan {
         restart: Some(RestartReport {
@@ -221,17 +216,9 @@ pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
             )),
         );
     }
-    let phases = plan
-        .parts
-        .iter()
-        .map(|(bytes, replies)| Phase {
-            bytes: bytes.clone(),
-            expected: Expected::host(replies),
-        })
-        .collect();
     let run = args
         .device
-        .run_phases(phases, Duration::from_secs(args.timeout_s))?;
+        .run_phases(Phase::of(&plan.parts), Duration::from_secs(args.timeout_s))?;
     let comparison = compare(host_replies.len(), &run, &host_replies);
     let traj = trajectory(&run.replies, &scans, &plan.scan_replies);
     let relation_error = match crate::metrics::relations::find_relations(&path, None) {

@@ -30,6 +30,10 @@ use serde::Serialize;
 
 use crate::domain::recording::Recording;
 
+mod phases;
+use phases::exchange_phases;
+pub use phases::{Phase, replies_across_restart, restart_cut};
+
 /// How long the device has to answer the [`handshake`] (QEMU boots in well under a
 /// second; a board that runs answers within milliseconds).
 pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
@@ -343,60 +347,6 @@ fn exchange<W: Write + Send + 'static>(
         elapsed: start.elapsed(),
     };
     Ok((run, writer))
-}
-
-/// How long a device is given to reset and boot after it answered `Restart`, before the
-/// next part of a run is sent ([`Phase`]).
-const RESTART_BOOT: Duration = Duration::from_millis(500);
-
-/// One part of a run over a link: the bytes, and the replies expected to them. A run of
-/// several parts restarts the device between them (each part but the last ends with
-/// `Command::Restart`); each part opens with the [`handshake`], which the device answers
-/// once it has booted.
-pub struct Phase<'h> {
-    /// The bytes to send.
-    pub bytes: Vec<u8>,
-    /// The replies expected to them.
-    pub expected: Expected<'h>,
-}
-
-/// [`exchange`] for each of `phases` in turn on the same link: a part is sent once every
-/// reply to the one before has arrived (the device has restarted by then). Stops after
-/// the first part whose replies did not all arrive within `timeout` (counted from the
-/// start). The replies of all parts, in order.
-fn exchange_phases<W: Write + Send + 'static>(
-    mut link: W,
-    rx: &mpsc::Receiver<Vec<u8>>,
-    phases: Vec<Phase<'_>>,
-    timeout: Duration,
-) -> Result<(LinkRun, thread::JoinHandle<W>)> {
-    let start = Instant::now();
-    let mut total = LinkRun {
-        replies: Vec::new(),
-        bad_frames: 0,
-        elapsed: Duration::ZERO,
-    };
-    let parts = phases.len();
-    for (k, phase) in phases.into_iter().enumerate() {
-        let left = timeout.saturating_sub(start.elapsed());
-        let (run, writer) = exchange(link, rx, phase.bytes, phase.expected, left)
-            .with_context(|| format!("part {} of {parts} of the run", k + 1))?;
-        let complete = run.replies.len() >= phase.expected.replies;
-        total.replies.extend(run.replies);
-        total.bad_frames += run.bad_frames;
-        total.elapsed = start.elapsed();
-        if k + 1 == parts || !complete {
-            return Ok((total, writer));
-        }
-        // Every reply arrived, so the device has read every byte: the writer is done.
-        link = writer
-            .join()
-            .map_err(|_| anyhow::anyhow!("the thread writing to the device panicked"))?;
-        // The device answers `Restart` before it resets: a byte sent at once could reach
-        // its UART just before the reset clears it. Let it reset and boot first.
-        thread::sleep(RESTART_BOOT);
-    }
-    bail!("a run of no parts")
 }
 
 /// Reads `source` on a thread of its own and passes what arrives on the channel it

@@ -9,7 +9,7 @@
 use std::path::Path;
 
 use anyhow::{Result, bail};
-use microslam::device::{LocalizerEstimator, Session};
+use microslam::device::{LocalizerEstimator, PoseKeeping, Session};
 use microslam::geometry::Pose2;
 use microslam::grid::MapImage;
 use microslam::grid::map_image::{DEFAULT_LAYER_LEVELS, encode_map_image_with_layers};
@@ -161,6 +161,16 @@ pub fn lidar_messages(
 /// The replies of the host reference: the firmware's [`Session`] with its EKF and its
 /// localizer on `image`, fed the same bytes.
 pub fn host_localizer_replies(bytes: &[u8], image: &[u8]) -> Result<Vec<ToHost>> {
+    host_localizer_session(bytes, image, None)
+}
+
+/// [`host_localizer_replies`] of a firmware that booted with a pose saved in this map
+/// (`resume`): its session starts on the localizer there (`Session::localizing_from`).
+pub fn host_localizer_session(
+    bytes: &[u8],
+    image: &[u8],
+    resume: Option<Pose2<f32>>,
+) -> Result<Vec<ToHost>> {
     let map = MapImage::parse(image)?;
     let mut ekf = Box::new(profile::Ekf::new(profile::EKF_CONFIG));
     let mut localizer =
@@ -179,5 +189,54 @@ pub fn host_localizer_replies(bytes: &[u8], image: &[u8]) -> Result<Vec<ToHost>>
                 profile::GRID_SETUP,
             )
             .with_map_checksum(Some(map.checksum()));
+    if let Some(pose) = resume {
+        session = session.localizing_from(pose);
+    }
     Ok(bytes.iter().filter_map(|&b| session.receive(b)).collect())
+}
+
+/// One part of a run: the bytes sent and the host's replies to them.
+pub type RunPart = (Vec<u8>, Vec<ToHost>);
+
+/// The host reference of a localizer run restarted after `restart_after` scans: the
+/// bytes and replies of each part (the first ends with `Restart`; the second opens with
+/// the handshake), and the pose the firmware kept before the reset (`PoseKeeping`), from
+/// which it starts again.
+pub fn host_localizer_restart(
+    messages: &[ToDevice],
+    last_chunks: &[usize],
+    restart_after: usize,
+    image: &[u8],
+) -> Result<(Vec<RunPart>, Pose2<f32>)> {
+    let (cut, next_seq) = super::hil::restart_cut(messages, last_chunks, restart_after)?;
+    let mut before = messages[..cut].to_vec();
+    before.push(ToDevice::Command {
+        seq: next_seq,
+        command: WireCommand::Restart,
+    });
+    let before_bytes = super::hil::encode_all(&before);
+    let before_replies = host_localizer_session(&before_bytes, image, None)?;
+    let map = MapImage::parse(image)?;
+    let mut keeping = PoseKeeping::new(Some(map.checksum()), None);
+    let mut kept = None;
+    for reply in &before_replies {
+        kept = keeping.after(reply).map(|(pose, _)| pose).or(kept);
+    }
+    let resumed = keeping
+        .before_restart()
+        .map(|(pose, _)| pose)
+        .or(kept)
+        .ok_or_else(|| {
+            anyhow::anyhow!(
+                "the localizer tracked no scan in the first {restart_after}: no pose is kept"
+            )
+        })?;
+    let mut after = vec![super::hil::handshake()];
+    after.extend_from_slice(&messages[cut..]);
+    let after_bytes = super::hil::encode_all(&after);
+    let after_replies = host_localizer_session(&after_bytes, image, Some(resumed))?;
+    Ok((
+        vec![(before_bytes, before_replies), (after_bytes, after_replies)],
+        resumed,
+    ))
 }

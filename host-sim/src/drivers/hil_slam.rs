@@ -180,22 +180,7 @@ pub fn host_restart_replies(
     last_chunks: &[usize],
     restart_after: usize,
 ) -> Result<HostRestart> {
-    let cut = match restart_after
-        .checked_sub(1)
-        .and_then(|k| last_chunks.get(k))
-    {
-        Some(&i) if restart_after < last_chunks.len() => i + 1,
-        _ => bail!(
-            "--restart-after {restart_after}: give a number of scans between 1 and {} (the \
-             scans streamed less one)",
-            last_chunks.len().saturating_sub(1)
-        ),
-    };
-    let next_seq = messages
-        .iter()
-        .map(|m| m.seq().wrapping_add(1))
-        .max()
-        .unwrap_or(0);
+    let (cut, next_seq) = super::hil::restart_cut(messages, last_chunks, restart_after)?;
     let mapping = host_slam_session_then(encode_all(&messages[..cut]), Some(next_seq), true)?;
     let resumed_from = mapping
         .replies
