@@ -105,6 +105,51 @@ fn an_mrclam_run_as_an_aruco_bag_replays_as_the_files_do() {
     assert!((a - d).abs() < 0.005, "files {a} m, poses-only bag {d} m");
 }
 
+/// `export-landmarks` writes a bag's detections as a plain landmark log on the robot's
+/// frame (mounted through the bag's /tf_static): replayed with a settings file of no
+/// sensor mount, it gives the bag's result.
+#[test]
+fn a_bag_exported_as_a_plain_landmark_log_replays_as_the_bag_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = mrclam_bag(dir.path(), &DetectionFormat::Aruco);
+    let log = dir.path().join("run.txt");
+    let out = host_sim()
+        .args(["export-landmarks", "--quiet", "--dataset"])
+        .arg(format!("rosbag:{}", bag.display()))
+        .arg("--out")
+        .arg(&log)
+        .output()
+        .expect("host-sim starts");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&log).unwrap();
+    assert!(
+        text.lines().any(|l| l.starts_with("sighting ")),
+        "{text:.400}"
+    );
+    let from_bag = replay(
+        &format!("rosbag:{}", bag.display()),
+        &dir.path().join("bag"),
+        &[],
+    );
+    let from_log = replay(
+        &format!("landmarks:{}", log.display()),
+        &dir.path().join("log"),
+        &[],
+    );
+    let (a, b) = (ate(&from_bag), ate(&from_log));
+    println!("ATE ArucoMarkers bag {a:.6} m, its plain landmark log {b:.6} m");
+    assert!((a - b).abs() < 0.005, "bag {a} m, plain log {b} m");
+    assert_eq!(
+        from_bag["inputs"]["sightings"]["used"], from_log["inputs"]["sightings"]["used"],
+        "{}",
+        from_log["inputs"]
+    );
+}
+
 /// Every landmark of one class (Detection3DArray): JCBB decides which landmark.
 #[test]
 fn a_detection3d_bag_with_one_class_runs_jcbb() {
