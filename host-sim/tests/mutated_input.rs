@@ -148,6 +148,21 @@ fn run(args: &[&str], out: &Path) -> Run {
     }
 }
 
+/// A grid-SLAM replay of `dataset` with 8 particles and the `extra` arguments.
+fn grid_replay(dataset: &str, extra: &[&str], out: &Path) -> Run {
+    let mut args = vec![
+        "replay",
+        "--filter",
+        "grid-slam",
+        "--particles",
+        "8",
+        "--dataset",
+        dataset,
+    ];
+    args.extend_from_slice(extra);
+    run(&args, out)
+}
+
 /// The property every reader keeps; `accounted` checks the counts of a run that
 /// succeeded against the input's text.
 fn holds(
@@ -237,18 +252,7 @@ fn a_mutated_carmen_log_fails_naming_it_or_is_used_whole() {
         let text = apply(&base, &m);
         std::fs::write(&log, &text).unwrap();
         let out = dir.path().join("out");
-        let r = run(
-            &[
-                "replay",
-                "--filter",
-                "grid-slam",
-                "--particles",
-                "8",
-                "--dataset",
-                &dataset,
-            ],
-            &out,
-        );
+        let r = grid_replay(&dataset, &[], &out);
         holds(&r, &out, &text, &["log.clf"], scans_accounted)
     });
 }
@@ -489,20 +493,7 @@ fn a_mutated_grid_settings_file_fails_naming_it_or_is_used() {
     run_cases(128, &mutation(), |m| {
         std::fs::write(&config, apply(GRID_SETTINGS, &m)).unwrap();
         let out = dir.path().join("out");
-        let r = run(
-            &[
-                "replay",
-                "--filter",
-                "grid-slam",
-                "--particles",
-                "8",
-                "--config",
-                config.to_str().unwrap(),
-                "--dataset",
-                &dataset,
-            ],
-            &out,
-        );
+        let r = grid_replay(&dataset, &["--config", config.to_str().unwrap()], &out);
         holds(&r, &out, &carmen_log(), &["grid.toml"], scans_accounted)
     });
 }
