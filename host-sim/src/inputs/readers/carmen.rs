@@ -147,15 +147,22 @@ fn coordinate(value: f64, line: usize, what: &str) -> Result<f64, CarmenError> {
     }
 }
 
-/// A message's `ipc_timestamp`, refused when it is not finite: a NaN or infinite stamp
-/// would reach the trajectory written and the stamp matching of the metrics.
-fn stamp(value: f64, line: usize) -> Result<f64, CarmenError> {
+/// A field that must be a finite number ([`num`], then [`finite`]).
+fn finite_num(tok: Option<&str>, line: usize, what: &str) -> Result<f64, CarmenError> {
+    finite(num(tok, line, what)?, line, what)
+}
+
+/// A message's stamp (`ipc_timestamp`, `logger_timestamp`), refused when it is not
+/// finite: a NaN or infinite `ipc_timestamp` would reach the trajectory written and the
+/// stamp matching of the metrics, and a log whose `logger_timestamp` is not a time is
+/// corrupt even where the replay does not use it.
+fn finite(value: f64, line: usize, what: &str) -> Result<f64, CarmenError> {
     if value.is_finite() {
         Ok(value)
     } else {
         Err(CarmenError {
             line,
-            reason: format!("ipc_timestamp {value} is not finite"),
+            reason: format!("{what} {value} is not finite"),
         })
     }
 }
@@ -285,7 +292,7 @@ pub fn parse<R: BufRead>(
                     *v = num(tok.next(), n, LASER_TAIL[k])?;
                 }
                 let _hostname = tok.next();
-                num(tok.next(), n, "logger_timestamp")?;
+                finite_num(tok.next(), n, "logger_timestamp")?;
                 for (k, name) in [(0, "x"), (1, "y"), (3, "odom_x"), (4, "odom_y")] {
                     coordinate(f[k], n, name)?;
                 }
@@ -294,7 +301,7 @@ pub fn parse<R: BufRead>(
                     ranges,
                     pose: [f[0], f[1], f[2]],
                     odom: [f[3], f[4], f[5]],
-                    stamp: stamp(f[6], n)?,
+                    stamp: finite(f[6], n, "ipc_timestamp")?,
                 }));
             }
             Some("ODOM") => {
@@ -317,14 +324,14 @@ pub fn parse<R: BufRead>(
                     *v = num(tok.next(), n, ODOM_FIELDS[k])?;
                 }
                 let _hostname = tok.next();
-                num(tok.next(), n, "logger_timestamp")?;
+                finite_num(tok.next(), n, "logger_timestamp")?;
                 coordinate(f[0], n, "x")?;
                 coordinate(f[1], n, "y")?;
                 log.messages.push(Message::Odom(OdomMessage {
                     pose: [f[0], f[1], f[2]],
                     tv: f[3],
                     rv: f[4],
-                    stamp: stamp(f[6], n)?,
+                    stamp: finite(f[6], n, "ipc_timestamp")?,
                 }));
             }
             Some("PARAM") => {
@@ -414,6 +421,15 @@ mod tests {
             assert_eq!(
                 e,
                 format!("CARMEN log line {line}: ipc_timestamp {value} is not finite")
+            );
+        }
+        for (text, value) in [
+            ("FLASER 1 1.0 0 0 0 0 0 0 5.0 h nan\n", "NaN"),
+            ("ODOM 0 0 0 0 0 0 5.0 h inf\n", "inf"),
+        ] {
+            assert_eq!(
+                error(text),
+                format!("CARMEN log line 1: logger_timestamp {value} is not finite")
             );
         }
     }
