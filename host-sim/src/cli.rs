@@ -518,9 +518,13 @@ pub struct HilArgs {
     /// Baud rate of the serial port.
     #[arg(long, default_value_t = 115_200)]
     pub baud: u32,
-    /// Dataset: `mrclam:<dir>` or `mrclam:<dir>/robot<k>` (EKF), as for `replay`, or `carmen:<log>`: with `--map`
-    /// the localizer on the map in the firmware's flash, without it the building-scale
-    /// grid SLAM (a firmware built with `--features building-slam`).
+    /// Dataset: `mrclam:<dir>` or `mrclam:<dir>/robot<k>`, `landmarks:<file>`, or
+    /// `rosbag:<bag>` with ArucoMarkers detections (EKF), as for `replay`; or a lidar log,
+    /// `carmen:<log>` or `rosbag:<bag>` with scans: with `--map` the localizer on the map in
+    /// the firmware's flash, without it the building-scale grid SLAM (a firmware built
+    /// with `--features building-slam`). A bag's lidar mounted off the robot's centre is
+    /// streamed in its own frame (the device estimates the lidar's pose; the trajectory
+    /// written is the robot's).
     #[arg(long, short)]
     pub dataset: DatasetSpec,
     /// With `carmen:`: the map the firmware was built with (`MICROSLAM_MAP`), for the
@@ -573,6 +577,9 @@ pub struct HilArgs {
     /// Record the device's estimates into this MCAP file (Foxglove schemas).
     #[arg(long)]
     pub mcap: Option<PathBuf>,
+    /// Topics and lidar mount of a `rosbag:` dataset.
+    #[command(flatten)]
+    pub bag: BagArgs,
 }
 
 /// Options of `host-sim export-map`.
@@ -715,6 +722,7 @@ impl From<&HilArgs> for HilOptions {
             serial: a.serial.clone(),
             baud: a.baud,
             dataset: a.dataset.clone(),
+            bag: (&a.bag).into(),
             robot: a.robot,
             out: a.out.clone(),
             timeout_s: a.timeout_s,

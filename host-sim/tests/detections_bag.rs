@@ -170,6 +170,21 @@ fn a_detection3d_bag_with_one_class_runs_jcbb() {
     );
     assert!(a.is_finite(), "{m}");
     assert!(m["landmarks_created"].as_u64().unwrap() > 0, "{m}");
+    // The firmware's landmark session pairs sightings by id: `hil` refuses such a bag
+    // before it talks to a device, naming the count, instead of streaming no sighting.
+    let out = host_sim()
+        .args(["hil", "--serial", "/nonexistent/tty", "--dataset"])
+        .arg(format!("rosbag:{}", bag.display()))
+        .arg("--out")
+        .arg(dir.path().join("hil"))
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{e}");
+    assert!(
+        e.contains("sightings carry no landmark id") && e.contains("-a jcbb"),
+        "{e}"
+    );
 }
 
 // --- bad input -------------------------------------------------------------------------

@@ -6,6 +6,10 @@ use crate::drivers::hil::{
     Device, Expected, compare, encode_all_corrupted, host_replies, messages_for,
 };
 use crate::inputs::readers::DatasetSpec;
+use crate::inputs::readers::carmen::resolve_log;
+use crate::inputs::readers::detections_bag;
+use crate::inputs::readers::lidar_recording::LidarRecording;
+use crate::inputs::readers::rosbag::BagOptions;
 use crate::output::tum_text;
 use anyhow::{Context, Result, bail};
 use microslam::geometry::Pose2;
@@ -74,9 +78,12 @@ pub struct HilOptions {
     pub serial: Option<String>,
     /// Baud rate of the serial port.
     pub baud: u32,
-    /// Dataset: `mrclam:<dir>` (EKF) or `carmen:<log>` (the localizer with `map`, the
+    /// Dataset: `mrclam:<dir>`, `landmarks:<file>` or `rosbag:<bag>` of detections (EKF),
+    /// or `carmen:<log>` or `rosbag:<bag>` of scans (the localizer with `map`, the
     /// building-scale grid SLAM without).
     pub dataset: DatasetSpec,
+    /// Topics and lidar mount of a `rosbag:` dataset.
+    pub bag: BagOptions,
     /// Robot whose log is streamed.
     pub robot: u8,
     /// Record the device's estimates into this MCAP file.
@@ -113,20 +120,33 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
     if let Device::Qemu(elf) = device {
         check_firmware_elf(elf)?;
     }
-    if let DatasetSpec::Carmen(log) = &args.dataset
-        && args.map.is_none()
-    {
+    crate::commands::replay::bag_options_apply(&args.dataset, &args.bag)?;
+    // A bag with a detections topic is a landmark recording; one without is a lidar bag.
+    let landmark_bag = match &args.dataset {
+        DatasetSpec::Rosbag(file) => {
+            let path = resolve_log(file)?;
+            detections_bag::detections_topic(&path, &args.bag)?.map(|_| path)
+        }
+        _ => None,
+    };
+    let lidar_log = landmark_bag.is_none()
+        && matches!(
+            args.dataset,
+            DatasetSpec::Carmen(_) | DatasetSpec::Rosbag(_)
+        );
+    if lidar_log && args.map.is_none() {
         use crate::commands::hil_slam::{SlamHilOptions, run_cli};
         // What this mode does not do is refused, never ignored.
         if args.mcap.is_some() || args.dataset_settings || args.corrupt_frames != 0.0 {
             bail!(
-                "the building-scale SLAM HIL (a carmen: log without --map) takes neither \
+                "the building-scale SLAM HIL (a lidar log without --map) takes neither \
                  --mcap, --dataset-settings nor --corrupt-frames"
             );
         }
+        let lidar = LidarRecording::read(&args.dataset, &args.bag)?;
         let options = SlamHilOptions {
             device,
-            log,
+            lidar: &lidar,
             scans: args.scans,
             out: &args.out,
             timeout_s: args.timeout_s,
@@ -137,20 +157,21 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
         return run_cli(&options, quiet);
     }
     if args.reference.is_some() {
-        bail!("--reference scores the building-scale SLAM (a carmen: log without --map)");
+        bail!("--reference scores the building-scale SLAM (a lidar log without --map)");
     }
-    if args.restart_after.is_some() && !matches!(args.dataset, DatasetSpec::Carmen(_)) {
+    if args.restart_after.is_some() && !lidar_log {
         bail!(
-            "--restart-after restarts a firmware with a lidar log (carmen:): the \
+            "--restart-after restarts a firmware with a lidar log (carmen: or rosbag:): the \
              building-scale SLAM's (without --map) or the localizer's (with --map)"
         );
     }
-    if let DatasetSpec::Carmen(log) = &args.dataset {
+    if lidar_log {
         use crate::commands::hil_localizer::{LocalizerHilOptions, run_cli};
+        let lidar = LidarRecording::read(&args.dataset, &args.bag)?;
         let options = LocalizerHilOptions {
             device,
             map: args.map.as_deref(),
-            log,
+            lidar: &lidar,
             scans: args.scans,
             out: &args.out,
             timeout_s: args.timeout_s,
@@ -159,7 +180,21 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
         };
         return run_cli(&options, quiet);
     }
-    let mut recording = crate::inputs::readers::read(&args.dataset, args.robot)?;
+    // A bag of one's own robot starts from the plain landmark log's settings (as `replay`).
+    let family = match args.dataset {
+        DatasetSpec::Rosbag(_) => "landmarks",
+        _ => args.dataset.family(),
+    };
+    let mut recording = match &landmark_bag {
+        Some(path) => {
+            let mount =
+                crate::domain::config::Settings::load_for(family, args.config.as_deref(), None)?
+                    .sighting
+                    .mount;
+            detections_bag::recording(path, &args.bag, mount)?
+        }
+        None => crate::inputs::readers::read(&args.dataset, args.robot)?,
+    };
     if recording.events.iter().any(|e| {
         matches!(
             e.kind,
@@ -174,8 +209,26 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
             recording.name
         );
     }
+    let unidentified = recording
+        .events
+        .iter()
+        .filter(|e| {
+            matches!(
+                &e.kind,
+                microslam::event::EventKind::Sighting(s)
+                    if !matches!(s.identity, microslam::event::Identity::Unique(_))
+            )
+        })
+        .count();
+    if unidentified > 0 {
+        bail!(
+            "{}: {unidentified} sightings carry no landmark id (a class or nothing): the \
+             firmware's landmark session pairs sightings by id; replay hidden ids with \
+             `host-sim replay -a jcbb`",
+            recording.name
+        );
+    }
     let settings = if args.dataset_settings {
-        let family = args.dataset.family();
         let tuned =
             crate::domain::config::Settings::load_for(family, args.config.as_deref(), None)?;
         if tuned.sighting.has_bias_mean() {

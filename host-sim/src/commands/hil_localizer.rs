@@ -1,4 +1,4 @@
-//! `host-sim hil --dataset carmen:<log> --map <map.yaml>`: the firmware's localizer mode
+//! `host-sim hil --dataset carmen:<log> --map <map.yaml>` (or `rosbag:<bag>`): the firmware's localizer mode
 //! in the loop (through [`crate::drivers::hil_localizer`]). The device (a firmware built
 //! with `MICROSLAM_MAP=<map.yaml>`) is put in localizer mode at the log's first pose (the
 //! map's frame: a grid-SLAM map of the same log starts at its first scan), then every
@@ -16,17 +16,19 @@ use std::time::Duration;
 use anyhow::{Context, Result, bail};
 use microslam::geometry::Pose2;
 use microslam::grid::MapImage;
-use microslam::wire::ToHost;
+use microslam::wire::{EstimatorKind, ToHost};
 use serde::Serialize;
+
+use crate::inputs::readers::lidar_recording::LidarRecording;
 
 use crate::drivers::hil::{
     Device, Phase, compare, encode_all, replies_across_restart, restart_cut,
 };
 use crate::drivers::hil_localizer::{
-    host_localizer_replies, host_localizer_restart, localizer_messages, map_image_of,
-    map_image_with_levels,
+    WireLidar, host_localizer_replies, host_localizer_restart, map_image_of, map_image_with_levels,
+    wire_lidar_messages,
 };
-use crate::inputs::readers::carmen::{LaserMessage, front_scans, read_log, resolve_log};
+use crate::inputs::readers::carmen::LaserMessage;
 use crate::output::tum_text;
 
 /// `host-sim export-map`.
@@ -99,13 +101,14 @@ fn trajectory(
     replies: &[ToHost],
     scans: &[&LaserMessage],
     scan_replies: &[usize],
+    lidar: &WireLidar,
 ) -> Vec<(f64, [f64; 3])> {
     scans
         .iter()
         .zip(scan_replies)
         .filter_map(|(laser, &i)| match replies.get(i) {
             Some(ToHost::Localization { estimate, .. }) => {
-                Some((laser.stamp, estimate.pose.map(f64::from)))
+                Some((laser.stamp, lidar.robot_pose(estimate.pose.map(f64::from))))
             }
             _ => None,
         })
@@ -119,8 +122,8 @@ pub struct LocalizerHilOptions<'a> {
     pub device: Device<'a>,
     /// The map it was built with (`MICROSLAM_MAP`).
     pub map: Option<&'a Path>,
-    /// The CARMEN log (`carmen:<file>`).
-    pub log: &'a str,
+    /// The lidar log (`carmen:<file>` or `rosbag:<bag>`).
+    pub lidar: &'a LidarRecording,
     /// Stream only the first N scans.
     pub scans: Option<usize>,
     /// Output folder.
@@ -139,15 +142,12 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
     let Some(map_yaml) = args.map else {
         bail!("a lidar dataset runs the device's localizer: give --map <map.yaml>");
     };
-    let file = args.log;
-    let path = resolve_log(file)?;
-    let log = read_log(&path)?;
-    let mut scans = front_scans(&log);
-    if let Some(n) = args.scans {
-        scans.truncate(n);
-    }
+    let path = &args.lidar.path;
+    let scans = args.lidar.first(args.scans);
+    let wire = WireLidar::new(&args.lidar.lidar, args.lidar.beams());
     let image = map_image_of(map_yaml)?;
-    let (messages, last_chunks) = localizer_messages(&scans, Pose2::IDENTITY);
+    let (messages, last_chunks) =
+        wire_lidar_messages(&scans, &wire, Pose2::IDENTITY, EstimatorKind::Localizer);
     let (parts, scan_replies, resumed) = match args.restart_after {
         None => {
             let bytes = encode_all(&messages);
@@ -187,17 +187,18 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
             &host_localizer_replies(&encode_all(&messages), &image)?,
             &scans,
             &last_chunks,
+            &wire,
         )),
         None => None,
     };
-    let relation_error = match crate::metrics::relations::find_relations(&path, None) {
+    let relation_error = match crate::metrics::relations::find_relations(path, None) {
         Ok(r) => {
             let rels = crate::metrics::relations::read(&r)?;
             let score = |traj: &[(f64, [f64; 3])]| {
                 Some(crate::metrics::relations::evaluate(traj, &rels, 1e-3)).filter(|e| e.used > 0)
             };
             Some((
-                score(&trajectory(&run.replies, &scans, &scan_replies)),
+                score(&trajectory(&run.replies, &scans, &scan_replies, &wire)),
                 uninterrupted.as_deref().and_then(score),
             ))
         }
@@ -230,7 +231,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
     crate::output::create_folder(args.out)?;
     let json = args.out.join("hil.json");
     crate::output::write_report(&json, &report)?;
-    let poses = trajectory(&run.replies, &scans, &scan_replies)
+    let poses = trajectory(&run.replies, &scans, &scan_replies, &wire)
         .into_iter()
         .map(|(t, [x, y, th])| (t, Pose2::new(x, y, th)));
     std::fs::write(args.out.join("firmware.tum"), tum_text(poses))?;
@@ -241,7 +242,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
             .zip(&scan_replies)
             .filter_map(|(laser, &i)| match run.replies.get(i) {
                 Some(ToHost::Localization { estimate: e, .. }) => {
-                    let [x, y, th] = e.pose.map(f64::from);
+                    let [x, y, th] = wire.robot_pose(e.pose.map(f64::from));
                     let pose = Pose2::new(x, y, th);
                     let cov = Some(e.covariance.map(f64::from));
                     Some(((laser.stamp, pose, cov), laser.ranges.as_slice()))
@@ -249,8 +250,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
                 _ => None,
             })
             .unzip();
-        let lidar =
-            crate::domain::grid::carmen_lidar(crate::inputs::readers::carmen::beam_count(&log));
+        let lidar = args.lidar.lidar;
         crate::output::mcap::scene::record_estimates(
             &mut file,
             "",

@@ -1,4 +1,4 @@
-//! `host-sim hil --dataset carmen:<log>` without `--map`: the firmware's building-scale
+//! `host-sim hil --dataset carmen:<log>` (or `rosbag:<bag>`) without `--map`: the firmware's building-scale
 //! grid SLAM in the loop (through [`crate::drivers::hil_slam`]). The device (a firmware
 //! built with the feature `building-slam`) is put in grid mode at the origin, then every
 //! front scan of the log is streamed (its odometry increment, then its chunks); every
@@ -18,9 +18,11 @@ use microslam::wire::{EstimatorKind, ToDevice, ToHost};
 use serde::Serialize;
 
 use crate::drivers::hil::{Device, Phase, compare, replies_across_restart, restart_cut};
-use crate::drivers::hil_localizer::lidar_messages;
+use crate::drivers::hil_localizer::WireLidar;
+use crate::drivers::hil_localizer::wire_lidar_messages;
 use crate::drivers::hil_slam::{host_restart_replies, host_slam_replies};
-use crate::inputs::readers::carmen::{LaserMessage, front_scans, read_log, resolve_log};
+use crate::inputs::readers::carmen::LaserMessage;
+use crate::inputs::readers::lidar_recording::LidarRecording;
 use crate::metrics::reference::ReferenceAte;
 use crate::output::tum_text;
 
@@ -95,8 +97,8 @@ pub struct ReferenceReport {
 pub struct SlamHilOptions<'a> {
     /// The device running the `building-slam` firmware: under QEMU or a board.
     pub device: Device<'a>,
-    /// The CARMEN log (`carmen:<file>`).
-    pub log: &'a str,
+    /// The lidar log (`carmen:<file>` or `rosbag:<bag>`).
+    pub lidar: &'a LidarRecording,
     /// Stream only the first N scans.
     pub scans: Option<usize>,
     /// Output folder.
@@ -119,13 +121,14 @@ fn trajectory(
     replies: &[ToHost],
     scans: &[&LaserMessage],
     scan_replies: &[usize],
+    lidar: &WireLidar,
 ) -> Vec<(f64, [f64; 3])> {
     scans
         .iter()
         .zip(scan_replies)
         .filter_map(|(laser, &i)| match replies.get(i) {
             Some(ToHost::Estimate(estimate) | ToHost::Localization { estimate, .. }) => {
-                Some((laser.stamp, estimate.pose.map(f64::from)))
+                Some((laser.stamp, lidar.robot_pose(estimate.pose.map(f64::from))))
             }
             _ => None,
         })
@@ -190,15 +193,13 @@ fn plan(
     })
 }
 
-/// `host-sim hil --dataset carmen:<log>` (no `--map`).
+/// `host-sim hil --dataset carmen:<log>` or `rosbag:<bag>` (no `--map`).
 pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
-    let path = resolve_log(args.log)?;
-    let log = read_log(&path)?;
-    let mut scans = front_scans(&log);
-    if let Some(n) = args.scans {
-        scans.truncate(n);
-    }
-    let (messages, last_chunks) = lidar_messages(&scans, Pose2::IDENTITY, EstimatorKind::Grid);
+    let path = &args.lidar.path;
+    let scans = args.lidar.first(args.scans);
+    let wire = WireLidar::new(&args.lidar.lidar, args.lidar.beams());
+    let (messages, last_chunks) =
+        wire_lidar_messages(&scans, &wire, Pose2::IDENTITY, EstimatorKind::Grid);
     let plan = plan(&messages, &last_chunks, args.restart_after)?;
     let host_replies: Vec<ToHost> = plan.parts.iter().flat_map(|(_, r)| r.clone()).collect();
     if !quiet {
@@ -220,8 +221,8 @@ pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
         .device
         .run_phases(Phase::of(&plan.parts), Duration::from_secs(args.timeout_s))?;
     let comparison = compare(host_replies.len(), &run, &host_replies);
-    let traj = trajectory(&run.replies, &scans, &plan.scan_replies);
-    let relation_error = match crate::metrics::relations::find_relations(&path, None) {
+    let traj = trajectory(&run.replies, &scans, &plan.scan_replies, &wire);
+    let relation_error = match crate::metrics::relations::find_relations(path, None) {
         Ok(r) => {
             let rels = crate::metrics::relations::read(&r)?;
             Some(crate::metrics::relations::evaluate(&traj, &rels, 1e-3)).filter(|e| e.used > 0)

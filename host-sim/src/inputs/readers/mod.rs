@@ -7,6 +7,7 @@ pub mod bag_storage;
 pub mod carmen;
 pub mod detections_bag;
 pub mod landmarks;
+pub mod lidar_recording;
 pub mod map;
 pub mod mrclam;
 pub mod reference;
