@@ -6,7 +6,6 @@ use crate::drivers::hil::{
     Device, Expected, compare, encode_all_corrupted, host_replies, messages_for,
 };
 use crate::inputs::readers::DatasetSpec;
-use crate::inputs::readers::carmen::resolve_log;
 use crate::inputs::readers::detections_bag;
 use crate::inputs::readers::lidar_recording::LidarRecording;
 use crate::inputs::readers::rosbag::BagOptions;
@@ -122,13 +121,7 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
     }
     crate::commands::replay::bag_options_apply(&args.dataset, &args.bag)?;
     // A bag with a detections topic is a landmark recording; one without is a lidar bag.
-    let landmark_bag = match &args.dataset {
-        DatasetSpec::Rosbag(file) => {
-            let path = resolve_log(file)?;
-            detections_bag::detections_topic(&path, &args.bag)?.map(|_| path)
-        }
-        _ => None,
-    };
+    let landmark_bag = detections_bag::landmark_bag(&args.dataset, &args.bag)?;
     let lidar_log = landmark_bag.is_none()
         && matches!(
             args.dataset,

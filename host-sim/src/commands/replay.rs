@@ -67,12 +67,10 @@ pub struct ReplayOptions {
 pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
     bag_options_apply(&args.dataset, &args.bag)?;
     // A bag with a detections topic is a landmark recording; one without is a lidar bag.
-    let landmark_bag = match &args.dataset {
-        DatasetSpec::Rosbag(file) if args.filter != Some(FilterKind::GridSlam) => {
-            let path = resolve_log(file)?;
-            detections_bag::detections_topic(&path, &args.bag)?.map(|_| path)
-        }
-        _ => None,
+    let landmark_bag = if args.filter == Some(FilterKind::GridSlam) {
+        None
+    } else {
+        detections_bag::landmark_bag(&args.dataset, &args.bag)?
     };
     let lidar = landmark_bag.is_none()
         && matches!(

@@ -168,6 +168,20 @@ pub fn detections_topic(
     topic_in(path, &channels, options)
 }
 
+/// The bag `spec` names when it is a landmark recording (a `rosbag:` dataset with a
+/// detections topic, [`detections_topic`]); `None` for any other dataset and for a bag
+/// without detections (a lidar bag).
+pub fn landmark_bag(
+    spec: &super::DatasetSpec,
+    options: &BagOptions,
+) -> Result<Option<std::path::PathBuf>> {
+    let super::DatasetSpec::Rosbag(file) = spec else {
+        return Ok(None);
+    };
+    let path = super::carmen::resolve_log(file)?;
+    Ok(detections_topic(&path, options)?.map(|_| path))
+}
+
 fn kind_of(schema: &str) -> Option<&'static str> {
     [msg::ARUCO_MARKERS, msg::DETECTION3D_ARRAY]
         .into_iter()
