@@ -188,17 +188,15 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
         }
         None => crate::inputs::readers::read(&args.dataset, args.robot)?,
     };
-    if recording.events.iter().any(|e| {
-        matches!(
-            e.kind,
-            microslam::event::EventKind::Ackermann { .. }
-                | microslam::event::EventKind::Increment(_)
-        )
-    }) {
+    if recording
+        .events
+        .iter()
+        .any(|e| matches!(e.kind, microslam::event::EventKind::Ackermann { .. }))
+    {
         bail!(
-            "{}: the firmware's landmark session is driven by velocities here; a car's \
-             speed and steering (ackermann records) and odometry increments have no HIL \
-             run yet: replay it with `host-sim replay`",
+            "{}: the firmware's landmark session takes velocities and odometry increments; \
+             a car's speed and steering (ackermann records) have no wire message yet: \
+             replay it with `host-sim replay`",
             recording.name
         );
     }
