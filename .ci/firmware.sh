@@ -67,6 +67,14 @@ cp "$TARGET_DIR/$TARGET/$PROFILE/cost_grid" "$OUT/cost_grid.elf"
 cp "$TARGET_DIR/$TARGET/$PROFILE/cost_relocalize" "$OUT/cost_relocalize.elf"
 cp "$TARGET_DIR/$TARGET/$PROFILE/cost_slam" "$OUT/cost_slam.elf"
 
+# The firmware with the car model (feature `car`: the EKF moved by a car's speed and
+# steering), for the car's HIL test. Built after the plain ELFs above were copied.
+step "build: the firmware with the car model (qemu)"
+cargo clippy -p firmware-example --locked --target "$TARGET" --bins --features car -- -D warnings
+cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --bin firmware-example --features car
+cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/car.elf"
+export CAR_ELF="$OUT/car.elf"
+
 # The building-scale grid SLAM firmware (profile::Slam with loop closure as the grid
 # estimator, keyframes in the QEMU flash stand-in; QEMU only). Built after the plain ELFs
 # above were copied (the feature changes the build).
@@ -115,7 +123,7 @@ export BOARD_MAP_LOCALIZER_ELF="$OUT/localizer-board-map.elf" BOARD_MAP_LOCALIZE
 measured="$OUT/measured.txt"
 : >"$measured"
 record() { printf '%-40s %s\n' "$1" "$2" >>"$measured"; }
-for board in qemu stm32f411 localizer localizer-stm32f411 localizer-board-map; do
+for board in qemu stm32f411 car localizer localizer-stm32f411 localizer-board-map; do
     read -r text data bss _ < <(arm-none-eabi-size "$OUT/$board.elf" | tail -1)
     record "${board//-/_}_flash_bytes" "$((text + data))"
     record "${board//-/_}_static_ram_bytes" "$((data + bss))"

@@ -301,6 +301,12 @@ pub fn localizer_elf() -> PathBuf {
 }
 
 /// The building-scale SLAM firmware (built with `--features building-slam`):
+/// `$CAR_ELF`, else `target/firmware-elf/car.elf` (where `.ci/firmware.sh` puts it): the
+/// firmware with the car model (feature `car`).
+pub fn car_elf() -> PathBuf {
+    path_from_env("CAR_ELF", "target/firmware-elf/car.elf")
+}
+
 /// `$SLAM_ELF`, else `target/firmware-elf/slam.elf` (where `.ci/firmware.sh` puts it).
 pub fn slam_elf() -> PathBuf {
     path_from_env("SLAM_ELF", "target/firmware-elf/slam.elf")

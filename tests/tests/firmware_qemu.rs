@@ -1235,3 +1235,62 @@ fn firmware_takes_a_ros2_bag_of_marker_detections_like_the_mrclam_files() {
     // Measured 0.5329 m (the firmware's own EKF settings; the twist gives 0.2903 m).
     assert!(ate < 0.5329 * 1.05, "{ate}");
 }
+
+/// The firmware with the car model (`--features car`) driving the simulator's car
+/// (`host-sim sim --car`: speed and steering through the bicycle model, its sensor 0.3 m
+/// ahead of the rear axle, known ids): the car is configured over the wire
+/// (`ConfigureCar`), every speed-and-steering step is applied, and every reply equals the
+/// host's bit for bit.
+#[test]
+#[ignore = "needs qemu-system-arm and the car ELF: run by .ci/firmware.sh"]
+fn car_firmware_drives_the_simulators_car_like_the_host() {
+    use host_sim::domain::AssociationMode;
+    use host_sim::domain::config::Settings;
+    use microslam::wire::{CarSettings, EkfSettings, Odometry};
+    use microslam_replay_tests::firmware::car_elf;
+    let elf = built(car_elf());
+    let mut settings = Settings::load_for("sim", None, Some(AssociationMode::Known)).unwrap();
+    settings.sighting.mount = [0.3, 0.0, 0.0];
+    let recording = host_sim::inputs::sim::simulate_car(&settings, 1).expect("the car drives");
+    let car = CarSettings::from_model(&settings.vehicle::<f32>().expect("[vehicle]"));
+    let ekf = EkfSettings::from_config(&settings.ekf_config::<f32>())
+        .with_calibration(settings.calibration_priors());
+    let messages = host_sim::drivers::hil::messages_with_car(&recording, Some(ekf), Some(car));
+    let steps = messages
+        .iter()
+        .filter(|m| {
+            matches!(
+                m,
+                ToDevice::Odometry {
+                    odometry: Odometry::Ackermann { .. },
+                    ..
+                }
+            )
+        })
+        .count();
+    assert!(steps > 1000, "{steps} speed-and-steering steps");
+    let bytes = encode_all(&messages);
+    let expected = host_replies(&bytes);
+    let run = run_equal_to_host(&elf, bytes, &expected, Duration::from_secs(600));
+    let applied = run
+        .replies
+        .iter()
+        .filter(|r| matches!(r, ToHost::Estimate(e) if e.result == StepResult::Applied))
+        .count();
+    let (ate, poses) = host_sim::commands::hil::device_ate(&run.replies, &recording.ground_truth);
+    let ate = ate.expect("an ATE");
+    println!(
+        "car firmware: {steps} speed-and-steering steps, {applied} estimates applied, \
+         device ATE(se2) {ate:.4} m over {poses}, {:.1} s",
+        run.elapsed.as_secs_f64()
+    );
+    assert!(
+        run.replies
+            .iter()
+            .all(|r| !matches!(r, ToHost::Refused { .. })),
+        "a command refused"
+    );
+    assert!(applied >= steps, "{applied} applied of {steps} steps");
+    // Measured 0.0215 m (seed 1, the settings of `sim --car`).
+    assert!(ate < 0.0215 * 1.05, "{ate}");
+}

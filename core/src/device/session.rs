@@ -13,6 +13,7 @@ use crate::association::{Observed, observe_known_supervised};
 use crate::ekf::health::{HealthConfig, HealthStatus, Supervisor};
 use crate::ekf::{EkfConfig, EkfSlam, UpdateOutcome};
 use crate::geometry::Pose2;
+use crate::motion::Ackermann;
 use crate::pf::{GridEstimator, GridLocalizer, LocalizerState};
 use crate::sensors::lidar::{LidarGeometry, LidarScan};
 use crate::sensors::range_bearing::RangeBearing;
@@ -95,6 +96,9 @@ impl GridSetup {
 const SCAN_DROPPED: u8 = 0x80;
 /// Error code in [`StepResult::Rejected`] for encoder ticks the wheel model refused.
 const TICKS_REFUSED: u8 = 0x81;
+/// Error code in [`StepResult::Rejected`] for a car's odometry before a car model was
+/// configured ([`Command::ConfigureCar`]).
+pub const NO_CAR: u8 = 0x82;
 
 /// The device side of the protocol for an `f32` EKF of state dimension `N` with a
 /// known-id table of `L` ids.
@@ -130,6 +134,8 @@ pub struct Session<'a, const N: usize, const P: usize, const L: usize> {
     ekf_config: EkfConfig<f32>,
     /// Self-calibration priors applied at each reset ([`super::messages::EkfSettings::calibration`]).
     calibration: [f32; 4],
+    /// The car [`Odometry::Ackermann`] moves through ([`Command::ConfigureCar`]).
+    car: Option<Ackermann<f32>>,
     ids: KnownIds<L>,
     supervisor: Supervisor<f32>,
     grid: Option<&'a mut dyn GridEstimator>,
@@ -154,6 +160,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             ekf,
             ekf_config,
             calibration: [0.0; 4],
+            car: None,
             ids: KnownIds::new(),
             supervisor: Supervisor::new(HealthConfig::DEFAULT_F32),
             grid: None,
@@ -315,6 +322,8 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
                 grid.predict_increment(&Pose2::new(dx, dy, dtheta))
             }
             Odometry::Velocity { v, omega, dt } => grid.predict_velocity(v, omega, dt),
+            // A car's odometry moves the EKF only.
+            Odometry::Ackermann { .. } => return StepResult::Ignored,
             Odometry::EncoderTicks {
                 front_left,
                 front_right,
@@ -394,6 +403,14 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
                 self.ekf.predict_increment(&Pose2::new(dx, dy, dtheta))
             }
             Odometry::Velocity { v, omega, dt } => self.ekf.predict_velocity(v, omega, dt),
+            Odometry::Ackermann { v, steering, dt } => match &self.car {
+                #[cfg(feature = "car")]
+                Some(car) => self.ekf.predict_ackermann(car, v, steering, dt),
+                _ => {
+                    let _ = (v, steering, dt);
+                    return StepResult::Rejected { reason: NO_CAR };
+                }
+            },
             // Ticks need the wheel geometry: used by the grid estimator only.
             Odometry::EncoderTicks { .. } => return StepResult::Ignored,
         };
@@ -505,6 +522,25 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             }
             Command::ReportStatus => {}
             Command::Restart => self.restart_requested = true,
+            Command::ConfigureCar(settings) => {
+                if !cfg!(feature = "car") {
+                    return ToHost::Refused {
+                        seq,
+                        reason: Refusal::NoCarModel,
+                        estimator: self.active,
+                    };
+                }
+                let car = settings.to_model();
+                if !car.is_valid() {
+                    self.status.rejected = self.status.rejected.saturating_add(1);
+                    return ToHost::Refused {
+                        seq,
+                        reason: Refusal::InvalidCar,
+                        estimator: self.active,
+                    };
+                }
+                self.car = Some(car);
+            }
             Command::ConfigureEkf(settings) => {
                 if let Some(field) = settings.invalid_field() {
                     self.status.rejected = self.status.rejected.saturating_add(1);

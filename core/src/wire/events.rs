@@ -5,10 +5,12 @@
 //! [`Odometry::Velocity`] is a step of known duration. [`EventsToWire`] keeps the last
 //! velocity and, before every later event, sends the motion up to that event's stamp:
 //! `(v, ω, dt = stamp − stamp of the last motion)`, with `dt` computed in `f64` from the
-//! event stamps and then rounded to `f32`. Stamps go on the wire as whole microseconds.
+//! event stamps and then rounded to `f32`. A car's speed and steering angle
+//! ([`EventKind::Ackermann`]) are held the same way and sent as
+//! [`Odometry::Ackermann`]. Stamps go on the wire as whole microseconds.
 //!
-//! Sent: velocities (as held motion), increments, yaw rates, and sightings with a unique
-//! id. Skipped (counted in [`EventsToWire::skipped`]): sightings without a unique id (the
+//! Sent: velocities and a car's speed and steering (as held motion), increments, yaw
+//! rates, and sightings with a unique id. Skipped (counted in [`EventsToWire::skipped`]): sightings without a unique id (the
 //! wire carries known-id sightings only) and event kinds the wire does not know.
 
 use heapless::Vec;
@@ -26,11 +28,19 @@ pub struct EventsToWire {
     skipped: u32,
 }
 
+/// The motion held since `since`: what goes on the wire at the next event.
 #[derive(Clone, Copy, Debug)]
 struct HeldVelocity {
     since: f64,
-    v: f32,
-    omega: f32,
+    motion: HeldMotion,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum HeldMotion {
+    /// Speed and turn rate.
+    Velocity { v: f32, omega: f32 },
+    /// A car's speed and steering angle.
+    Ackermann { v: f32, steering: f32 },
 }
 
 /// Whole microseconds of a stamp in seconds (saturating; negative and NaN give 0).
@@ -77,13 +87,16 @@ impl EventsToWire {
         if let Some(held) = self.held.as_mut() {
             let dt = (stamp - held.since) as f32;
             held.since = stamp;
-            let (v, omega) = (held.v, held.omega);
+            let odometry = match held.motion {
+                HeldMotion::Velocity { v, omega } => Odometry::Velocity { v, omega, dt },
+                HeldMotion::Ackermann { v, steering } => Odometry::Ackermann { v, steering, dt },
+            };
             let seq = self.next_seq();
             // Capacity 2, and this is the first push: cannot fail.
             let _ = out.push(ToDevice::Odometry {
                 seq,
                 stamp_us,
-                odometry: Odometry::Velocity { v, omega, dt },
+                odometry,
             });
         }
         let f = |x: T| x.to_f64() as f32;
@@ -91,8 +104,20 @@ impl EventsToWire {
             EventKind::Velocity { v, omega } => {
                 self.held = Some(HeldVelocity {
                     since: stamp,
-                    v: f(*v),
-                    omega: f(*omega),
+                    motion: HeldMotion::Velocity {
+                        v: f(*v),
+                        omega: f(*omega),
+                    },
+                });
+                None
+            }
+            EventKind::Ackermann { v, steering } => {
+                self.held = Some(HeldVelocity {
+                    since: stamp,
+                    motion: HeldMotion::Ackermann {
+                        v: f(*v),
+                        steering: f(*steering),
+                    },
                 });
                 None
             }
@@ -127,7 +152,11 @@ impl EventsToWire {
             Some(m) => {
                 let _ = out.push(m);
             }
-            None if !matches!(event.kind, EventKind::Velocity { .. }) => {
+            None if !matches!(
+                event.kind,
+                EventKind::Velocity { .. } | EventKind::Ackermann { .. }
+            ) =>
+            {
                 self.skipped = self.skipped.saturating_add(1);
             }
             None => {}
@@ -210,5 +239,43 @@ mod tests {
         assert_eq!(msgs, expect);
         assert_eq!(w.skipped(), 1, "the class-only sighting");
         assert_eq!(w.last_seq(), 5);
+    }
+
+    #[test]
+    fn a_cars_speed_and_steering_are_held_as_velocities_are() {
+        let mut w = EventsToWire::new();
+        let events = [
+            Event::new(
+                10.0,
+                EventKind::Ackermann {
+                    v: 2.0,
+                    steering: 0.1,
+                },
+            ),
+            Event::new(10.5, EventKind::Velocity { v: 1.0, omega: 0.0 }),
+            sighting(10.75, Identity::Unique(2)),
+        ];
+        let msgs: std::vec::Vec<ToDevice> = events.iter().flat_map(|e| w.push(e)).collect();
+        assert_eq!(msgs.len(), 3);
+        assert_eq!(
+            msgs[0],
+            ToDevice::Odometry {
+                seq: 1,
+                stamp_us: 10_500_000,
+                odometry: Odometry::Ackermann {
+                    v: 2.0,
+                    steering: 0.1,
+                    dt: 0.5,
+                },
+            }
+        );
+        assert!(matches!(
+            msgs[1],
+            ToDevice::Odometry {
+                odometry: Odometry::Velocity { dt: 0.25, .. },
+                ..
+            }
+        ));
+        assert_eq!(w.skipped(), 0);
     }
 }

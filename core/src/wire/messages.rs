@@ -10,7 +10,7 @@ use crate::ekf::EkfConfig;
 use crate::ekf::health::HealthStatus;
 use crate::gate::ChiSquareGate;
 use crate::geometry::Pose2;
-use crate::motion::{IncrementNoise, VelocityNoise};
+use crate::motion::{Ackermann, AckermannNoise, IncrementNoise, VelocityNoise};
 use crate::sensors::range_bearing::RangeBearingSensor;
 use heapless::Vec;
 use serde::{Deserialize, Serialize};
@@ -37,6 +37,17 @@ pub enum Odometry {
         v: f32,
         /// Yaw rate, rad/s.
         omega: f32,
+        /// Duration, s.
+        dt: f32,
+    },
+    /// A car's speed and front steering angle held over `dt`, moved through the car
+    /// model of [`Command::ConfigureCar`] (the EKF only; rejected before a car is
+    /// configured, ignored by the grid estimators). Since protocol 6.
+    Ackermann {
+        /// Speed of the rear-axle centre, m/s.
+        v: f32,
+        /// Front steering angle, rad (counter-clockwise positive).
+        steering: f32,
         /// Duration, s.
         dt: f32,
     },
@@ -112,11 +123,62 @@ pub enum Command {
         /// Byte offset into the image.
         offset: u32,
     },
+    /// Set the car model [`Odometry::Ackermann`] is moved through, kept across resets.
+    /// A model that is not valid ([`crate::motion::Ackermann::invalid_setting`]) is
+    /// refused with [`Refusal::InvalidCar`] and counted in [`Status::rejected`], the model
+    /// unchanged. Since protocol 6.
+    ConfigureCar(CarSettings),
     /// Restart the device, as its reset button would: answered with a
     /// [`ToHost::Status`], after which the firmware resets the processor
     /// ([`crate::device::Session::restart_requested`]). What it keeps in flash (a saved
     /// map and pose) decides what it runs after the reset. Since protocol 5.
     Restart,
+}
+
+/// A car for [`Command::ConfigureCar`]: the fields of [`Ackermann`]`<f32>`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CarSettings {
+    /// Distance from the rear to the front axle, m.
+    pub wheelbase: f32,
+    /// Largest |steering angle| accepted, rad.
+    pub max_steering: f32,
+    /// Standard deviation of the 1-s mean speed, m/s.
+    pub speed_std: f32,
+    /// Additional standard deviation of the speed per m/s of speed.
+    pub speed_std_per_mps: f32,
+    /// Standard deviation of the 1-s mean steering angle, rad.
+    pub steering_std: f32,
+    /// Additional standard deviation of the steering angle per m/s of speed.
+    pub steering_std_per_mps: f32,
+}
+
+impl CarSettings {
+    /// The settings of `car`.
+    pub fn from_model(car: &Ackermann<f32>) -> Self {
+        Self {
+            wheelbase: car.wheelbase,
+            max_steering: car.max_steering,
+            speed_std: car.noise.speed_std,
+            speed_std_per_mps: car.noise.speed_std_per_mps,
+            steering_std: car.noise.steering_std,
+            steering_std_per_mps: car.noise.steering_std_per_mps,
+        }
+    }
+
+    /// The car model.
+    pub fn to_model(&self) -> Ackermann<f32> {
+        Ackermann {
+            wheelbase: self.wheelbase,
+            max_steering: self.max_steering,
+            noise: AckermannNoise {
+                speed_std: self.speed_std,
+                speed_std_per_mps: self.speed_std_per_mps,
+                steering_std: self.steering_std,
+                steering_std_per_mps: self.steering_std_per_mps,
+            },
+        }
+    }
 }
 
 /// Bytes of the map image a [`ToHost::MapChunk`] carries at most.
@@ -533,6 +595,13 @@ pub enum Refusal {
     MapNotWritten,
     /// [`Command::ReadMap`] before a map was saved. Since protocol 4.
     NoSavedMap,
+    /// [`Command::ConfigureCar`] carried a model that is not valid
+    /// ([`crate::motion::Ackermann::invalid_setting`]); the car is unchanged. Since
+    /// protocol 6.
+    InvalidCar,
+    /// [`Command::ConfigureCar`] on a firmware built without the car model (`microslam`
+    /// feature `car`). Since protocol 6.
+    NoCarModel,
 }
 
 impl core::fmt::Display for Refusal {
@@ -551,6 +620,10 @@ impl core::fmt::Display for Refusal {
             Self::NoMapStorage => f.write_str("the active estimator keeps no map to save"),
             Self::MapNotWritten => f.write_str("writing the map into flash failed"),
             Self::NoSavedMap => f.write_str("no map has been saved"),
+            Self::InvalidCar => f.write_str("the car model is not valid"),
+            Self::NoCarModel => f.write_str(
+                "the firmware is built without the car model (firmware-example's feature `car`)",
+            ),
         }
     }
 }
@@ -559,7 +632,7 @@ impl core::fmt::Display for Refusal {
 /// message of either direction changes. [`ToHost::Status`] keeps its variant index (1)
 /// and its first two fields (`seq`, `protocol`) in every version, so a host can always
 /// tell which version a device speaks.
-pub const PROTOCOL_VERSION: u16 = 5;
+pub const PROTOCOL_VERSION: u16 = 6;
 
 /// Messages from the device to the host.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -3,7 +3,7 @@
 //! `hil.json` and `firmware.tum`.
 
 use crate::drivers::hil::{
-    Device, Expected, compare, encode_all_corrupted, host_replies, messages_for,
+    Device, Expected, compare, encode_all_corrupted, host_replies, messages_with_car,
 };
 use crate::inputs::readers::DatasetSpec;
 use crate::inputs::readers::detections_bag;
@@ -188,18 +188,29 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
         }
         None => crate::inputs::readers::read(&args.dataset, args.robot)?,
     };
-    if recording
+    // A car's speed and steering go through the car of the settings' `[vehicle]`, which
+    // the device is given first (a firmware built with the feature `car`).
+    let car = if recording
         .events
         .iter()
         .any(|e| matches!(e.kind, microslam::event::EventKind::Ackermann { .. }))
     {
-        bail!(
-            "{}: the firmware's landmark session takes velocities and odometry increments; \
-             a car's speed and steering (ackermann records) have no wire message yet: \
-             replay it with `host-sim replay`",
-            recording.name
-        );
-    }
+        let settings =
+            crate::domain::config::Settings::load_for(family, args.config.as_deref(), None)?;
+        let Some(car) = settings.vehicle::<f32>() else {
+            bail!(
+                "{}: a car's speed and steering (ackermann records) need the car's \
+                 wheelbase and noise: a [vehicle] section in --config",
+                recording.name
+            );
+        };
+        if let Some(bad) = car.invalid_setting() {
+            bail!("[vehicle]: {bad}");
+        }
+        Some(microslam::wire::CarSettings::from_model(&car))
+    } else {
+        None
+    };
     let unidentified = recording
         .events
         .iter()
@@ -244,7 +255,7 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
     } else {
         None
     };
-    let messages = messages_for(&recording, settings);
+    let messages = messages_with_car(&recording, settings, car);
     let (bytes, corrupted) =
         encode_all_corrupted(&messages, args.corrupt_frames, args.corrupt_seed);
     let host = host_replies(&bytes);

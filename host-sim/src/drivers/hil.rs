@@ -23,8 +23,8 @@ use microslam::device::Session;
 use microslam::geometry::Pose2;
 use microslam::profile;
 use microslam::wire::{
-    Command as WireCommand, EkfSettings, EventsToWire, FrameDecoder, MAX_FRAME_LEN, ToDevice,
-    ToHost, encode_frame,
+    CarSettings, Command as WireCommand, EkfSettings, EventsToWire, FrameDecoder, MAX_FRAME_LEN,
+    ToDevice, ToHost, encode_frame,
 };
 use serde::Serialize;
 
@@ -82,8 +82,22 @@ impl<'h> Expected<'h> {
 /// The messages for a recording: the [`handshake`], EKF settings when given, reset to its
 /// initial pose, its events, a status request.
 pub fn messages_for(recording: &Recording, settings: Option<EkfSettings>) -> Vec<ToDevice> {
+    messages_with_car(recording, settings, None)
+}
+
+/// [`messages_for`] of a car's recording: `car` is configured first
+/// ([`WireCommand::ConfigureCar`]), for its speed and steering odometry.
+pub fn messages_with_car(
+    recording: &Recording,
+    settings: Option<EkfSettings>,
+    car: Option<CarSettings>,
+) -> Vec<ToDevice> {
     let start = recording.initial_pose.unwrap_or_default();
     let mut out = vec![handshake()];
+    out.extend(car.map(|c| ToDevice::Command {
+        seq: 0,
+        command: WireCommand::ConfigureCar(c),
+    }));
     out.extend(settings.map(|s| ToDevice::Command {
         seq: 0,
         command: WireCommand::ConfigureEkf(s),

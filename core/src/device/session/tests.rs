@@ -655,3 +655,99 @@ fn localizer_mode_matches_direct_calls_and_refusals_are_explicit() {
         "{reports:?}"
     );
 }
+
+/// A car: its odometry is rejected until a model is configured, an invalid model is
+/// refused (and counted), and then each `Ackermann` step equals `predict_ackermann` on a
+/// filter of its own. Without the feature `car` both are refused.
+#[test]
+fn a_car_moves_the_ekf_through_the_configured_model() {
+    use crate::motion::{Ackermann, AckermannNoise};
+    use crate::wire::CarSettings;
+    let car = Ackermann {
+        wheelbase: 0.3f32,
+        max_steering: 0.6,
+        noise: AckermannNoise {
+            speed_std: 0.01,
+            speed_std_per_mps: 0.05,
+            steering_std: 0.02,
+            steering_std_per_mps: 0.0,
+        },
+    };
+    let drive = |seq: u32, steering: f32| ToDevice::Odometry {
+        seq,
+        stamp_us: u64::from(seq) * 100_000,
+        odometry: Odometry::Ackermann {
+            v: 0.4,
+            steering,
+            dt: 0.1,
+        },
+    };
+    let configure = |seq: u32, car: &Ackermann<f32>| ToDevice::Command {
+        seq,
+        command: Command::ConfigureCar(CarSettings::from_model(car)),
+    };
+    let invalid = Ackermann {
+        wheelbase: 0.0,
+        ..car
+    };
+    let mut ekf = EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+    let mut session = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+    let replies: std::vec::Vec<ToHost> = frames(&[
+        drive(1, 0.1),
+        configure(2, &invalid),
+        configure(3, &car),
+        drive(4, 0.1),
+        drive(5, -0.3),
+        drive(6, 0.9), // beyond max_steering: a corrupt reading
+    ])
+    .iter()
+    .filter_map(|&b| session.receive(b))
+    .collect();
+    let result = |r: &ToHost| match r {
+        ToHost::Estimate(e) => Some(e.result),
+        _ => None,
+    };
+    assert_eq!(
+        result(&replies[0]),
+        Some(StepResult::Rejected { reason: NO_CAR })
+    );
+    if !cfg!(feature = "car") {
+        assert!(matches!(
+            replies[2],
+            ToHost::Refused {
+                reason: Refusal::NoCarModel,
+                ..
+            }
+        ));
+        return;
+    }
+    assert!(matches!(
+        replies[1],
+        ToHost::Refused {
+            reason: Refusal::InvalidCar,
+            ..
+        }
+    ));
+    assert!(
+        matches!(replies[2], ToHost::Status { .. }),
+        "{:?}",
+        replies[2]
+    );
+    assert_eq!(result(&replies[3]), Some(StepResult::Applied));
+    assert_eq!(result(&replies[4]), Some(StepResult::Applied));
+    assert!(matches!(
+        result(&replies[5]),
+        Some(StepResult::Rejected { .. })
+    ));
+    // The same steps on a filter of its own.
+    let mut direct =
+        EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+    direct.predict_ackermann(&car, 0.4, 0.1, 0.1).unwrap();
+    direct.predict_ackermann(&car, 0.4, -0.3, 0.1).unwrap();
+    let ToHost::Estimate(last) = replies[4] else {
+        panic!("{:?}", replies[4]);
+    };
+    let p = direct.pose();
+    assert_eq!(last.pose, [p.x, p.y, p.theta]);
+    assert!(p.x > 0.07 && p.theta < 0.0, "{p:?}");
+}
