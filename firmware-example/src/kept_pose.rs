@@ -1,5 +1,6 @@
 //! The robot's pose kept in flash by a firmware ([`KeptPose`]): the library's
-//! [`PoseStore`] written by the library's rule ([`PoseKeeping`]) after every reply.
+//! [`PoseStore`] written by the library's rule ([`PoseKeeping`]) after every reply, and
+//! the hook a firmware's `serve` calls after each reply ([`after_reply`]).
 
 use embedded_storage::nor_flash::NorFlash;
 use microslam::device::{PoseKeeping, PoseStore};
@@ -36,4 +37,28 @@ impl<F: NorFlash> KeptPose<F> {
             }
         }
     }
+}
+
+/// What a firmware's `serve` calls after each reply: `kept`'s
+/// [`KeptPose::after_reply`], or nothing when the firmware keeps no pose.
+pub fn after_reply<F: NorFlash>(mut kept: Option<KeptPose<F>>) -> impl FnMut(&ToHost, bool) {
+    move |reply: &ToHost, restarting: bool| {
+        if let Some(kept) = kept.as_mut() {
+            kept.after_reply(reply, restarting);
+        }
+    }
+}
+
+/// The pose store in QEMU's flash stand-in (two sectors of
+/// [`crate::config::POSE_SECTOR_BYTES`]); `None`, logged, when the stand-in is taken or
+/// the store refuses it: the firmware then keeps no pose.
+#[cfg(feature = "qemu")]
+pub fn stand_in_store() -> Option<PoseStore<crate::flash::SramFlash>> {
+    use crate::config::POSE_SECTOR_BYTES;
+    let store = crate::flash::SramFlash::take_poses(2 * POSE_SECTOR_BYTES)
+        .and_then(|flash| PoseStore::open(flash, 0, POSE_SECTOR_BYTES).ok());
+    if store.is_none() {
+        defmt::error!("pose store refused: poses are not kept");
+    }
+    store
 }

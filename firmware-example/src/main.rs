@@ -169,17 +169,13 @@ mod grid {
     #[cfg(feature = "qemu")]
     mod kept_pose {
         use super::*;
-        use firmware_example::config::POSE_SECTOR_BYTES;
-        use firmware_example::flash::SramFlash;
-        use firmware_example::kept_pose::KeptPose;
-        use microslam::device::PoseStore;
+        use firmware_example::kept_pose::{KeptPose, after_reply, stand_in_store};
 
         pub fn resume(
             session: FirmwareSession,
             checksum: Option<u32>,
         ) -> (FirmwareSession, impl FnMut(&ToHost, bool)) {
-            let store = SramFlash::take_poses(2 * POSE_SECTOR_BYTES)
-                .and_then(|flash| PoseStore::open(flash, 0, POSE_SECTOR_BYTES).ok());
+            let store = stand_in_store();
             let saved = checksum
                 .zip(store.as_ref())
                 .and_then(|(crc, s)| s.latest_in(crc));
@@ -195,13 +191,8 @@ mod grid {
                 }
                 None => session,
             };
-            let mut kept = store.map(|store| KeptPose::new(store, checksum));
-            let after_reply = move |reply: &ToHost, restarting: bool| {
-                if let Some(kept) = kept.as_mut() {
-                    kept.after_reply(reply, restarting);
-                }
-            };
-            (session, after_reply)
+            let kept = store.map(|store| KeptPose::new(store, checksum));
+            (session, after_reply(kept))
         }
     }
 
@@ -226,12 +217,12 @@ mod grid {
     use super::*;
     use core::mem::ManuallyDrop;
     use firmware_example::config::{
-        LOCALIZER_CONFIG, Localizer, POSE_SECTOR_BYTES, SLAM_CONFIG, SLAM_KEYFRAME_BYTES,
-        SLAM_MAP_BYTES, SLAM_NODES, Slam, SlamEstimator,
+        LOCALIZER_CONFIG, Localizer, SLAM_CONFIG, SLAM_KEYFRAME_BYTES, SLAM_MAP_BYTES, SLAM_NODES,
+        Slam, SlamEstimator,
     };
     use firmware_example::flash::SramFlash;
-    use firmware_example::kept_pose::KeptPose;
-    use microslam::device::{LocalizerEstimator, PoseStore};
+    use firmware_example::kept_pose::{KeptPose, after_reply, stand_in_store};
+    use microslam::device::LocalizerEstimator;
     use microslam::geometry::Pose2;
     use microslam::grid::MapImage;
     use microslam::pf::PfError;
@@ -267,11 +258,7 @@ mod grid {
     /// `SaveMap` keeps the map and the pose for the next boot.
     pub fn session(ekf: &'static mut Ekf) -> (FirmwareSession, impl FnMut(&ToHost, bool)) {
         let memory = MEMORY.take();
-        let store = SramFlash::take_poses(2 * POSE_SECTOR_BYTES)
-            .and_then(|flash| PoseStore::open(flash, 0, POSE_SECTOR_BYTES).ok());
-        if store.is_none() {
-            defmt::error!("pose store refused: poses are not kept");
-        }
+        let store = stand_in_store();
         let Some(map_flash) = SramFlash::take_map(SLAM_MAP_BYTES) else {
             defmt::error!("map flash stand-in taken");
             board::halt(4)
@@ -288,13 +275,8 @@ mod grid {
             Some(pose) => localize(ekf, memory, map_flash.into_bytes(), pose),
             None => map(ekf, memory, map_flash),
         };
-        let mut kept = store.map(|store| KeptPose::new(store, session.1));
-        let after_reply = move |reply: &ToHost, restarting: bool| {
-            if let Some(kept) = kept.as_mut() {
-                kept.after_reply(reply, restarting);
-            }
-        };
-        (session.0, after_reply)
+        let kept = store.map(|store| KeptPose::new(store, session.1));
+        (session.0, after_reply(kept))
     }
 
     /// The localizer on the map image at the start of `region` (the map flash) from
