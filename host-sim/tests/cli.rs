@@ -141,6 +141,33 @@ fn hil_with_a_missing_or_wrong_elf_says_so() {
     }
 }
 
+/// `hil --scans 0` streams nothing: refused, naming the log, before a device is touched
+/// (the serial port named does not exist).
+#[test]
+fn hil_of_no_scan_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = host_sim()
+        .args([
+            "hil",
+            "--serial",
+            "/nonexistent/tty",
+            "--dataset",
+            "carmen:intel/intel-raw-part.clf",
+            "--scans",
+            "0",
+            "--out",
+        ])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("--scans 0: no scan of") && err.contains("intel-raw-part.clf"),
+        "{err}"
+    );
+}
+
 /// `--help` of `args`.
 fn help(args: &[&str]) -> String {
     let out = host_sim().args(args).arg("--help").output().unwrap();

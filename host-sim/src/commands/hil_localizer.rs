@@ -143,7 +143,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
         bail!("a lidar dataset runs the device's localizer: give --map <map.yaml>");
     };
     let path = &args.lidar.path;
-    let scans = args.lidar.first(args.scans);
+    let scans = args.lidar.first(args.scans)?;
     let wire = WireLidar::new(&args.lidar.lidar, args.lidar.beams());
     let image = map_image_of(map_yaml)?;
     let (messages, last_chunks) =

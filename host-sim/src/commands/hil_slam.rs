@@ -196,7 +196,7 @@ fn plan(
 /// `host-sim hil --dataset carmen:<log>` or `rosbag:<bag>` (no `--map`).
 pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
     let path = &args.lidar.path;
-    let scans = args.lidar.first(args.scans);
+    let scans = args.lidar.first(args.scans)?;
     let wire = WireLidar::new(&args.lidar.lidar, args.lidar.beams());
     let (messages, last_chunks) =
         wire_lidar_messages(&scans, &wire, Pose2::IDENTITY, EstimatorKind::Grid);

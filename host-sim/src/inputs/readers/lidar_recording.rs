@@ -52,10 +52,14 @@ impl LidarRecording {
         }
     }
 
-    /// The first `n` scans (all without `n`).
-    pub fn first(&self, n: Option<usize>) -> Vec<&LaserMessage> {
+    /// The first `n` scans (all without `n`, all of them when it has fewer); `n` = 0 is
+    /// refused: a run of no scan would use nothing it read.
+    pub fn first(&self, n: Option<usize>) -> Result<Vec<&LaserMessage>> {
+        if n == Some(0) {
+            bail!("--scans 0: no scan of {} to stream", self.path.display());
+        }
         let n = n.unwrap_or(self.scans.len()).min(self.scans.len());
-        self.scans[..n].iter().collect()
+        Ok(self.scans[..n].iter().collect())
     }
 
     /// Beams of a scan (its first; a log's scans have one length).
