@@ -94,7 +94,9 @@ cargo build --release -p host-sim --locked
 MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo clippy -p firmware-example --locked --target "$TARGET" --bins -- -D warnings
 MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --no-default-features --features stm32f411
 cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/localizer-stm32f411.elf"
-MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --bin firmware-example --bin cost_grid
+# The QEMU localizer reads its own lidar too (feature own-lidar: an LD06 on UART1).
+MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo clippy -p firmware-example --locked --target "$TARGET" --bins --features own-lidar -- -D warnings
+MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --bin firmware-example --bin cost_grid --features own-lidar
 cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/localizer.elf"
 # cost_grid with the map: the localizer's step on the Intel map (scans ray-cast in it).
 cp "$TARGET_DIR/$TARGET/$PROFILE/cost_grid" "$OUT/cost_grid_map.elf"

@@ -86,6 +86,21 @@ pub const GRID_CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
 #[cfg(feature = "wire")]
 pub const GRID_SETUP: crate::device::GridSetup = crate::device::GridSetup::EXAMPLE;
 
+/// Beams of a revolution of the lidar a board reads itself (an LD06 on a UART,
+/// `microslam-hal`'s `Ld06Uart`): one a degree, the LD06's own spacing.
+pub const LIDAR_BINS: usize = 360;
+
+/// How the board's own LD06 turns its points into beams: upright (angles clockwise, as
+/// the datasheet's), every return kept, the ranges and mount of [`GRID_SETUP`]'s lidar.
+#[cfg(feature = "wire")]
+pub const LIDAR_SETUP: crate::sensors::ld06::Ld06Setup = crate::sensors::ld06::Ld06Setup {
+    direction: crate::sensors::ld06::AngleDirection::Clockwise,
+    min_intensity: 0,
+    min_range: GRID_SETUP.lidar.min_range,
+    max_range: GRID_SETUP.lidar.max_range,
+    mount: GRID_SETUP.lidar.mount,
+};
+
 /// Particles of the localizer on a map in flash. Without the 64 KB grid in RAM far more
 /// would fit (28 bytes each); the instruction budget per scan is what limits them.
 pub const LOCALIZER_PARTICLES: usize = 64;

@@ -161,7 +161,37 @@ mod grid {
         let session = Session::new(ekf, EKF_CONFIG)
             .with_localizer(localizer, GRID_SETUP)
             .with_map_checksum(checksum);
-        kept_pose::resume(session, checksum)
+        kept_pose::resume(own_lidar::wire(session), checksum)
+    }
+
+    /// Under QEMU an LD06 lidar's packets arrive on UART1: `NextRevolution` reads it.
+    #[cfg(all(feature = "qemu", feature = "own-lidar"))]
+    mod own_lidar {
+        use super::*;
+        use firmware_example::config::{LIDAR_BINS, LIDAR_SETUP};
+        use microslam_hal::lidar::Ld06Uart;
+
+        /// The reader (its two revolutions of beams, 2.9 KB), zeroed at reset.
+        static LIDAR: StaticCell<Ld06Uart<board::qemu::CmsdkUart, LIDAR_BINS>> = StaticCell::new();
+
+        pub fn wire(session: FirmwareSession) -> FirmwareSession {
+            let Some(lidar) = Ld06Uart::new(board::qemu::lidar_uart(), LIDAR_SETUP) else {
+                defmt::error!("lidar setup invalid");
+                board::halt(4)
+            };
+            session.with_lidar(LIDAR.init(lidar))
+        }
+    }
+
+    /// Without the feature `own-lidar`, and on a board (no lidar wired to the MCU yet),
+    /// `NextRevolution` is refused.
+    #[cfg(not(all(feature = "qemu", feature = "own-lidar")))]
+    mod own_lidar {
+        use super::*;
+
+        pub fn wire(session: FirmwareSession) -> FirmwareSession {
+            session
+        }
     }
 
     /// Under QEMU the robot's pose is kept in the flash stand-in: a pose saved in this map

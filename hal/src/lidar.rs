@@ -100,6 +100,29 @@ impl<R: embedded_io::Read, const BINS: usize> Ld06Uart<R, BINS> {
     }
 }
 
+/// The reader as a [`microslam::device::Session`]'s own lidar.
+#[cfg(feature = "device")]
+impl<R: embedded_io::Read, const BINS: usize> microslam::device::LidarSource for Ld06Uart<R, BINS> {
+    fn next_revolution(&mut self) -> Option<LidarScan<'_>> {
+        loop {
+            match self.poll() {
+                Ok(true) => return Some(self.scan()),
+                Ok(false) => {}
+                Err(_) => return None,
+            }
+        }
+    }
+
+    fn counters(&self) -> microslam::wire::LidarCounters {
+        let c = self.decoder.counters();
+        microslam::wire::LidarCounters {
+            packets: c.packets,
+            bad_packets: c.bad_crc.saturating_add(c.bad_angle),
+            skipped_bytes: c.skipped_bytes,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -168,6 +168,86 @@ fn hil_of_no_scan_is_refused() {
     );
 }
 
+/// What `hil --own-lidar` cannot do is refused before a device or a file is touched,
+/// naming the option: a landmark log, a board, a restart, a fraction beyond 1, a line
+/// fault without `--own-lidar`.
+#[test]
+fn hil_own_lidar_refuses_what_it_cannot_do() {
+    let dir = tempfile::tempdir().unwrap();
+    let map = dir.path().join("map.yaml");
+    let run = |args: &[&str]| {
+        let out = host_sim()
+            .arg("hil")
+            .args(args)
+            .arg("--out")
+            .arg(dir.path().join("out"))
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{args:?}");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let intel = ["--dataset", "carmen:intel/intel-raw-part.clf", "--map"];
+    let map = map.to_str().unwrap();
+    let cases: [(Vec<&str>, &str); 5] = [
+        (
+            vec![
+                "--serial",
+                "/nonexistent/tty",
+                "-d",
+                "mrclam:dataset6",
+                "--own-lidar",
+            ],
+            "--own-lidar streams a lidar log",
+        ),
+        (
+            [
+                &["--serial", "/nonexistent/tty"][..],
+                &intel,
+                &[map, "--own-lidar"],
+            ]
+            .concat(),
+            "under QEMU (--qemu)",
+        ),
+        (
+            [
+                &["--qemu", "/nonexistent.elf"][..],
+                &intel,
+                &[map, "--own-lidar"],
+            ]
+            .concat()
+            .into_iter()
+            .chain(["--restart-after", "5"])
+            .collect(),
+            "without --restart-after",
+        ),
+        (
+            [
+                &["--qemu", "/nonexistent.elf"][..],
+                &intel,
+                &[map, "--own-lidar"],
+            ]
+            .concat()
+            .into_iter()
+            .chain(["--lidar-drop", "2"])
+            .collect(),
+            "--lidar-drop: a fraction",
+        ),
+        (
+            [
+                &["--serial", "/nonexistent/tty"][..],
+                &intel,
+                &[map, "--lidar-noise", "0.1"],
+            ]
+            .concat(),
+            "--own-lidar",
+        ),
+    ];
+    for (args, expected) in cases {
+        let err = run(&args);
+        assert!(err.contains(expected), "{args:?}: {err}");
+    }
+}
+
 /// `--help` of `args`.
 fn help(args: &[&str]) -> String {
     let out = host_sim().args(args).arg("--help").output().unwrap();

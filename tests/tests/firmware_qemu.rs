@@ -447,6 +447,142 @@ fn intel_tracking(elf: &std::path::Path, map: &std::path::Path, n: usize) {
     println!("firmware stack peak with localizer: {stack_peak_bytes} bytes");
 }
 
+/// Scans of the Intel raw log the own-lidar test streams.
+const OWN_LIDAR_SCANS: usize = 600;
+
+/// The localizer firmware reads its own lidar: the first [`OWN_LIDAR_SCANS`] scans of the
+/// Intel raw log as an LD06's packets on its second UART (UART1), with noise after 5 % of
+/// the packets, a byte changed in 2 % and 1 % lost, the odometry and a `NextRevolution`
+/// per scan on the link. Every reply equals the host's (the same session, the same reader
+/// on the same bytes) bit for bit, every revolution reaches the localizer, every changed
+/// packet is counted as a bad checksum, every whole one is decoded; and the trajectory
+/// tracks as the one of the same scans sent over the link does.
+#[test]
+#[ignore = "needs qemu-system-arm, the localizer ELF, its map and the datasets: run by .ci/firmware.sh"]
+fn localizer_firmware_reads_its_own_lidar_through_a_faulty_line_bit_for_bit_on_intel() {
+    use host_sim::domain::grid::carmen_lidar;
+    use host_sim::drivers::hil::{Expected, run_qemu_with_lidar};
+    use host_sim::drivers::hil_lidar::{Ld06Stream, LineFaults, ld06_packets};
+    use host_sim::drivers::hil_localizer::{
+        ScanPath, WireLidar, host_localizer_replies, host_localizer_session, lidar_messages_by,
+        map_image_of,
+    };
+    use microslam_replay_tests::firmware::{localizer_elf, localizer_map};
+    let (elf, map) = (built(localizer_elf()), built(localizer_map()));
+    let log_path = host_sim::inputs::readers::carmen::resolve_log("intel/intel-raw-part.clf")
+        .expect("Intel log");
+    let log = host_sim::inputs::readers::carmen::read_log(&log_path).expect("Intel log reads");
+    let mut scans = host_sim::inputs::readers::carmen::front_scans(&log);
+    scans.truncate(OWN_LIDAR_SCANS);
+    let beams = scans[0].ranges.len();
+    let image = map_image_of(&map).expect("the map converts");
+
+    let (revolutions, _) = ld06_packets(&scans, &carmen_lidar(beams)).expect("1° beams");
+    let faults = LineFaults {
+        noise: 0.05,
+        corrupt: 0.02,
+        drop: 0.01,
+        seed: 3,
+    };
+    let line = Ld06Stream::new(&revolutions, &faults).expect("no revolution lost");
+    assert!(line.corrupted > 0 && line.dropped > 0 && line.noise_bytes > 0);
+    let start = microslam::geometry::Pose2::IDENTITY;
+    let wire = WireLidar::carmen(beams);
+    let (messages, last) = lidar_messages_by(
+        &scans,
+        &wire,
+        start,
+        EstimatorKind::Localizer,
+        ScanPath::OwnLidar,
+    );
+    let bytes = encode_all(&messages);
+    let expected =
+        host_localizer_session(&bytes, &image, None, Some(&line.bytes)).expect("host reference");
+    assert_eq!(expected.len(), messages.len(), "one reply per message");
+    for &i in &last {
+        assert!(
+            matches!(expected[i], ToHost::Localization { estimate, .. }
+                if estimate.result == StepResult::Applied
+                    && estimate.estimator == EstimatorKind::Localizer),
+            "reply {i}: {:?}",
+            expected[i]
+        );
+    }
+
+    let run = run_qemu_with_lidar(
+        &elf,
+        bytes,
+        line.bytes.clone(),
+        Expected::host(&expected),
+        Duration::from_secs(600),
+    )
+    .expect("qemu-system-arm runs");
+    assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
+    assert_eq!(run.replies.len(), expected.len(), "every message answered");
+    for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
+        assert_eq!(
+            bits(got),
+            bits(want),
+            "reply {i} differs:\n{got:?}\n{want:?}"
+        );
+    }
+    let Some(ToHost::Status { lidar: counted, .. }) = run.replies.last() else {
+        panic!("the run ends with a status")
+    };
+    assert_eq!(counted.bad_packets as usize, line.corrupted, "{counted:?}");
+    // The first packet of the revolution after the last one ends it: one more.
+    assert_eq!(counted.packets as usize, line.packets + 1, "{counted:?}");
+
+    // Tracking: the revolutions' poses stay with those of the same scans sent over the link
+    // (a 360-bin revolution of the 180° scanner: the same beams, binned).
+    let (link_messages, link_last) = localizer_messages_from(&scans, &wire);
+    let link = host_localizer_replies(&encode_all(&link_messages), &image).expect("host reference");
+    let gaps: Vec<f64> = last
+        .iter()
+        .zip(&link_last)
+        .map(|(&a, &b)| {
+            let (p, q) = (
+                run.replies[a].estimate().unwrap().pose,
+                link[b].estimate().unwrap().pose,
+            );
+            f64::from((p[0] - q[0]).hypot(p[1] - q[1]))
+        })
+        .collect();
+    let worst = gaps.iter().copied().fold(0.0, f64::max);
+    let rms = (gaps.iter().map(|g| g * g).sum::<f64>() / gaps.len() as f64).sqrt();
+    println!(
+        "own lidar: {} scans, {} packets whole, {} changed ({} counted), {} lost, {} noise \
+         bytes; {:.2} s; from the link's trajectory {rms:.3} m RMS, {worst:.3} m at most",
+        scans.len(),
+        line.packets,
+        line.corrupted,
+        counted.bad_packets,
+        line.dropped,
+        line.noise_bytes,
+        run.elapsed.as_secs_f64()
+    );
+    assert!(rms < OWN_LIDAR_LINK_GAP_M.0, "{rms} m RMS");
+    assert!(worst < OWN_LIDAR_LINK_GAP_M.1, "{worst} m at most");
+}
+
+/// How far the own lidar's trajectory strays from the link's on the test's scans, m: RMS
+/// and at most (the line's faults and the 1° bins of a revolution cost beams). Measured
+/// 0.032 and 0.243 m; held with a 10 % margin (re-record from the test's output).
+const OWN_LIDAR_LINK_GAP_M: (f64, f64) = (0.035, 0.27);
+
+/// The localizer's messages of `scans` with their chunks on the link.
+fn localizer_messages_from(
+    scans: &[&host_sim::inputs::readers::carmen::LaserMessage],
+    wire: &host_sim::drivers::hil_localizer::WireLidar,
+) -> (Vec<ToDevice>, Vec<usize>) {
+    host_sim::drivers::hil_localizer::wire_lidar_messages(
+        scans,
+        wire,
+        microslam::geometry::Pose2::IDENTITY,
+        EstimatorKind::Localizer,
+    )
+}
+
 /// Scans of the Intel raw log the localizer's restart test streams, and where it restarts
 /// the device.
 const RESTART_SCANS: usize = 1500;
@@ -1080,6 +1216,7 @@ fn hil_on_bag(
         reference: None,
         reference_offset: 0.0,
         restart_after: None,
+        own_lidar: None,
     };
     run_cli(&options, true).expect("hil runs");
     serde_json::from_str(&std::fs::read_to_string(out.join("hil.json")).expect("hil.json"))

@@ -26,6 +26,9 @@ use crate::wire::messages::{
 };
 use crate::wire::scan::ScanAssembler;
 
+#[cfg(feature = "own-lidar")]
+use super::lidar::LidarSource;
+
 /// The most beams of one scan a [`Session`] reassembles (a 1° scanner); longer scans are
 /// dropped and answered with [`StepResult::Rejected`].
 pub const MAX_SCAN_BEAMS: usize = 360;
@@ -99,6 +102,9 @@ const TICKS_REFUSED: u8 = 0x81;
 /// Error code in [`StepResult::Rejected`] for a car's odometry before a car model was
 /// configured ([`Command::ConfigureCar`]).
 pub const NO_CAR: u8 = 0x82;
+/// Error code in [`StepResult::Rejected`] for a [`Command::NextRevolution`] whose lidar
+/// bus failed before a revolution was finished.
+pub const LIDAR_FAILED: u8 = 0x83;
 
 /// The device side of the protocol for an `f32` EKF of state dimension `N` with a
 /// known-id table of `L` ids.
@@ -141,6 +147,9 @@ pub struct Session<'a, const N: usize, const P: usize, const L: usize> {
     grid: Option<&'a mut dyn GridEstimator>,
     grid_setup: Option<GridSetup>,
     localizer: Result<&'a mut dyn LocalizerEstimator, Refusal>,
+    /// The lidar wired to the device, for [`Command::NextRevolution`].
+    #[cfg(feature = "own-lidar")]
+    lidar: Option<&'a mut dyn LidarSource>,
     /// The map image's CRC-32, reported in every status.
     map_checksum: Option<u32>,
     assembler: ScanAssembler<MAX_SCAN_BEAMS>,
@@ -166,6 +175,8 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             grid: None,
             grid_setup: None,
             localizer: Err(Refusal::NoMap),
+            #[cfg(feature = "own-lidar")]
+            lidar: None,
             map_checksum: None,
             assembler: ScanAssembler::new(),
             ranges: [0.0; MAX_SCAN_BEAMS],
@@ -204,6 +215,16 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
         self.localizer = localizer;
         self.grid_setup = Some(setup);
         self.reset(Pose2::new(0.0, 0.0, 0.0));
+        self
+    }
+
+    /// The same session reading its own lidar: [`Command::NextRevolution`] observes the
+    /// lidar's next revolution with the active grid estimator (refused with
+    /// [`Refusal::NoLidar`] without one). Scans sent over the line are still taken.
+    /// Feature `own-lidar`.
+    #[cfg(feature = "own-lidar")]
+    pub fn with_lidar(mut self, lidar: &'a mut dyn LidarSource) -> Self {
+        self.lidar = Some(lidar);
         self
     }
 
@@ -299,6 +320,12 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             ToDevice::YawRate { seq, stamp_us, .. } => (*seq, *stamp_us, StepResult::Ignored),
             ToDevice::Scan(chunk) => (chunk.seq, chunk.stamp_us, self.scan(chunk)),
         };
+        self.reply(seq, stamp_us, result)
+    }
+
+    /// Counts an event and its refusal, and answers it with the estimate after it.
+    #[inline(never)]
+    fn reply(&mut self, seq: u32, stamp_us: u64, result: StepResult) -> ToHost {
         self.status.events = self.status.events.saturating_add(1);
         if let StepResult::Rejected { .. } = result {
             self.status.rejected = self.status.rejected.saturating_add(1);
@@ -311,6 +338,51 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             },
             _ => ToHost::Estimate(estimate),
         }
+    }
+
+    /// [`Command::NextRevolution`]: the own lidar's next revolution through the active
+    /// grid estimator (read and skipped while the EKF runs); refused without a lidar.
+    fn revolution(&mut self, seq: u32, stamp_us: u64) -> ToHost {
+        #[cfg(feature = "own-lidar")]
+        if let Some(lidar) = self.lidar.take() {
+            let reply = self.own_revolution(seq, stamp_us, &mut *lidar);
+            self.lidar = Some(lidar);
+            return reply;
+        }
+        let _ = stamp_us;
+        ToHost::Refused {
+            seq,
+            reason: Refusal::NoLidar,
+            estimator: self.active,
+        }
+    }
+
+    /// What the own lidar's reader has seen (all 0 without one).
+    fn lidar_counters(&self) -> crate::wire::LidarCounters {
+        #[cfg(feature = "own-lidar")]
+        if let Some(lidar) = self.lidar.as_deref() {
+            return lidar.counters();
+        }
+        crate::wire::LidarCounters::default()
+    }
+
+    /// [`Session::revolution`] with the lidar.
+    #[cfg(feature = "own-lidar")]
+    fn own_revolution(&mut self, seq: u32, stamp_us: u64, lidar: &mut dyn LidarSource) -> ToHost {
+        let grid: Option<&mut dyn GridEstimator> =
+            match (self.active, &mut self.grid, &mut self.localizer) {
+                (EstimatorKind::Grid, Some(g), _) => Some(&mut **g),
+                (EstimatorKind::Localizer, _, Ok(l)) => Some(&mut **l),
+                _ => None,
+            };
+        let result = match (lidar.next_revolution(), grid) {
+            (None, _) => StepResult::Rejected {
+                reason: LIDAR_FAILED,
+            },
+            (Some(_), None) => StepResult::Ignored,
+            (Some(scan), Some(grid)) => observe(grid, &scan),
+        };
+        self.reply(seq, stamp_us, result)
     }
 
     fn grid_odometry(&mut self, odometry: &Odometry) -> StepResult {
@@ -388,10 +460,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             (EstimatorKind::Localizer, _, Ok(l)) => &mut **l,
             _ => return StepResult::Ignored,
         };
-        match grid.observe(&LidarScan::new(ranges, geometry)) {
-            Ok(_) => StepResult::Applied,
-            Err(e) => StepResult::Rejected { reason: e as u8 },
-        }
+        observe(grid, &LidarScan::new(ranges, geometry))
     }
 
     fn odometry(&mut self, odometry: &Odometry) -> StepResult {
@@ -520,6 +589,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
                     },
                 };
             }
+            Command::NextRevolution { stamp_us } => return self.revolution(seq, stamp_us),
             Command::ReportStatus => {}
             Command::Restart => self.restart_requested = true,
             Command::ConfigureCar(settings) => {
@@ -566,6 +636,7 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             status: self.status,
             stack_peak_bytes: 0,
             map_checksum: self.map_checksum,
+            lidar: self.lidar_counters(),
         }
     }
 
@@ -648,6 +719,14 @@ impl<'a, const N: usize, const P: usize, const L: usize> Session<'a, N, P, L> {
             status: self.status,
             health: self.supervisor.status(),
         }
+    }
+}
+
+/// One scan through a grid estimator, as the wire reports it.
+fn observe(grid: &mut dyn GridEstimator, scan: &LidarScan<'_>) -> StepResult {
+    match grid.observe(scan) {
+        Ok(_) => StepResult::Applied,
+        Err(e) => StepResult::Rejected { reason: e as u8 },
     }
 }
 

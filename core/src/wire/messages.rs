@@ -133,6 +133,20 @@ pub enum Command {
     /// ([`crate::device::Session::restart_requested`]). What it keeps in flash (a saved
     /// map and pose) decides what it runs after the reset. Since protocol 5.
     Restart,
+    /// Observe the next revolution of the device's own lidar (a lidar wired to the
+    /// board: [`crate::device::LidarSource`]) with the active grid estimator, stamped
+    /// `stamp_us`: the device reads its lidar until a revolution is complete and answers
+    /// as to the last chunk of a scan sent over the line, with the estimate after it
+    /// ([`ToHost::Estimate`], or [`ToHost::Localization`] on the localizer), its `seq` the
+    /// command's; [`ToHost::Status`] carries the reader's counters. The odometry sent before it is the motion up to that
+    /// revolution, as a board would read its encoders when the revolution ends. With the
+    /// EKF active the revolution is read and skipped ([`StepResult::Ignored`]), so the
+    /// lidar stays in step. Refused with [`Refusal::NoLidar`] by a firmware without a
+    /// lidar of its own. Since protocol 7.
+    NextRevolution {
+        /// Time stamp of the revolution, µs.
+        stamp_us: u64,
+    },
 }
 
 /// A car for [`Command::ConfigureCar`]: the fields of [`Ackermann`]`<f32>`.
@@ -504,6 +518,21 @@ pub struct Status {
     pub resamples: u32,
 }
 
+/// What the reader of a lidar wired to the device has seen ([`ToHost::Status`]):
+/// every byte it was sent is in one of the packets or among the skipped bytes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LidarCounters {
+    /// Packets that passed every check.
+    pub packets: u32,
+    /// Packets dropped for a wrong checksum or a field out of its range (an angle of a
+    /// turn or more).
+    pub bad_packets: u32,
+    /// Bytes skipped while looking for a packet's start (noise, the rest of a bad
+    /// packet).
+    pub skipped_bytes: u32,
+}
+
 /// An estimate of the robot pose after one event.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -602,6 +631,9 @@ pub enum Refusal {
     /// [`Command::ConfigureCar`] on a firmware built without the car model (`microslam`
     /// feature `car`). Since protocol 6.
     NoCarModel,
+    /// [`Command::NextRevolution`] on a firmware that reads no lidar of its own. Since
+    /// protocol 7.
+    NoLidar,
 }
 
 impl core::fmt::Display for Refusal {
@@ -624,6 +656,7 @@ impl core::fmt::Display for Refusal {
             Self::NoCarModel => f.write_str(
                 "the firmware is built without the car model (firmware-example's feature `car`)",
             ),
+            Self::NoLidar => f.write_str("the firmware reads no lidar of its own"),
         }
     }
 }
@@ -632,7 +665,7 @@ impl core::fmt::Display for Refusal {
 /// message of either direction changes. [`ToHost::Status`] keeps its variant index (1)
 /// and its first two fields (`seq`, `protocol`) in every version, so a host can always
 /// tell which version a device speaks.
-pub const PROTOCOL_VERSION: u16 = 6;
+pub const PROTOCOL_VERSION: u16 = 7;
 
 /// Messages from the device to the host.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -657,6 +690,9 @@ pub enum ToHost {
         /// [`crate::grid::MapImage::checksum`]); `None` without a valid one. Tells which
         /// map a device carries (since protocol 2).
         map_checksum: Option<u32>,
+        /// What the reader of the device's own lidar has seen (all 0 without one; since
+        /// protocol 7).
+        lidar: LidarCounters,
     },
     /// An estimate after an event in localizer mode, with the localizer's state.
     Localization {
@@ -698,4 +734,15 @@ pub enum ToHost {
         /// The bytes (the rest zero).
         bytes: MapBytes,
     },
+}
+
+impl ToHost {
+    /// The estimate a reply carries ([`ToHost::Estimate`], [`ToHost::Localization`]);
+    /// `None` for the answers to commands.
+    pub fn estimate(&self) -> Option<&Estimate> {
+        match self {
+            Self::Estimate(e) | Self::Localization { estimate: e, .. } => Some(e),
+            _ => None,
+        }
+    }
 }

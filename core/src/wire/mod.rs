@@ -49,9 +49,9 @@ pub use frame::{
     encode_frame,
 };
 pub use messages::{
-    CarSettings, Command, EkfSettings, Estimate, EstimatorKind, LocalizerReport, MAP_CHUNK_BYTES,
-    MapBytes, Odometry, PROTOCOL_VERSION, Refusal, SCAN_CHUNK_BEAMS, ScanChunk, Status, StepResult,
-    ToDevice, ToHost, TrackingState,
+    CarSettings, Command, EkfSettings, Estimate, EstimatorKind, LidarCounters, LocalizerReport,
+    MAP_CHUNK_BYTES, MapBytes, Odometry, PROTOCOL_VERSION, Refusal, SCAN_CHUNK_BEAMS, ScanChunk,
+    Status, StepResult, ToDevice, ToHost, TrackingState,
 };
 pub use scan::{Scan, ScanAssembler, ScanError};
 

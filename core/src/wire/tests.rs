@@ -231,6 +231,7 @@ fn a_status_starts_with_its_sequence_number_and_the_protocol_version() {
         status: Status::default(),
         stack_peak_bytes: 0,
         map_checksum: Some(0xDEAD_BEEF),
+        lidar: LidarCounters::default(),
     };
     let body = body_of(&status);
     // Variant 1, then seq and protocol as varints (one byte each while below 128).

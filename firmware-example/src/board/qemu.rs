@@ -1,5 +1,6 @@
-//! QEMU `mps2-an386` (Cortex-M4F): CMSDK APB UART0 and an FPGA I/O LED; semihosting for
-//! exit codes and for defmt output.
+//! QEMU `mps2-an386` (Cortex-M4F): CMSDK APB UART0 (the host link) and UART1 (a lidar's
+//! packet stream, QEMU's second `-serial`), an FPGA I/O LED; semihosting for exit codes
+//! and for defmt output.
 
 use core::convert::Infallible;
 
@@ -7,6 +8,8 @@ use defmt_semihosting as _;
 
 /// UART0 of the mps2 boards.
 const UART0_BASE: usize = 0x4000_4000;
+/// UART1 of the mps2 boards.
+const UART1_BASE: usize = 0x4000_5000;
 /// FPGA I/O block: register 0 drives the two user LEDs.
 const FPGAIO_LED: usize = 0x4002_8000;
 
@@ -194,6 +197,14 @@ impl FpgaLed {
             core::ptr::write_volatile(reg, v);
         }
     }
+}
+
+/// The UART a lidar is wired to: UART1 (QEMU's second `-serial`). Its reads spin while
+/// it is empty (its interrupt is not the one that ends the link's WFI). Call once.
+pub fn lidar_uart() -> CmsdkUart {
+    // SAFETY: UART1's address on mps2-an386; `lidar_uart` is called once, and nothing
+    // else drives UART1.
+    unsafe { CmsdkUart::new(UART1_BASE) }
 }
 
 /// Takes the board: UART0 and LED 0. Call once.

@@ -111,10 +111,38 @@ pub struct HilOptions {
     /// With a `carmen:` dataset and no `map`: save the map and restart the device after
     /// this many scans (it localizes in its own map for the rest).
     pub restart_after: Option<usize>,
+    /// With a lidar log and `map` under QEMU: the scans go to the device's own lidar (an
+    /// LD06's packets on its second UART) with these line faults.
+    pub own_lidar: Option<crate::drivers::hil_lidar::LineFaults>,
 }
+
+/// What `--own-lidar` needs.
+const OWN_LIDAR_NEEDS: &str = "--own-lidar streams a lidar log (carmen: or rosbag:) to the \
+     localizer firmware (with --map), which reads the lidar on its second UART";
 
 /// `host-sim hil`.
 pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
+    if let Some(faults) = &args.own_lidar {
+        let lidar_spec = matches!(
+            args.dataset,
+            DatasetSpec::Carmen(_) | DatasetSpec::Rosbag(_)
+        );
+        if !lidar_spec || args.map.is_none() {
+            bail!(OWN_LIDAR_NEEDS);
+        }
+        if args.qemu.is_none() {
+            bail!(
+                "--own-lidar feeds the lidar UART of a firmware under QEMU (--qemu); a board \
+                 reads the lidar wired to it"
+            );
+        }
+        if args.restart_after.is_some() {
+            bail!("--own-lidar runs without --restart-after");
+        }
+        if let Some(option) = faults.invalid() {
+            bail!("{option}: a fraction of the packets, 0 to 1");
+        }
+    }
     let device = Device::from_options(args.qemu.as_deref(), args.serial.as_deref(), args.baud)?;
     if let Device::Qemu(elf) = device {
         check_firmware_elf(elf)?;
@@ -127,6 +155,9 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
             args.dataset,
             DatasetSpec::Carmen(_) | DatasetSpec::Rosbag(_)
         );
+    if args.own_lidar.is_some() && !lidar_log {
+        bail!(OWN_LIDAR_NEEDS);
+    }
     if lidar_log && args.map.is_none() {
         use crate::commands::hil_slam::{SlamHilOptions, run_cli};
         // What this mode does not do is refused, never ignored.
@@ -170,6 +201,7 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
             timeout_s: args.timeout_s,
             mcap: args.mcap.as_deref(),
             restart_after: args.restart_after,
+            own_lidar: args.own_lidar,
         };
         return run_cli(&options, quiet);
     }

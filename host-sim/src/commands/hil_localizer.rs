@@ -22,11 +22,13 @@ use serde::Serialize;
 use crate::inputs::readers::lidar_recording::LidarRecording;
 
 use crate::drivers::hil::{
-    Device, Phase, compare, encode_all, replies_across_restart, restart_cut,
+    Device, Expected, Phase, compare, encode_all, replies_across_restart, restart_cut,
+    run_qemu_with_lidar,
 };
+use crate::drivers::hil_lidar::{Ld06Stream, LineFaults, ld06_packets};
 use crate::drivers::hil_localizer::{
-    WireLidar, host_localizer_replies, host_localizer_restart, map_image_of, map_image_with_levels,
-    wire_lidar_messages,
+    ScanPath, WireLidar, host_localizer_replies, host_localizer_restart, host_localizer_session,
+    lidar_messages_by, map_image_of, map_image_with_levels,
 };
 use crate::inputs::readers::carmen::LaserMessage;
 use crate::output::tum_text;
@@ -78,8 +80,36 @@ pub struct LocalizerHil {
     /// The localizer's state after the last scan (lost events, relocalizations).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub final_localizer: Option<microslam::wire::LocalizerReport>,
+    /// With `--own-lidar`: what was sent on the lidar's line and what the device's reader
+    /// counted.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub own_lidar: Option<OwnLidarReport>,
     /// The full comparison (pose and covariance differences).
     pub comparison: crate::drivers::hil::Comparison,
+}
+
+/// The lidar's line of a `--own-lidar` run.
+#[derive(Debug, Serialize)]
+pub struct OwnLidarReport {
+    /// The line faults asked for.
+    pub faults: LineFaultsReport,
+    /// What was sent.
+    pub sent: Ld06Stream,
+    /// The device reader's counters in its last status (after the last revolution).
+    pub device: Option<microslam::wire::LidarCounters>,
+}
+
+/// [`LineFaults`] as written in the report.
+#[derive(Debug, Serialize)]
+pub struct LineFaultsReport {
+    /// Fraction of packets followed by noise.
+    pub noise: f64,
+    /// Fraction of packets with a byte changed.
+    pub corrupt: f64,
+    /// Fraction of packets lost.
+    pub drop: f64,
+    /// Seed.
+    pub seed: u64,
 }
 
 /// A localizer run restarted part way (`--restart-after`).
@@ -106,11 +136,9 @@ fn trajectory(
     scans
         .iter()
         .zip(scan_replies)
-        .filter_map(|(laser, &i)| match replies.get(i) {
-            Some(ToHost::Localization { estimate, .. }) => {
-                Some((laser.stamp, lidar.robot_pose(estimate.pose.map(f64::from))))
-            }
-            _ => None,
+        .filter_map(|(laser, &i)| {
+            let estimate = replies.get(i)?.estimate()?;
+            Some((laser.stamp, lidar.robot_pose(estimate.pose.map(f64::from))))
         })
         .collect()
 }
@@ -135,6 +163,8 @@ pub struct LocalizerHilOptions<'a> {
     /// Restart the device after this many scans (`Restart`): it resumes from the pose it
     /// kept in flash.
     pub restart_after: Option<usize>,
+    /// Send the scans to the device's own lidar (its second UART) with these line faults.
+    pub own_lidar: Option<LineFaults>,
 }
 
 /// `host-sim hil --dataset carmen:<log> --map <map.yaml>`.
@@ -146,12 +176,26 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
     let scans = args.lidar.first(args.scans)?;
     let wire = WireLidar::new(&args.lidar.lidar, args.lidar.beams());
     let image = map_image_of(map_yaml)?;
-    let (messages, last_chunks) =
-        wire_lidar_messages(&scans, &wire, Pose2::IDENTITY, EstimatorKind::Localizer);
+    let own_lidar = match args.own_lidar {
+        Some(faults) => Some(own_lidar_line(args, &scans, &faults)?),
+        None => None,
+    };
+    let scan_path = match own_lidar {
+        Some(_) => ScanPath::OwnLidar,
+        None => ScanPath::Link,
+    };
+    let (messages, last_chunks) = lidar_messages_by(
+        &scans,
+        &wire,
+        Pose2::IDENTITY,
+        EstimatorKind::Localizer,
+        scan_path,
+    );
     let (parts, scan_replies, resumed) = match args.restart_after {
         None => {
             let bytes = encode_all(&messages);
-            let host = host_localizer_replies(&bytes, &image)?;
+            let lidar = own_lidar.as_ref().map(|(s, _)| s.bytes.as_slice());
+            let host = host_localizer_session(&bytes, &image, None, lidar)?;
             (vec![(bytes, host)], last_chunks.clone(), None)
         }
         Some(n) => {
@@ -177,9 +221,18 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
             ))
         );
     }
-    let run = args
-        .device
-        .run_phases(Phase::of(&parts), Duration::from_secs(args.timeout_s))?;
+    let timeout = Duration::from_secs(args.timeout_s);
+    let run = match (&own_lidar, args.device, parts.as_slice()) {
+        (Some((stream, _)), Device::Qemu(elf), [(bytes, host)]) => run_qemu_with_lidar(
+            elf,
+            bytes.clone(),
+            stream.bytes.clone(),
+            Expected::host(host),
+            timeout,
+        )?,
+        (Some(_), _, _) => bail!("--own-lidar runs one part under QEMU (no restart, no board)"),
+        (None, device, _) => device.run_phases(Phase::of(&parts), timeout)?,
+    };
     let comparison = compare(host.len(), &run, &host);
     // With a restart: the same log without it, on the host, for comparison.
     let uninterrupted = match resumed {
@@ -226,6 +279,19 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
             ToHost::Localization { localizer, .. } => Some(*localizer),
             _ => None,
         }),
+        own_lidar: own_lidar.map(|(sent, faults)| OwnLidarReport {
+            faults: LineFaultsReport {
+                noise: faults.noise,
+                corrupt: faults.corrupt,
+                drop: faults.drop,
+                seed: faults.seed,
+            },
+            sent,
+            device: run.replies.iter().rev().find_map(|r| match r {
+                ToHost::Status { lidar, .. } => Some(*lidar),
+                _ => None,
+            }),
+        }),
         comparison,
     };
     crate::output::create_folder(args.out)?;
@@ -240,14 +306,12 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
         let (estimates, ranges): (Vec<_>, Vec<&[f32]>) = scans
             .iter()
             .zip(&scan_replies)
-            .filter_map(|(laser, &i)| match run.replies.get(i) {
-                Some(ToHost::Localization { estimate: e, .. }) => {
-                    let [x, y, th] = wire.robot_pose(e.pose.map(f64::from));
-                    let pose = Pose2::new(x, y, th);
-                    let cov = Some(e.covariance.map(f64::from));
-                    Some(((laser.stamp, pose, cov), laser.ranges.as_slice()))
-                }
-                _ => None,
+            .filter_map(|(laser, &i)| {
+                let e = run.replies.get(i)?.estimate()?;
+                let [x, y, th] = wire.robot_pose(e.pose.map(f64::from));
+                let pose = Pose2::new(x, y, th);
+                let cov = Some(e.covariance.map(f64::from));
+                Some(((laser.stamp, pose, cov), laser.ranges.as_slice()))
             })
             .unzip();
         let lidar = args.lidar.lidar;
@@ -277,6 +341,22 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
             json.display()
         );
     }
+    if let Some(lidar) = &report.own_lidar {
+        let counted = lidar.device.unwrap_or_default();
+        if !quiet {
+            println!(
+                "lidar line: {} packets whole, {} corrupted, {} lost, {} bytes of noise; the \
+                 device's reader: {} packets, {} bad packets, {} bytes skipped",
+                lidar.sent.packets,
+                lidar.sent.corrupted,
+                lidar.sent.dropped,
+                lidar.sent.noise_bytes,
+                counted.packets,
+                counted.bad_packets,
+                counted.skipped_bytes,
+            );
+        }
+    }
     crate::drivers::hil::check_protocol(&report.comparison)?;
     crate::drivers::hil::check_refusals(&run.replies)?;
     if report.replies_received != report.replies_expected
@@ -290,4 +370,19 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The lidar line of `--own-lidar`: the scans as LD06 packets with `faults` (checked by
+/// `commands::hil`: a firmware under QEMU, no restart, fractions within 0–1).
+fn own_lidar_line(
+    args: &LocalizerHilOptions<'_>,
+    scans: &[&LaserMessage],
+    faults: &LineFaults,
+) -> Result<(Ld06Stream, LineFaults)> {
+    let path = &args.lidar.path;
+    let (revolutions, _) = ld06_packets(scans, &args.lidar.lidar)
+        .with_context(|| format!("{}: as LD06 packets", path.display()))?;
+    let stream = Ld06Stream::new(&revolutions, faults)
+        .with_context(|| format!("{}: the lidar's line", path.display()))?;
+    Ok((stream, *faults))
 }

@@ -4,11 +4,10 @@
 //! under QEMU) can be fed with to replay a recording through the board's own lidar path.
 
 use crate::domain::grid::carmen_lidar;
+use crate::drivers::hil_lidar::ld06_packets;
 use crate::inputs::readers::DatasetSpec;
 use crate::inputs::readers::carmen::{beam_count, front_scans, read_log, resolve_log};
 use anyhow::{Context, Result, bail};
-use microslam::sensors::ld06::{AngleDirection, revolution_packets};
-use microslam::sensors::lidar::LidarScan;
 use std::path::Path;
 
 /// What [`export`] wrote.
@@ -37,33 +36,13 @@ pub fn export(file: &str, out: &Path, limit: Option<usize>) -> Result<Ld06Export
         bail!("{}: no front laser scan to write", path.display());
     }
     // One revolution a scan: the rotation speed from the median interval between scans.
-    let mut gaps: Vec<f64> = scans
-        .windows(2)
-        .map(|w| w[1].stamp - w[0].stamp)
-        .filter(|d| d.is_finite() && *d > 0.0)
-        .collect();
-    gaps.sort_by(f64::total_cmp);
-    let period = gaps.get(gaps.len() / 2).copied().unwrap_or(0.1);
-    let speed_deg_s = (360.0 / period).round().clamp(1.0, f64::from(u16::MAX)) as u16;
-    let first_stamp = scans[0].stamp;
+    let (revolutions, speed_deg_s) =
+        ld06_packets(&scans, &lidar).with_context(|| format!("{}", path.display()))?;
     let mut bytes = Vec::with_capacity(scans.len() * 30 * 47);
     let mut packets = 0;
-    for (i, laser) in scans.iter().enumerate() {
-        let stamp_ms = ((laser.stamp - first_stamp) * 1000.0).round().max(0.0) as u32;
-        packets += revolution_packets(
-            &LidarScan::new(&laser.ranges, lidar),
-            AngleDirection::Clockwise,
-            speed_deg_s,
-            stamp_ms,
-            |p| bytes.extend_from_slice(&p.encode()),
-        )
-        .map_err(|e| {
-            anyhow::anyhow!(
-                "{}: scan {i} ({} beams): {e}",
-                path.display(),
-                laser.ranges.len()
-            )
-        })?;
+    for p in revolutions.iter().flatten() {
+        bytes.extend_from_slice(&p.encode());
+        packets += 1;
     }
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         crate::output::create_folder(dir)?;

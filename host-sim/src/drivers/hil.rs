@@ -13,7 +13,6 @@
 
 use std::io::{Read, Write};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::thread;
 use std::time::{Duration, Instant};
@@ -32,7 +31,9 @@ use crate::domain::recording::Recording;
 
 mod phases;
 use phases::exchange_phases;
+mod qemu;
 pub use phases::{Phase, replies_across_restart, restart_cut};
+pub use qemu::{QemuMachine, run_qemu, run_qemu_on, run_qemu_phases, run_qemu_with_lidar};
 
 /// How long the device has to answer the [`handshake`] (QEMU boots in well under a
 /// second; a board that runs answers within milliseconds).
@@ -385,113 +386,6 @@ fn reader_thread(mut source: impl Read + Send + 'static) -> mpsc::Receiver<Vec<u
         }
     });
     rx
-}
-
-/// How long the STM32 firmware is given under `netduinoplus2` to enable its USART before
-/// the host writes (QEMU's model of it drops bytes that arrive before).
-const NETDUINO_BOOT: Duration = Duration::from_millis(500);
-
-/// The QEMU board a firmware runs on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum QemuMachine {
-    /// `mps2-an386` (Cortex-M4): the firmware's `qemu` build, its link on UART0.
-    Mps2An386,
-    /// `netduinoplus2`, an STM32F405 (Cortex-M4F, the STM32F4 memory map and USARTs): the
-    /// firmware's STM32 build (`stm32f411,stm32-in-qemu`), its link on USART2.
-    NetduinoPlus2,
-}
-
-impl QemuMachine {
-    /// QEMU's arguments for the board and for its link on the child's stdin/stdout: on
-    /// the netduino, `-serial` goes to USART1, USART2, … in order, so the first is null.
-    fn args(self) -> &'static [&'static str] {
-        match self {
-            Self::Mps2An386 => &[
-                "-machine",
-                "mps2-an386",
-                "-cpu",
-                "cortex-m4",
-                "-serial",
-                "stdio",
-            ],
-            Self::NetduinoPlus2 => &[
-                "-machine",
-                "netduinoplus2",
-                "-serial",
-                "null",
-                "-serial",
-                "stdio",
-            ],
-        }
-    }
-}
-
-/// Runs `elf` under QEMU (`mps2-an386`, UART0 on the child's stdin/stdout, semihosting
-/// on a file next to the ELF), writes `bytes` and collects the `expected` replies (a
-/// stream that opens with the [`handshake`] is refused when the firmware does not answer
-/// it within [`HANDSHAKE_TIMEOUT`] or not as expected).
-pub fn run_qemu(
-    elf: &Path,
-    bytes: Vec<u8>,
-    expected: Expected<'_>,
-    timeout: Duration,
-) -> Result<LinkRun> {
-    run_qemu_on(QemuMachine::Mps2An386, elf, bytes, expected, timeout)
-}
-
-/// [`run_qemu`] on the board `machine`.
-pub fn run_qemu_on(
-    machine: QemuMachine,
-    elf: &Path,
-    bytes: Vec<u8>,
-    expected: Expected<'_>,
-    timeout: Duration,
-) -> Result<LinkRun> {
-    run_qemu_phases(machine, elf, vec![Phase { bytes, expected }], timeout)
-}
-
-/// [`run_qemu_on`] for a run in parts ([`Phase`]), the device restarted between them
-/// (QEMU keeps its RAM through the reset, where the firmware's flash stand-in is).
-pub fn run_qemu_phases(
-    machine: QemuMachine,
-    elf: &Path,
-    phases: Vec<Phase<'_>>,
-    timeout: Duration,
-) -> Result<LinkRun> {
-    let semihosting_log = elf.with_extension("semihosting.log");
-    let mut child: Child = Command::new("qemu-system-arm")
-        .args(machine.args())
-        .args(["-display", "none", "-monitor", "none"])
-        .arg("-chardev")
-        .arg(format!("file,id=semi,path={}", semihosting_log.display()))
-        .args([
-            "-semihosting-config",
-            "enable=on,target=native,chardev=semi",
-        ])
-        .arg("-kernel")
-        .arg(elf)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .context("starting qemu-system-arm (apt-get install qemu-system-arm)")?;
-    let (Some(stdin), Some(stdout)) = (child.stdin.take(), child.stdout.take()) else {
-        let _ = child.kill();
-        let _ = child.wait();
-        bail!("qemu-system-arm without piped stdio");
-    };
-    let rx = reader_thread(stdout);
-    if machine == QemuMachine::NetduinoPlus2 {
-        // The STM32 USART model drops what arrives before the firmware has enabled it
-        // (the mps2 UART does not): let the firmware boot first.
-        thread::sleep(NETDUINO_BOOT);
-    }
-    let exchanged = exchange_phases(stdin, &rx, phases, timeout);
-    let _ = child.kill();
-    let _ = child.wait();
-    let (run, writer) = exchanged?;
-    drop(writer.join());
-    Ok(run)
 }
 
 /// Where the device runs: a firmware ELF under QEMU, or a board on a serial port.

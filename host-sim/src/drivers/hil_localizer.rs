@@ -166,6 +166,28 @@ pub fn wire_lidar_messages(
     start: Pose2<f32>,
     kind: EstimatorKind,
 ) -> (Vec<ToDevice>, Vec<usize>) {
+    lidar_messages_by(scans, lidar, start, kind, ScanPath::Link)
+}
+
+/// How the scans reach the device.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScanPath {
+    /// As scan chunks over the link.
+    Link,
+    /// Through the device's own lidar (its second UART, [`super::hil_lidar`]): a
+    /// `NextRevolution` command where each scan's chunks would be, the scans themselves on
+    /// the lidar's line.
+    OwnLidar,
+}
+
+/// [`wire_lidar_messages`] with the scans sent along `path`.
+pub fn lidar_messages_by(
+    scans: &[&LaserMessage],
+    lidar: &WireLidar,
+    start: Pose2<f32>,
+    kind: EstimatorKind,
+    path: ScanPath,
+) -> (Vec<ToDevice>, Vec<usize>) {
     let start = lidar.lidar_pose(start);
     let mut out = vec![
         super::hil::handshake(),
@@ -209,6 +231,15 @@ pub fn wire_lidar_messages(
             });
             seq = seq.wrapping_add(1);
         }
+        if path == ScanPath::OwnLidar {
+            out.push(ToDevice::Command {
+                seq,
+                command: WireCommand::NextRevolution { stamp_us },
+            });
+            seq = seq.wrapping_add(1);
+            last_chunks.push(out.len() - 1);
+            continue;
+        }
         let sent: Vec<u16> = laser
             .ranges
             .iter()
@@ -242,15 +273,18 @@ pub fn wire_lidar_messages(
 /// The replies of the host reference: the firmware's [`Session`] with its EKF and its
 /// localizer on `image`, fed the same bytes.
 pub fn host_localizer_replies(bytes: &[u8], image: &[u8]) -> Result<Vec<ToHost>> {
-    host_localizer_session(bytes, image, None)
+    host_localizer_session(bytes, image, None, None)
 }
 
 /// [`host_localizer_replies`] of a firmware that booted with a pose saved in this map
-/// (`resume`): its session starts on the localizer there (`Session::localizing_from`).
+/// (`resume`): its session starts on the localizer there (`Session::localizing_from`);
+/// with `lidar`, the bytes of its own lidar's line ([`super::hil_lidar`]), read by the
+/// firmware's reader on `NextRevolution`.
 pub fn host_localizer_session(
     bytes: &[u8],
     image: &[u8],
     resume: Option<Pose2<f32>>,
+    lidar: Option<&[u8]>,
 ) -> Result<Vec<ToHost>> {
     let map = MapImage::parse(image)?;
     let mut ekf = Box::new(profile::Ekf::new(profile::EKF_CONFIG));
@@ -270,6 +304,10 @@ pub fn host_localizer_session(
                 profile::GRID_SETUP,
             )
             .with_map_checksum(Some(map.checksum()));
+    let mut reader = lidar.map(|l| Box::new(super::hil_lidar::host_reader(l)));
+    if let Some(reader) = reader.as_deref_mut() {
+        session = session.with_lidar(reader);
+    }
     if let Some(pose) = resume {
         session = session.localizing_from(pose);
     }
@@ -296,7 +334,7 @@ pub fn host_localizer_restart(
         command: WireCommand::Restart,
     });
     let before_bytes = super::hil::encode_all(&before);
-    let before_replies = host_localizer_session(&before_bytes, image, None)?;
+    let before_replies = host_localizer_session(&before_bytes, image, None, None)?;
     let map = MapImage::parse(image)?;
     let mut keeping = PoseKeeping::new(Some(map.checksum()), None);
     let mut kept = None;
@@ -315,7 +353,7 @@ pub fn host_localizer_restart(
     let mut after = vec![super::hil::handshake()];
     after.extend_from_slice(&messages[cut..]);
     let after_bytes = super::hil::encode_all(&after);
-    let after_replies = host_localizer_session(&after_bytes, image, Some(resumed))?;
+    let after_replies = host_localizer_session(&after_bytes, image, Some(resumed), None)?;
     Ok((
         vec![(before_bytes, before_replies), (after_bytes, after_replies)],
         resumed,

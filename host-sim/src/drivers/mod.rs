@@ -26,6 +26,7 @@ pub mod graph_slam;
 pub mod grid;
 pub mod grid_run;
 pub mod hil;
+pub mod hil_lidar;
 pub mod hil_localizer;
 pub mod hil_slam;
 pub mod odometry;

@@ -751,3 +751,151 @@ fn a_car_moves_the_ekf_through_the_configured_model() {
     assert_eq!(last.pose, [p.x, p.y, p.theta]);
     assert!(p.x > 0.07 && p.theta < 0.0, "{p:?}");
 }
+
+/// A lidar that finishes the revolutions it is given, then fails (its bus went quiet).
+#[cfg(feature = "own-lidar")]
+struct Revolutions {
+    ranges: std::vec::Vec<std::vec::Vec<f32>>,
+    next: usize,
+    current: std::vec::Vec<f32>,
+}
+
+#[cfg(feature = "own-lidar")]
+impl LidarSource for Revolutions {
+    fn next_revolution(&mut self) -> Option<LidarScan<'_>> {
+        self.current = self.ranges.get(self.next)?.clone();
+        self.next += 1;
+        let geometry = LidarGeometry {
+            first_angle: 0.0,
+            angle_increment: core::f32::consts::TAU / self.current.len() as f32,
+            ..GridSetup::EXAMPLE.lidar
+        };
+        Some(LidarScan::new(&self.current, geometry))
+    }
+
+    fn counters(&self) -> crate::wire::LidarCounters {
+        crate::wire::LidarCounters {
+            packets: self.next as u32,
+            ..Default::default()
+        }
+    }
+}
+
+#[cfg(feature = "own-lidar")]
+#[test]
+fn the_devices_own_lidar_feeds_the_grid_estimator_as_scans_on_the_line_do() {
+    use crate::grid::OccupancyGrid;
+    use crate::pf::{GridPfConfig, GridSlam};
+    type Slam<'g> = GridSlam<'g, 64, 64, 8, 40>;
+    let config = GridPfConfig::MICROCONTROLLER;
+    // A square room 2.4 m wide seen from its centre, 40 beams from 0°.
+    let inc = core::f32::consts::TAU / 40.0;
+    let room: std::vec::Vec<f32> = (0..40)
+        .map(|i| {
+            let a = inc * i as f32;
+            1.2 / libm::fabsf(libm::cosf(a)).max(libm::fabsf(libm::sinf(a)))
+        })
+        .collect();
+    let next = |seq: u32| ToDevice::Command {
+        seq,
+        command: Command::NextRevolution {
+            stamp_us: u64::from(seq) * 1000,
+        },
+    };
+    let select = ToDevice::Command {
+        seq: 2,
+        command: Command::SelectEstimator(EstimatorKind::Grid),
+    };
+    let bytes = frames(&[
+        next(1),
+        select,
+        next(3),
+        velocity(4, 0.1, 0.0),
+        next(5),
+        next(6),
+        ToDevice::Command {
+            seq: 7,
+            command: Command::ReportStatus,
+        },
+    ]);
+
+    let mut grid = OccupancyGrid::<64, 64>::centred(0.05, config.log_odds);
+    let mut slam = Slam::new(&mut grid, config, Pose2::new(0.0, 0.0, 0.0)).unwrap();
+    let mut lidar = Revolutions {
+        ranges: std::vec![room.clone(); 3],
+        next: 0,
+        current: std::vec::Vec::new(),
+    };
+    let mut ekf = EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+    let mut session = Session::<_, _, 4>::with_grid(
+        &mut ekf,
+        EkfConfig::DEFAULT_F32,
+        &mut slam,
+        GridSetup::EXAMPLE,
+    )
+    .with_lidar(&mut lidar);
+    let replies: std::vec::Vec<ToHost> = bytes.iter().filter_map(|&b| session.receive(b)).collect();
+    drop(session);
+    let revolution = |r: &ToHost| match *r {
+        ToHost::Estimate(e) => (e.seq, e.stamp_us, e.estimator, e.result),
+        ref other => panic!("{other:?}"),
+    };
+    // With the EKF active the revolution is read and skipped; then two go to the grid
+    // filter; the fourth finds the lidar quiet.
+    let (ekf_, grid_) = (EstimatorKind::Ekf, EstimatorKind::Grid);
+    assert_eq!(
+        revolution(&replies[0]),
+        (1, 1000, ekf_, StepResult::Ignored)
+    );
+    assert_eq!(
+        revolution(&replies[2]),
+        (3, 3000, grid_, StepResult::Applied)
+    );
+    assert_eq!(
+        revolution(&replies[4]),
+        (5, 5000, grid_, StepResult::Applied)
+    );
+    let quiet = StepResult::Rejected {
+        reason: LIDAR_FAILED,
+    };
+    assert_eq!(revolution(&replies[5]), (6, 6000, grid_, quiet));
+    // The status carries the reader's counters (this lidar counts revolutions read).
+    let ToHost::Status { lidar, .. } = replies[6] else {
+        panic!("{:?}", replies[6])
+    };
+    assert_eq!(lidar.packets, 3);
+    assert_eq!(replies.len(), 7);
+
+    // The same scans straight into a filter of the same start: the same pose.
+    let mut grid2 = OccupancyGrid::<64, 64>::centred(0.05, config.log_odds);
+    let mut direct = Slam::new(&mut grid2, config, Pose2::new(0.0, 0.0, 0.0)).unwrap();
+    let geometry = LidarGeometry {
+        first_angle: 0.0,
+        angle_increment: inc,
+        ..GridSetup::EXAMPLE.lidar
+    };
+    direct.observe(&LidarScan::new(&room, geometry)).unwrap();
+    direct.predict_velocity(0.1, 0.0, 0.1).unwrap();
+    direct.observe(&LidarScan::new(&room, geometry)).unwrap();
+    let p = direct.pose();
+    assert_eq!(replies[4].estimate().unwrap().pose, [p.x, p.y, p.theta]);
+}
+
+#[test]
+fn a_session_without_a_lidar_refuses_next_revolution() {
+    let mut ekf = EkfSlam::<f32, { state_dim(4) }, { factor_len(4) }>::new(EkfConfig::DEFAULT_F32);
+    let mut session = Session::<_, _, 4>::new(&mut ekf, EkfConfig::DEFAULT_F32);
+    let bytes = frames(&[ToDevice::Command {
+        seq: 7,
+        command: Command::NextRevolution { stamp_us: 0 },
+    }]);
+    let replies: std::vec::Vec<ToHost> = bytes.iter().filter_map(|&b| session.receive(b)).collect();
+    assert_eq!(
+        replies,
+        [ToHost::Refused {
+            seq: 7,
+            reason: Refusal::NoLidar,
+            estimator: EstimatorKind::Ekf,
+        }]
+    );
+}

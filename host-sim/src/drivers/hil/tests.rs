@@ -31,6 +31,7 @@ fn answer(protocol: u16, map_checksum: Option<u32>) -> ToHost {
         },
         stack_peak_bytes: 0,
         map_checksum,
+        lidar: microslam::wire::LidarCounters::default(),
     }
 }
 
