@@ -178,7 +178,8 @@ for elf in cost cost_grid cost_grid_map cost_relocalize cost_slam; do
 done
 # `ekf n=N key=value…` → ekfN_key_instructions for every key;
 # `grid p=P beams=B window=W step=S …` → grid_pP_bB_wW_step_instructions (W × W shifts);
-# `localizer …` → localizer_pP_bB_wW_…, `localizer_map …` → localizer_intel_pP_bB_wW_….
+# `localizer …` → localizer_pP_bB_wW_…, `localizer_map …` → localizer_intel_pP_bB_wW_…;
+# `ld06 bins=B …` → ld06_bB_packet_{mean,max}_instructions.
 awk '/^ekf /{
         split($2, n, "=");
         for (i = 3; i <= NF; i++) { split($i, kv, "="); printf "%-40s %s\n", "ekf" n[2] "_" kv[1] "_instructions", kv[2] }
@@ -210,6 +211,11 @@ awk '/^ekf /{
         for (i = 2; i <= NF; i++) { split($i, kv, "="); m[kv[1]] = kv[2] }
         printf "%-40s %s\n", "slam_map_image_instructions", m["instructions"];
         printf "%-40s %s\n", "slam_map_image_bytes", m["bytes"];
+    }
+    /^ld06 /{
+        for (i = 2; i <= NF; i++) { split($i, kv, "="); l[kv[1]] = kv[2] }
+        printf "%-40s %s\n", "ld06_b" l["bins"] "_packet_mean_instructions", l["packet_mean"];
+        printf "%-40s %s\n", "ld06_b" l["bins"] "_packet_max_instructions", l["packet_max"];
     }
     /^relocalize_budget(_b45)? /{
         for (i = 2; i <= NF; i++) { split($i, kv, "="); f[kv[1]] = kv[2] }

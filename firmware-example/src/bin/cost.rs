@@ -1,4 +1,5 @@
-//! Instruction counts per estimator step, under QEMU with `-icount shift=6`.
+//! Instruction counts per estimator step (and per packet of the board's own lidar), under
+//! QEMU with `-icount shift=6`.
 //!
 //! With `-icount shift=6` QEMU's virtual clock advances 64 ns per executed instruction;
 //! SysTick, clocked from the 25 MHz core clock of mps2-an386, ticks every 40 ns. So
@@ -138,11 +139,76 @@ fn measure<const N: usize, const P: usize>(
     )
 }
 
+/// The board's own LD06 reader (what `microslam-hal`'s `Ld06Uart` runs on each byte): a
+/// revolution of a 2.4 m square room (360 points, 30 packets) and the first packet of the
+/// next, byte by byte through `Ld06Decoder` and each packet into
+/// `RevolutionBinner::<LIDAR_BINS>` with the board's `LIDAR_SETUP`; instructions per
+/// packet, the mean and the most (the packet that finishes the revolution).
+fn measure_ld06(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
+    use firmware_example::config::{GRID_SETUP, LIDAR_BINS, LIDAR_SETUP};
+    use microslam::sensors::ld06::{
+        AngleDirection, Ld06Decoder, PACKET_BYTES, RevolutionBinner, revolution_packets,
+    };
+    use microslam::sensors::lidar::{LidarGeometry, LidarScan};
+    const PACKETS: usize = 31;
+    let mut ranges = [0f32; 360];
+    for (i, r) in ranges.iter_mut().enumerate() {
+        let a = (i as f32).to_radians();
+        *r = 1.2 / libm::fabsf(libm::cosf(a)).max(libm::fabsf(libm::sinf(a)));
+    }
+    let geometry = LidarGeometry {
+        first_angle: 0.0,
+        angle_increment: 1f32.to_radians(),
+        ..GRID_SETUP.lidar
+    };
+    let mut bytes = [[0u8; PACKET_BYTES]; PACKETS];
+    let mut made = 0;
+    for turn in 0..2 {
+        let scan = LidarScan::new(&ranges, geometry);
+        let sent = revolution_packets(&scan, AngleDirection::Clockwise, 3600, turn * 100, |p| {
+            if let Some(slot) = bytes.get_mut(made) {
+                *slot = p.encode();
+                made += 1;
+            }
+        });
+        if sent.is_err() {
+            return writeln!(out, "error ld06 packets");
+        }
+    }
+    let mut decoder = Ld06Decoder::new();
+    let Some(mut binner) = RevolutionBinner::<LIDAR_BINS>::new(LIDAR_SETUP) else {
+        return writeln!(out, "error ld06 setup");
+    };
+    let (mut total, mut most, mut finished) = (0u32, 0u32, 0u32);
+    for packet in &bytes {
+        let t = ticks.instructions(|| {
+            for &b in packet {
+                if let Some(p) = decoder.push(b) {
+                    finished += u32::from(binner.push(&p));
+                }
+            }
+        });
+        total += t;
+        most = most.max(t);
+    }
+    if made != PACKETS || finished != 1 || decoder.counters().packets != PACKETS as u32 {
+        return writeln!(out, "error ld06 decode");
+    }
+    writeln!(
+        out,
+        "ld06 bins={} packet_mean={} packet_max={}",
+        LIDAR_BINS,
+        total / PACKETS as u32,
+        most
+    )
+}
+
 fn run(out: &mut Serial, ticks: &mut Ticks) -> core::fmt::Result {
     firmware_example::cost::report_calibration(out, ticks)?;
     measure(out, ticks, EKF16.take(), 16)?;
     measure(out, ticks, EKF32.take(), 32)?;
     measure(out, ticks, EKF64.take(), 64)?;
+    measure_ld06(out, ticks)?;
     firmware_example::cost::report_end(out)
 }
 
