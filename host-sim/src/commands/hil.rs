@@ -116,6 +116,28 @@ pub struct HilOptions {
     pub own_lidar: Option<crate::drivers::hil_lidar::LineFaults>,
 }
 
+/// The landmark settings of a run (the dataset's file, `--config` over it), read at most
+/// once, when a step needs them: a bag's camera mount, a car's `[vehicle]`,
+/// `--dataset-settings`.
+struct LandmarkSettings<'a> {
+    family: &'static str,
+    config: Option<&'a Path>,
+    loaded: Option<crate::domain::config::Settings>,
+}
+
+impl LandmarkSettings<'_> {
+    fn get(&mut self) -> Result<&crate::domain::config::Settings> {
+        if self.loaded.is_none() {
+            let settings =
+                crate::domain::config::Settings::load_for(self.family, self.config, None)?;
+            self.loaded = Some(settings);
+        }
+        self.loaded
+            .as_ref()
+            .ok_or_else(|| anyhow::anyhow!("the landmark settings were not loaded"))
+    }
+}
+
 /// What `--own-lidar` needs.
 const OWN_LIDAR_NEEDS: &str = "--own-lidar streams a lidar log (carmen: or rosbag:) to the \
      localizer firmware (with --map), which reads the lidar on its second UART";
@@ -205,17 +227,14 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
         };
         return run_cli(&options, quiet);
     }
-    // A bag of one's own robot starts from the plain landmark log's settings (as `replay`).
-    let family = match args.dataset {
-        DatasetSpec::Rosbag(_) => "landmarks",
-        _ => args.dataset.family(),
+    let mut settings = LandmarkSettings {
+        family: args.dataset.landmark_settings_family(),
+        config: args.config.as_deref(),
+        loaded: None,
     };
     let mut recording = match &landmark_bag {
         Some(path) => {
-            let mount =
-                crate::domain::config::Settings::load_for(family, args.config.as_deref(), None)?
-                    .sighting
-                    .mount;
+            let mount = settings.get()?.sighting.mount;
             detections_bag::recording(path, &args.bag, mount)?
         }
         None => crate::inputs::readers::read(&args.dataset, args.robot)?,
@@ -227,9 +246,7 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
         .iter()
         .any(|e| matches!(e.kind, microslam::event::EventKind::Ackermann { .. }))
     {
-        let settings =
-            crate::domain::config::Settings::load_for(family, args.config.as_deref(), None)?;
-        let Some(car) = settings.vehicle::<f32>() else {
+        let Some(car) = settings.get()?.vehicle::<f32>() else {
             bail!(
                 "{}: a car's speed and steering (ackermann records) need the car's \
                  wheelbase and noise: a [vehicle] section in --config",
@@ -263,8 +280,7 @@ pub fn run_cli(args: &HilOptions, quiet: bool) -> Result<()> {
         );
     }
     let settings = if args.dataset_settings {
-        let tuned =
-            crate::domain::config::Settings::load_for(family, args.config.as_deref(), None)?;
+        let tuned = settings.get()?;
         if tuned.sighting.has_bias_mean() {
             bail!(
                 "the wire protocol's EkfSettings carries the calibration priors' standard \

@@ -174,7 +174,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
     };
     let path = &args.lidar.path;
     let scans = args.lidar.first(args.scans)?;
-    let wire = WireLidar::new(&args.lidar.lidar, args.lidar.beams());
+    let wire = WireLidar::of(args.lidar);
     let image = map_image_of(map_yaml)?;
     let own_lidar = match args.own_lidar {
         Some(faults) => Some(own_lidar_line(args, &scans, &faults)?),

@@ -197,7 +197,7 @@ fn plan(
 pub fn run_cli(args: &SlamHilOptions<'_>, quiet: bool) -> Result<()> {
     let path = &args.lidar.path;
     let scans = args.lidar.first(args.scans)?;
-    let wire = WireLidar::new(&args.lidar.lidar, args.lidar.beams());
+    let wire = WireLidar::of(args.lidar);
     let (messages, last_chunks) =
         wire_lidar_messages(&scans, &wire, Pose2::IDENTITY, EstimatorKind::Grid);
     let plan = plan(&messages, &last_chunks, args.restart_after)?;

@@ -99,11 +99,7 @@ pub fn run_cli(args: &ReplayOptions, quiet: bool) -> Result<()> {
         );
     }
     let started = Instant::now();
-    // A bag of one's own robot starts from the plain landmark log's settings.
-    let family = match args.dataset {
-        DatasetSpec::Rosbag(_) => "landmarks",
-        _ => args.dataset.family(),
-    };
+    let family = args.dataset.landmark_settings_family();
     let settings = Settings::load_for(family, args.config.as_deref(), args.association)?;
     let mut recording = match &landmark_bag {
         Some(path) => detections_bag::recording(path, &args.bag, settings.sighting.mount)?,

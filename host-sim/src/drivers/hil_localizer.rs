@@ -106,6 +106,11 @@ impl WireLidar {
         }
     }
 
+    /// For the scans of a lidar recording (a CARMEN log's or a ROS 2 bag's).
+    pub fn of(recording: &crate::inputs::readers::lidar_recording::LidarRecording) -> Self {
+        Self::new(&recording.lidar, recording.beams())
+    }
+
     /// For a CARMEN log's front scans of `beams` beams ([`carmen_lidar`]).
     pub fn carmen(beams: usize) -> Self {
         Self::new(&carmen_lidar(beams), beams)

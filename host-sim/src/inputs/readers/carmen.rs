@@ -71,6 +71,17 @@ impl CarmenLog {
             Message::Odom(_) => None,
         })
     }
+
+    /// The front laser scans, taken out of the log (no copy of their ranges).
+    pub fn into_front_scans(self) -> Vec<LaserMessage> {
+        self.messages
+            .into_iter()
+            .filter_map(|m| match m {
+                Message::Laser(l) if !l.rear => Some(l),
+                _ => None,
+            })
+            .collect()
+    }
 }
 
 /// A malformed line that cannot be skipped silently.

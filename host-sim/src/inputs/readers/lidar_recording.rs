@@ -3,7 +3,7 @@
 //! streams to a firmware.
 
 use super::DatasetSpec;
-use super::carmen::{LaserMessage, front_scans, read_log, resolve_log};
+use super::carmen::{LaserMessage, read_log, resolve_log};
 use super::rosbag::{self, BagOptions};
 use anyhow::{Result, bail};
 use microslam::sensors::lidar::LidarGeometry;
@@ -29,7 +29,7 @@ impl LidarRecording {
             DatasetSpec::Carmen(file) => {
                 let path = resolve_log(file)?;
                 let log = read_log(&path)?;
-                let scans: Vec<LaserMessage> = front_scans(&log).into_iter().cloned().collect();
+                let scans = log.into_front_scans();
                 if scans.is_empty() {
                     bail!("{}: no front laser scan to stream", path.display());
                 }

@@ -68,6 +68,15 @@ impl DatasetSpec {
             Self::Landmarks(_) => "landmarks",
         }
     }
+
+    /// The settings a landmark run of this dataset starts from (`host-sim/configs/<name>.toml`):
+    /// its family's, and for a bag of one's own robot the plain landmark log's.
+    pub fn landmark_settings_family(&self) -> &'static str {
+        match self {
+            Self::Rosbag(_) => "landmarks",
+            _ => self.family(),
+        }
+    }
 }
 
 /// Reads the dataset named by `spec` for `robot`. An MRCLAM recording may name stress
