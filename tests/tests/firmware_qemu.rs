@@ -70,6 +70,13 @@ fn run_equal_to_host_on(
     timeout: Duration,
 ) -> QemuRun {
     let run = run_in_qemu_on(machine, elf, bytes, Expected::host(expected), timeout);
+    assert_replies_equal(&run, expected);
+    run
+}
+
+/// Every frame of `run` decoded, every message answered, every reply equal to
+/// `expected`'s bit for bit.
+fn assert_replies_equal(run: &QemuRun, expected: &[ToHost]) {
     assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
     assert_eq!(run.replies.len(), expected.len(), "every message answered");
     for (i, (got, want)) in run.replies.iter().zip(expected).enumerate() {
@@ -79,7 +86,6 @@ fn run_equal_to_host_on(
             "reply {i} differs:\n{got:?}\n{want:?}"
         );
     }
-    run
 }
 
 /// Runs `elf` under QEMU on a run in parts (the device restarted between them: `parts`,
@@ -94,15 +100,7 @@ fn run_parts_equal_to_host(
     let run = run_qemu_phases(QemuMachine::Mps2An386, elf, Phase::of(parts), timeout)
         .expect("qemu-system-arm runs");
     let expected: Vec<ToHost> = parts.iter().flat_map(|(_, r)| r.iter().copied()).collect();
-    assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
-    assert_eq!(run.replies.len(), expected.len(), "every message answered");
-    for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
-        assert_eq!(
-            bits(got),
-            bits(want),
-            "reply {i} differs:\n{got:?}\n{want:?}"
-        );
-    }
+    assert_replies_equal(&run, &expected);
     (run, expected)
 }
 
@@ -517,15 +515,7 @@ fn localizer_firmware_reads_its_own_lidar_through_a_faulty_line_bit_for_bit_on_i
         Duration::from_secs(600),
     )
     .expect("qemu-system-arm runs");
-    assert_eq!(run.bad_frames, 0, "the firmware's frames all decode");
-    assert_eq!(run.replies.len(), expected.len(), "every message answered");
-    for (i, (got, want)) in run.replies.iter().zip(&expected).enumerate() {
-        assert_eq!(
-            bits(got),
-            bits(want),
-            "reply {i} differs:\n{got:?}\n{want:?}"
-        );
-    }
+    assert_replies_equal(&run, &expected);
     let Some(ToHost::Status { lidar: counted, .. }) = run.replies.last() else {
         panic!("the run ends with a status")
     };
