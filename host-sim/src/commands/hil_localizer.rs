@@ -92,24 +92,11 @@ pub struct LocalizerHil {
 #[derive(Debug, Serialize)]
 pub struct OwnLidarReport {
     /// The line faults asked for.
-    pub faults: LineFaultsReport,
+    pub faults: LineFaults,
     /// What was sent.
     pub sent: Ld06Stream,
     /// The device reader's counters in its last status (after the last revolution).
     pub device: Option<microslam::wire::LidarCounters>,
-}
-
-/// [`LineFaults`] as written in the report.
-#[derive(Debug, Serialize)]
-pub struct LineFaultsReport {
-    /// Fraction of packets followed by noise.
-    pub noise: f64,
-    /// Fraction of packets with a byte changed.
-    pub corrupt: f64,
-    /// Fraction of packets lost.
-    pub drop: f64,
-    /// Seed.
-    pub seed: u64,
 }
 
 /// A localizer run restarted part way (`--restart-after`).
@@ -180,7 +167,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
         Some(faults) => Some(own_lidar_line(args, &scans, &faults)?),
         None => None,
     };
-    let scan_path = match own_lidar {
+    let scan_path = match &own_lidar {
         Some(_) => ScanPath::OwnLidar,
         None => ScanPath::Link,
     };
@@ -194,7 +181,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
     let (parts, scan_replies, resumed) = match args.restart_after {
         None => {
             let bytes = encode_all(&messages);
-            let lidar = own_lidar.as_ref().map(|(s, _)| s.bytes.as_slice());
+            let lidar = own_lidar.as_ref().map(|s| s.bytes.as_slice());
             let host = host_localizer_session(&bytes, &image, None, lidar)?;
             (vec![(bytes, host)], last_chunks.clone(), None)
         }
@@ -223,7 +210,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
     }
     let timeout = Duration::from_secs(args.timeout_s);
     let run = match (&own_lidar, args.device, parts.as_slice()) {
-        (Some((stream, _)), Device::Qemu(elf), [(bytes, host)]) => run_qemu_with_lidar(
+        (Some(stream), Device::Qemu(elf), [(bytes, host)]) => run_qemu_with_lidar(
             elf,
             bytes.clone(),
             stream.bytes.clone(),
@@ -279,19 +266,16 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
             ToHost::Localization { localizer, .. } => Some(*localizer),
             _ => None,
         }),
-        own_lidar: own_lidar.map(|(sent, faults)| OwnLidarReport {
-            faults: LineFaultsReport {
-                noise: faults.noise,
-                corrupt: faults.corrupt,
-                drop: faults.drop,
-                seed: faults.seed,
-            },
-            sent,
-            device: run.replies.iter().rev().find_map(|r| match r {
-                ToHost::Status { lidar, .. } => Some(*lidar),
-                _ => None,
+        own_lidar: own_lidar
+            .zip(args.own_lidar)
+            .map(|(sent, faults)| OwnLidarReport {
+                faults,
+                sent,
+                device: run.replies.iter().rev().find_map(|r| match r {
+                    ToHost::Status { lidar, .. } => Some(*lidar),
+                    _ => None,
+                }),
             }),
-        }),
         comparison,
     };
     crate::output::create_folder(args.out)?;
@@ -378,11 +362,10 @@ fn own_lidar_line(
     args: &LocalizerHilOptions<'_>,
     scans: &[&LaserMessage],
     faults: &LineFaults,
-) -> Result<(Ld06Stream, LineFaults)> {
+) -> Result<Ld06Stream> {
     let path = &args.lidar.path;
     let (revolutions, _) = ld06_packets(scans, &args.lidar.lidar)
         .with_context(|| format!("{}: as LD06 packets", path.display()))?;
-    let stream = Ld06Stream::new(&revolutions, faults)
-        .with_context(|| format!("{}: the lidar's line", path.display()))?;
-    Ok((stream, *faults))
+    Ld06Stream::new(&revolutions, faults)
+        .with_context(|| format!("{}: the lidar's line", path.display()))
 }

@@ -53,7 +53,7 @@ pub fn ld06_packets(
 
 /// Faults of the line between the lidar and the device, each a fraction of the packets
 /// (0 to 1), drawn from `seed`.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct LineFaults {
     /// Packets followed by 1–16 bytes of noise.
     pub noise: f64,
