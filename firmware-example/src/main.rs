@@ -164,18 +164,19 @@ mod grid {
         kept_pose::resume(own_lidar::wire(session), checksum)
     }
 
-    /// Under QEMU an LD06 lidar's packets arrive on UART1: `NextRevolution` reads it.
-    #[cfg(all(feature = "qemu", feature = "own-lidar"))]
+    /// An LD06 lidar's packets arrive on the board's lidar UART (UART1 under QEMU, USART1
+    /// on the STM32): `NextRevolution` reads it.
+    #[cfg(feature = "own-lidar")]
     mod own_lidar {
         use super::*;
         use firmware_example::config::{LIDAR_BINS, LIDAR_SETUP};
         use microslam_hal::lidar::Ld06Uart;
 
         /// The reader (its two revolutions of beams, 2.9 KB), zeroed at reset.
-        static LIDAR: StaticCell<Ld06Uart<board::qemu::CmsdkUart, LIDAR_BINS>> = StaticCell::new();
+        static LIDAR: StaticCell<Ld06Uart<board::LidarUart, LIDAR_BINS>> = StaticCell::new();
 
         pub fn wire(session: FirmwareSession) -> FirmwareSession {
-            let Some(lidar) = Ld06Uart::new(board::qemu::lidar_uart(), LIDAR_SETUP) else {
+            let Some(lidar) = Ld06Uart::new(board::lidar_uart(), LIDAR_SETUP) else {
                 defmt::error!("lidar setup invalid");
                 board::halt(4)
             };
@@ -183,9 +184,8 @@ mod grid {
         }
     }
 
-    /// Without the feature `own-lidar`, and on a board (no lidar wired to the MCU yet),
-    /// `NextRevolution` is refused.
-    #[cfg(not(all(feature = "qemu", feature = "own-lidar")))]
+    /// Without the feature `own-lidar`, `NextRevolution` is refused.
+    #[cfg(not(feature = "own-lidar"))]
     mod own_lidar {
         use super::*;
 
