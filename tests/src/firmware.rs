@@ -77,6 +77,17 @@ pub fn stm32_qemu_elf() -> PathBuf {
     path_from_env("STM32_QEMU_ELF", "target/firmware-elf/stm32-qemu.elf")
 }
 
+/// The STM32 build of the localizer firmware for QEMU's `netduinoplus2`, reading its own
+/// lidar on USART1 (`--features stm32f411,stm32-in-qemu,own-lidar`, `MICROSLAM_MAP` the
+/// map of [`localizer_map`]): `$STM32_LOCALIZER_QEMU_ELF`, else
+/// `target/firmware-elf/localizer-stm32-qemu.elf` (where `.ci/firmware.sh` puts it).
+pub fn stm32_localizer_qemu_elf() -> PathBuf {
+    path_from_env(
+        "STM32_LOCALIZER_QEMU_ELF",
+        "target/firmware-elf/localizer-stm32-qemu.elf",
+    )
+}
+
 /// A deterministic drive: a robot circling twice through a ring of 12 landmarks, velocity
 /// odometry at 10 Hz with a slowly varying bias, range-bearing sightings (with
 /// deterministic "noise") of the landmarks within 4 m and ±60°, a reset half-way (to

@@ -22,7 +22,7 @@ use serde::Serialize;
 use crate::inputs::readers::lidar_recording::LidarRecording;
 
 use crate::drivers::hil::{
-    Device, Expected, Phase, compare, encode_all, replies_across_restart, restart_cut,
+    Device, Expected, Phase, QemuMachine, compare, encode_all, replies_across_restart, restart_cut,
     run_qemu_with_lidar,
 };
 use crate::drivers::hil_lidar::{Ld06Stream, LineFaults, ld06_packets};
@@ -211,6 +211,7 @@ pub fn run_cli(args: &LocalizerHilOptions<'_>, quiet: bool) -> Result<()> {
     let timeout = Duration::from_secs(args.timeout_s);
     let run = match (&own_lidar, args.device, parts.as_slice()) {
         (Some(stream), Device::Qemu(elf), [(bytes, host)]) => run_qemu_with_lidar(
+            QemuMachine::Mps2An386,
             elf,
             bytes.clone(),
             stream.bytes.clone(),

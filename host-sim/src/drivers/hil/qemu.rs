@@ -29,26 +29,39 @@ pub enum QemuMachine {
 }
 
 impl QemuMachine {
-    /// QEMU's arguments for the board and for its link on the child's stdin/stdout: on
-    /// the netduino, `-serial` goes to USART1, USART2, … in order, so the first is null.
-    fn args(self) -> &'static [&'static str] {
+    /// QEMU's arguments for the board, its link on the child's stdin/stdout and, when
+    /// `lidar` names a chardev, its lidar UART on that: mps2-an386's UART0 and UART1 are
+    /// the first and second `-serial`; on the netduino, `-serial` goes to USART1, USART2,
+    /// … in order, so the first is the lidar's (or null) and the second the link.
+    fn args(self, lidar: Option<&str>) -> Vec<String> {
+        let lidar = lidar.map(|id| format!("chardev:{id}"));
+        let mut args: Vec<String> = match self {
+            Self::Mps2An386 => ["-machine", "mps2-an386", "-cpu", "cortex-m4"]
+                .map(String::from)
+                .into(),
+            Self::NetduinoPlus2 => ["-machine", "netduinoplus2"].map(String::from).into(),
+        };
+        let serials = match self {
+            Self::Mps2An386 => [Some("stdio".to_string()), lidar],
+            Self::NetduinoPlus2 => [
+                Some(lidar.unwrap_or_else(|| "null".into())),
+                Some("stdio".into()),
+            ],
+        };
+        for serial in serials.into_iter().flatten() {
+            args.push("-serial".into());
+            args.push(serial);
+        }
+        args
+    }
+
+    /// How long the firmware is given to enable its UARTs before the host writes.
+    fn boot_time(self) -> Duration {
         match self {
-            Self::Mps2An386 => &[
-                "-machine",
-                "mps2-an386",
-                "-cpu",
-                "cortex-m4",
-                "-serial",
-                "stdio",
-            ],
-            Self::NetduinoPlus2 => &[
-                "-machine",
-                "netduinoplus2",
-                "-serial",
-                "null",
-                "-serial",
-                "stdio",
-            ],
+            Self::Mps2An386 => Duration::ZERO,
+            // The STM32 USART model drops what arrives before the firmware has enabled it
+            // (the mps2 UART does not).
+            Self::NetduinoPlus2 => NETDUINO_BOOT,
         }
     }
 }
@@ -88,10 +101,11 @@ pub fn run_qemu_phases(
     run_qemu_linked(machine, elf, phases, None, timeout)
 }
 
-/// [`run_qemu`] with `lidar` on the board's second UART (mps2-an386's UART1, where the
-/// firmware reads its own lidar): a socket QEMU serves, written as fast as the device
-/// takes the bytes.
+/// [`run_qemu_on`] with `lidar` on the board's lidar UART (mps2-an386's UART1, the
+/// netduino's USART1, where the firmware reads its own lidar): a socket QEMU serves,
+/// written as fast as the device takes the bytes.
 pub fn run_qemu_with_lidar(
+    machine: QemuMachine,
     elf: &Path,
     bytes: Vec<u8>,
     lidar: Vec<u8>,
@@ -99,7 +113,7 @@ pub fn run_qemu_with_lidar(
     timeout: Duration,
 ) -> Result<LinkRun> {
     let phases = vec![Phase { bytes, expected }];
-    run_qemu_linked(QemuMachine::Mps2An386, elf, phases, Some(lidar), timeout)
+    run_qemu_linked(machine, elf, phases, Some(lidar), timeout)
 }
 
 /// The second UART's socket: a path of its own for each run.
@@ -116,6 +130,7 @@ fn lidar_socket_path() -> std::path::PathBuf {
 fn feed_lidar(
     socket: &Path,
     bytes: Vec<u8>,
+    boot: Duration,
 ) -> Result<thread::JoinHandle<Option<std::os::unix::net::UnixStream>>> {
     let started = Instant::now();
     let mut stream = loop {
@@ -130,6 +145,7 @@ fn feed_lidar(
         }
     };
     Ok(thread::spawn(move || {
+        thread::sleep(boot);
         stream.write_all(&bytes).ok()?;
         Some(stream)
     }))
@@ -146,16 +162,14 @@ fn run_qemu_linked(
     let semihosting_log = elf.with_extension("semihosting.log");
     let socket = lidar.as_ref().map(|_| lidar_socket_path());
     let mut qemu = Command::new("qemu-system-arm");
-    qemu.args(machine.args());
     if let Some(socket) = &socket {
         let _ = std::fs::remove_file(socket);
-        qemu.arg("-chardev")
-            .arg(format!(
-                "socket,id=lidar,path={},server=on,wait=off",
-                socket.display()
-            ))
-            .args(["-serial", "chardev:lidar"]);
+        qemu.arg("-chardev").arg(format!(
+            "socket,id=lidar,path={},server=on,wait=off",
+            socket.display()
+        ));
     }
+    qemu.args(machine.args(socket.as_ref().map(|_| "lidar")));
     let mut child: Child = qemu
         .args(["-display", "none", "-monitor", "none"])
         .arg("-chardev")
@@ -178,7 +192,7 @@ fn run_qemu_linked(
     };
     let rx = reader_thread(stdout);
     let feeder = match (socket.as_deref(), lidar) {
-        (Some(socket), Some(bytes)) => match feed_lidar(socket, bytes) {
+        (Some(socket), Some(bytes)) => match feed_lidar(socket, bytes, machine.boot_time()) {
             Ok(feeder) => Some(feeder),
             Err(e) => {
                 let _ = child.kill();
@@ -188,11 +202,8 @@ fn run_qemu_linked(
         },
         _ => None,
     };
-    if machine == QemuMachine::NetduinoPlus2 {
-        // The STM32 USART model drops what arrives before the firmware has enabled it
-        // (the mps2 UART does not): let the firmware boot first.
-        thread::sleep(NETDUINO_BOOT);
-    }
+    // Let the firmware enable its UARTs first.
+    thread::sleep(machine.boot_time());
     let exchanged = exchange_phases(stdin, &rx, phases, timeout);
     let _ = child.kill();
     let _ = child.wait();
