@@ -46,6 +46,7 @@ step "clippy (firmware, both boards)"
 cargo clippy -p firmware-example --locked --target "$TARGET" --bins -- -D warnings
 cargo clippy -p firmware-example --locked --target "$TARGET" --no-default-features --features stm32f411 -- -D warnings
 cargo clippy -p firmware-example --locked --target "$TARGET" --no-default-features --features stm32f411,stm32-in-qemu -- -D warnings
+cargo clippy -p firmware-example --locked --target "$TARGET" --no-default-features --features stm32f411,own-lidar -- -D warnings
 cargo clippy -p firmware-example --locked --target "$TARGET" --bins --features building-slam -- -D warnings
 cargo clippy -p microslam --locked --target "$TARGET" --features wire,defmt -- -D warnings
 
@@ -92,8 +93,14 @@ MAP_DIR="$OUT/intel-map"
 cargo build --release -p host-sim --locked
 "$TARGET_DIR/release/host-sim" -q replay --filter grid-slam --dataset carmen:intel/intel-raw-part.clf --out "$MAP_DIR"
 MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo clippy -p firmware-example --locked --target "$TARGET" --bins -- -D warnings
-MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --no-default-features --features stm32f411
+# The board's localizer reads its own lidar on USART1 (PA10, interrupt and ring); the same
+# build for netduinoplus2 runs its QEMU test.
+MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo clippy -p firmware-example --locked --target "$TARGET" --no-default-features --features stm32f411,own-lidar -- -D warnings
+MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --no-default-features --features stm32f411,own-lidar
 cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/localizer-stm32f411.elf"
+MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --no-default-features --features stm32f411,stm32-in-qemu,own-lidar
+cp "$TARGET_DIR/$TARGET/$PROFILE/firmware-example" "$OUT/localizer-stm32-qemu.elf"
+export STM32_LOCALIZER_QEMU_ELF="$OUT/localizer-stm32-qemu.elf"
 # The QEMU localizer reads its own lidar too (feature own-lidar: an LD06 on UART1).
 MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo clippy -p firmware-example --locked --target "$TARGET" --bins --features own-lidar -- -D warnings
 MICROSLAM_MAP="$MAP_DIR/map.yaml" cargo build -p firmware-example --locked --target "$TARGET" --profile "$PROFILE" --bin firmware-example --bin cost_grid --features own-lidar
