@@ -30,7 +30,11 @@ const MAP_CONFIG: GridPfConfig = GridPfConfig::MICROCONTROLLER;
 
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("OUT_DIR is set by cargo"));
-    let memory = if env::var_os("CARGO_FEATURE_STM32F411").is_some() {
+    let board = env::var_os("CARGO_FEATURE_STM32F411").is_some();
+    let memory = if board && env::var_os("CARGO_FEATURE_BUILDING_SLAM").is_some() {
+        // Sectors 1–2 and 6–7 kept for the SLAM's saved pose, map and keyframes.
+        "memory-stm32f411-slam.x"
+    } else if board {
         "memory-stm32f411.x"
     } else {
         "memory-qemu.x"

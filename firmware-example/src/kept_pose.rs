@@ -49,14 +49,14 @@ pub fn after_reply<F: NorFlash>(mut kept: Option<KeptPose<F>>) -> impl FnMut(&To
     }
 }
 
-/// The pose store in QEMU's flash stand-in (two sectors of
-/// [`crate::config::POSE_SECTOR_BYTES`]); `None`, logged, when the stand-in is taken or
-/// the store refuses it: the firmware then keeps no pose.
-#[cfg(feature = "qemu")]
-pub fn stand_in_store() -> Option<PoseStore<crate::flash::SramFlash>> {
-    use crate::config::POSE_SECTOR_BYTES;
-    let store = crate::flash::SramFlash::take_poses(2 * POSE_SECTOR_BYTES)
-        .and_then(|flash| PoseStore::open(flash, 0, POSE_SECTOR_BYTES).ok());
+/// The pose store in the board's flash (two sectors of [`crate::board::POSE_SECTOR_BYTES`]:
+/// QEMU's stand-in, or sectors 1 and 2 of the STM32F411 in the building-slam build);
+/// `None`, logged, when the sectors are taken or the store refuses them: the firmware
+/// then keeps no pose.
+#[cfg(any(feature = "qemu", feature = "building-slam"))]
+pub fn store() -> Option<PoseStore<crate::board::PoseFlash>> {
+    use crate::board::{POSE_SECTOR_BYTES, pose_flash};
+    let store = pose_flash().and_then(|flash| PoseStore::open(flash, 0, POSE_SECTOR_BYTES).ok());
     if store.is_none() {
         defmt::error!("pose store refused: poses are not kept");
     }

@@ -4,18 +4,20 @@
 //! Built without a map it carries the grid SLAM (its 64 KB grid in RAM); built with
 //! `MICROSLAM_MAP=<map.yaml>` it carries the localizer on the map image in flash instead,
 //! checked at boot: a bad image is reported to the host (`Refusal::BadMap`) when it asks
-//! for the localizer, never a fault. With the feature `building-slam` (QEMU) it carries
-//! the building-scale grid SLAM with loop closure (`profile::Slam`, 112 KB) as its grid
-//! estimator, its keyframes in the flash stand-in, beside a 4-landmark EKF.
+//! for the localizer, never a fault. With the feature `building-slam` it carries the
+//! building-scale grid SLAM with loop closure (`profile::Slam`, 112 KB) as its grid
+//! estimator, beside a 4-landmark EKF, its keyframes, map image and saved pose in the
+//! board's flash (`board::keyframe_flash`, …: QEMU's stand-in, or the STM32F411's own
+//! sectors).
 #![no_std]
 #![no_main]
 
 #[cfg(all(feature = "building-slam", microslam_map))]
 compile_error!("`building-slam` carries the grid SLAM: build it without MICROSLAM_MAP");
-#[cfg(all(feature = "building-slam", not(feature = "qemu")))]
+#[cfg(all(feature = "building-slam", feature = "stm32-in-qemu"))]
 compile_error!(
-    "`building-slam` keeps its keyframes in QEMU's flash stand-in: a board needs its flash \
-     driver wired in first"
+    "`building-slam` writes the STM32's flash, which QEMU's netduinoplus2 does not model: \
+     build it for the board, or for mps2-an386 (feature `qemu`)"
 );
 
 use cortex_m_rt::entry;
@@ -199,13 +201,13 @@ mod grid {
     #[cfg(feature = "qemu")]
     mod kept_pose {
         use super::*;
-        use firmware_example::kept_pose::{KeptPose, after_reply, stand_in_store};
+        use firmware_example::kept_pose::{KeptPose, after_reply, store};
 
         pub fn resume(
             session: FirmwareSession,
             checksum: Option<u32>,
         ) -> (FirmwareSession, impl FnMut(&ToHost, bool)) {
-            let store = stand_in_store();
+            let store = store();
             let saved = checksum
                 .zip(store.as_ref())
                 .and_then(|(crc, s)| s.latest_in(crc));
@@ -226,7 +228,8 @@ mod grid {
         }
     }
 
-    /// On a board the flash driver is not wired yet: no pose is kept.
+    /// On the STM32F411 the localizer's map leaves no flash sector free for a pose store
+    /// (the building-slam build keeps one in sectors 1 and 2): no pose is kept.
     #[cfg(not(feature = "qemu"))]
     mod kept_pose {
         use super::*;
@@ -246,12 +249,11 @@ mod grid {
 mod grid {
     use super::*;
     use core::mem::ManuallyDrop;
+    use firmware_example::board::{KEYFRAME_BYTES, MAP_BYTES, SlamFlash};
     use firmware_example::config::{
-        LOCALIZER_CONFIG, Localizer, SLAM_CONFIG, SLAM_KEYFRAME_BYTES, SLAM_MAP_BYTES, SLAM_NODES,
-        Slam, SlamEstimator,
+        LOCALIZER_CONFIG, Localizer, SLAM_CONFIG, SLAM_NODES, Slam, SlamEstimator,
     };
-    use firmware_example::flash::SramFlash;
-    use firmware_example::kept_pose::{KeptPose, after_reply, stand_in_store};
+    use firmware_example::kept_pose::{KeptPose, after_reply, store};
     use microslam::device::LocalizerEstimator;
     use microslam::geometry::Pose2;
     use microslam::grid::MapImage;
@@ -273,8 +275,8 @@ mod grid {
         slam: ManuallyDrop::new(Slam::zeroed()),
     });
 
-    /// Where its keyframes and its map image go: the flash stand-ins.
-    type Storage = NorFlashStorage<SramFlash>;
+    /// Where its keyframes and its map image go: the board's flash.
+    type Storage = NorFlashStorage<SlamFlash>;
 
     /// The SLAM with its keyframe storage, as the session's grid estimator.
     static ESTIMATOR: StaticCell<SlamEstimator<'static, Storage>> = StaticCell::new();
@@ -288,9 +290,9 @@ mod grid {
     /// `SaveMap` keeps the map and the pose for the next boot.
     pub fn session(ekf: &'static mut Ekf) -> (FirmwareSession, impl FnMut(&ToHost, bool)) {
         let memory = MEMORY.take();
-        let store = stand_in_store();
-        let Some(map_flash) = SramFlash::take_map(SLAM_MAP_BYTES) else {
-            defmt::error!("map flash stand-in taken");
+        let store = store();
+        let Some(map_flash) = board::map_flash() else {
+            defmt::error!("map flash taken");
             board::halt(4)
         };
         let saved = match (MapImage::parse_at_start(map_flash.bytes()), &store) {
@@ -380,22 +382,22 @@ mod grid {
     fn map(
         ekf: &'static mut Ekf,
         memory: &'static mut GridMemory,
-        map_flash: SramFlash,
+        map_flash: SlamFlash,
     ) -> (FirmwareSession, Option<u32>) {
         // SAFETY: the union was made with its `slam` field (all zero bytes, what
         // `Slam::zeroed` is), and it is the only field used from here on; `memory` is
         // the one `&'static mut` to the union (ConstStaticCell::take).
         #[allow(unsafe_code)]
         let slam: &'static mut Slam = unsafe { &mut memory.slam };
-        let Some(flash) = SramFlash::take(SLAM_KEYFRAME_BYTES) else {
-            defmt::error!("flash stand-in taken");
+        let Some(flash) = board::keyframe_flash() else {
+            defmt::error!("keyframe flash taken");
             board::halt(4)
         };
-        let Ok(storage) = Storage::new(flash, 0, SLAM_KEYFRAME_BYTES) else {
+        let Ok(storage) = Storage::new(flash, 0, KEYFRAME_BYTES) else {
             defmt::error!("keyframe storage refused");
             board::halt(4)
         };
-        let Ok(map_storage) = Storage::new(map_flash, 0, SLAM_MAP_BYTES) else {
+        let Ok(map_storage) = Storage::new(map_flash, 0, MAP_BYTES) else {
             defmt::error!("map storage refused");
             board::halt(4)
         };
@@ -409,7 +411,7 @@ mod grid {
         defmt::info!(
             "building-scale grid SLAM: {} keyframes, {} bytes of keyframe flash",
             SLAM_NODES,
-            SLAM_KEYFRAME_BYTES
+            KEYFRAME_BYTES
         );
         (
             Session::with_grid(ekf, EKF_CONFIG, ESTIMATOR.init(slam), GRID_SETUP),

@@ -4,6 +4,8 @@
 
 use core::convert::Infallible;
 
+use crate::flash::SramFlash;
+
 use defmt_semihosting as _;
 
 /// UART0 of the mps2 boards.
@@ -218,4 +220,38 @@ pub fn init() -> (Serial, Led) {
 /// Ends the program: QEMU exits with `code` (semihosting).
 pub fn halt(code: i32) -> ! {
     semihosting::process::exit(code)
+}
+
+/// The flash a pose store takes under QEMU: the SRAM stand-in ([`SramFlash`], which keeps
+/// NOR flash's rules and survives a system reset).
+pub type PoseFlash = SramFlash;
+/// Bytes of each of the pose store's two sectors.
+pub const POSE_SECTOR_BYTES: u32 = crate::config::POSE_SECTOR_BYTES;
+
+/// The pose store's two sectors in the stand-in, handed out once; `None` after.
+pub fn pose_flash() -> Option<PoseFlash> {
+    SramFlash::take_poses(2 * POSE_SECTOR_BYTES)
+}
+
+/// The flash the building-scale SLAM keeps its keyframes and its map image in: the
+/// stand-in.
+#[cfg(feature = "building-slam")]
+pub type SlamFlash = SramFlash;
+/// Bytes of the keyframes' region (the profile's: the graph's 640 keyframes).
+#[cfg(feature = "building-slam")]
+pub const KEYFRAME_BYTES: u32 = crate::config::SLAM_KEYFRAME_BYTES;
+/// Bytes of the map image's region (the profile's).
+#[cfg(feature = "building-slam")]
+pub const MAP_BYTES: u32 = crate::config::SLAM_MAP_BYTES;
+
+/// The keyframes' region of the stand-in, handed out once; `None` after.
+#[cfg(feature = "building-slam")]
+pub fn keyframe_flash() -> Option<SlamFlash> {
+    SramFlash::take(KEYFRAME_BYTES)
+}
+
+/// The map image's region of the stand-in, handed out once; `None` after.
+#[cfg(feature = "building-slam")]
+pub fn map_flash() -> Option<SlamFlash> {
+    SramFlash::take_map(MAP_BYTES)
 }
