@@ -149,15 +149,18 @@ pub type Slam = GraphSlam<
 /// Settings of [`Slam`]: [`GraphSlamConfig::MICROCONTROLLER`].
 pub const SLAM_CONFIG: GraphSlamConfig = GraphSlamConfig::MICROCONTROLLER;
 
-/// Bytes of flash the [`Slam`]'s keyframe store takes (the STM32F411's two 128 KB sectors
-/// 6 and 7: room for over a thousand 90-beam keyframes, more than the graph's
-/// [`SLAM_NODES`]).
-pub const SLAM_KEYFRAME_BYTES: u32 = 256 * 1024;
+/// Bytes of flash the [`Slam`]'s keyframe store takes: one 128 KB sector of the
+/// STM32F411 (sector 7), room for 606 keyframes of 90 beams (216 bytes each after the
+/// store's header). The Intel raw part makes about 490; a longer run (MIT CSAIL's 374 m make
+/// about 615) has its last keyframes refused and counted, short of the graph's
+/// [`SLAM_NODES`].
+pub const SLAM_KEYFRAME_BYTES: u32 = 128 * 1024;
 
 /// Bytes of flash for the map image the [`Slam`] writes at the end of a run
-/// (`GraphSlam::write_map_image`, feature `map-image`: two bitmaps of the map's whole tiles):
-/// maps up to 1 024 × 1 024 cells (51.2 m square at 5 cm); the Intel lab's takes 102 456.
-pub const SLAM_MAP_BYTES: u32 = 256 * 1024;
+/// (`GraphSlam::write_map_image`, feature `map-image`: two bitmaps of the map's whole
+/// tiles): one 128 KB sector of the STM32F411 (sector 6), at most 31 tiles of 128 × 128
+/// cells (e.g. 6 × 5, 38.4 m × 32 m at 5 cm); the Intel lab's (25 tiles) takes 102 456.
+pub const SLAM_MAP_BYTES: u32 = 128 * 1024;
 
 /// Bytes of each of the two flash sectors the robot's saved pose takes
 /// (`microslam::device::PoseStore`, feature `wire`): 128 records of 32 bytes a sector at

@@ -237,10 +237,10 @@ pub fn pose_flash() -> Option<PoseFlash> {
 /// stand-in.
 #[cfg(feature = "building-slam")]
 pub type SlamFlash = SramFlash;
-/// Bytes of the keyframes' region (the profile's: the graph's 640 keyframes).
+/// Bytes of the keyframes' region (the profile's: the STM32F411's sector 7).
 #[cfg(feature = "building-slam")]
 pub const KEYFRAME_BYTES: u32 = crate::config::SLAM_KEYFRAME_BYTES;
-/// Bytes of the map image's region (the profile's).
+/// Bytes of the map image's region (the profile's: the STM32F411's sector 6).
 #[cfg(feature = "building-slam")]
 pub const MAP_BYTES: u32 = crate::config::SLAM_MAP_BYTES;
 

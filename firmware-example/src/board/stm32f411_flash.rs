@@ -35,17 +35,16 @@ const FLASH_BASE: usize = 0x0800_0000;
 pub const POSE_START: u32 = 0x0000_4000;
 /// Bytes of each of the pose store's two sectors.
 pub const POSE_SECTOR_BYTES: u32 = 16 * 1024;
-/// The map image: sector 6. 128 KB hold a map of 31 tiles of 128 × 128 cells (e.g. 6 × 5
-/// tiles, 38.4 m × 32 m at 5 cm; the Intel lab's is 25 tiles, 102 456 bytes).
+/// The map image: sector 6, the profile's `SLAM_MAP_BYTES` (31 tiles of 128 × 128 cells).
 pub const MAP_START: u32 = 0x0004_0000;
 /// Bytes of the map image's region.
-pub const MAP_BYTES: u32 = 128 * 1024;
-/// The keyframes: sector 7. 128 KB hold 606 keyframes of 90 beams (216 bytes each after
-/// the store's header): the Intel raw part makes 490; a longer run's later keyframes are
-/// refused and counted (`GraphCounters::keyframes_refused`), the run goes on.
+pub const MAP_BYTES: u32 = crate::config::SLAM_MAP_BYTES;
+/// The keyframes: sector 7, the profile's `SLAM_KEYFRAME_BYTES` (606 keyframes of 90
+/// beams; a longer run's later keyframes are refused and counted,
+/// `GraphCounters::keyframes_refused`, and the run goes on).
 pub const KEYFRAME_START: u32 = 0x0006_0000;
 /// Bytes of the keyframes' region.
-pub const KEYFRAME_BYTES: u32 = 128 * 1024;
+pub const KEYFRAME_BYTES: u32 = crate::config::SLAM_KEYFRAME_BYTES;
 
 /// Why a region refused an operation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
@@ -246,6 +245,7 @@ pub type PoseFlash = Region<{ POSE_SECTOR_BYTES as usize }>;
 /// 128 KB sector each.
 pub type SlamFlash = Region<{ 128 * 1024 }>;
 
+// The profile's regions are one 128 KB sector each.
 const _: () = assert!(MAP_BYTES as usize == 128 * 1024 && KEYFRAME_BYTES as usize == 128 * 1024);
 
 /// The pose store's two sectors (1 and 2), handed out once; `None` after.
