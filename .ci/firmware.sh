@@ -280,34 +280,6 @@ awk '
         }
     }' "$measured"
 
-# Localizer bars: flash with the map ≤ 512 KB, static RAM + stack ≤ 128 KB (both boards'
-# flash, QEMU's RAM with its measured stack); every localizer figure present. The
-# instruction bar (step ≤ 0.8 M at P = 64) is reported; the budget below enforces the
-# recorded figures (the instruction bars are printed as met / NOT MET).
-awk '
-    { v[$1] = $2 }
-    END {
-        split("localizer_flash_bytes localizer_static_ram_bytes localizer_stm32f411_flash_bytes localizer_stack_peak_bytes localizer_p32_b90_w3_step_instructions localizer_p64_b90_w3_step_instructions localizer_p128_b90_w3_step_instructions localizer_intel_p32_b90_w3_step_instructions localizer_intel_p64_b90_w3_step_instructions localizer_intel_p128_b90_w3_step_instructions localizer_intel_p64_b90_w9_step_instructions relocalize_256x256_instructions relocalize_budget_256x256_instructions relocalize_budget_b45_256x256_instructions", need, " ");
-        for (i in need) if (!(need[i] in v)) { printf "FAIL: localizer figure %s missing\n", need[i]; bad = 1 }
-        ram = v["localizer_static_ram_bytes"] + v["localizer_stack_peak_bytes"];
-        printf "localizer firmware: flash %d bytes with the map (bar <= 524288), static RAM + stack %d bytes (bar <= 131072)\n", v["localizer_flash_bytes"], ram;
-        if (v["localizer_flash_bytes"] > 524288 || v["localizer_stm32f411_flash_bytes"] > 524288 || ram > 131072) {
-            print "FAIL: the localizer firmware is over the STM32F411 memory bar"; bad = 1
-        }
-        s = v["localizer_p64_b90_w3_step_instructions"];
-        printf "localizer step P=64, 90 beams, 3x3, room map: %d instructions (bar <= 800000: %s)\n", s, (s <= 800000) ? "met" : "NOT MET";
-        s = v["localizer_intel_p64_b90_w3_step_instructions"];
-        printf "localizer step P=64, 90 beams, 3x3, Intel map: %d instructions (bar <= 800000: %s)\n", s, (s <= 800000) ? "met" : "NOT MET";
-        printf "  (with grid SLAM'"'"'s 9x9 window on the Intel map: %d)\n", v["localizer_intel_p64_b90_w9_step_instructions"];
-        r = v["relocalize_256x256_instructions"];
-        printf "relocalization on 256x256: %d instructions (bar <= 50000000: %s)\n", r, (r <= 50000000) ? "met" : "NOT MET";
-        b = v["relocalize_budget_256x256_instructions"];
-        printf "relocalization scan stopped by the work budget, every beam looked at: %d instructions (bar <= 50000000: %s)\n", b, (b <= 50000000) ? "met" : "NOT MET";
-        b = v["relocalize_budget_b45_256x256_instructions"];
-        printf "relocalization scan stopped by the work budget, 45 beams: %d instructions (bar <= 50000000: %s)\n", b, (b <= 50000000) ? "met" : "NOT MET";
-        if (bad) exit 1
-    }' "$measured"
-
 if [[ "${1:-}" == "--record" ]]; then
     new=$(mktemp)
     {

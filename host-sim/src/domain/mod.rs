@@ -8,10 +8,13 @@
 //! - [`recording`]: a dataset in memory (events, true poses, true landmarks) and the
 //!   interpolation of true poses.
 //! - [`datasets`]: where the shared datasets folder is.
+//! - [`leave_outs`]: the measurement switches of `scripts/mrclam-leave-outs` (feature
+//!   `leave-outs`; constant `false` otherwise).
 
 pub mod config;
 pub mod datasets;
 pub mod grid;
+pub mod leave_outs;
 pub mod recording;
 
 /// How sightings are associated with landmarks.

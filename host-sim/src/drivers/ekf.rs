@@ -1,6 +1,7 @@
 //! The estimator side of the replay, generic over the filter's scalar.
 
 use crate::domain::config::Settings;
+use crate::domain::leave_outs::{LeaveOut, leave_out};
 use crate::domain::recording::Recording;
 use crate::domain::{AssociationMode, Precision};
 use crate::drivers::odometry::{VelocityProfile, delay_odometry};
@@ -401,6 +402,10 @@ impl<T: Real> Replayer<T> {
         // One clock around the whole loop: a clock read per step cost as much as a
         // prediction.
         let clock = Instant::now();
+        // A leave-out build (feature `leave-outs`) may predict only before sightings, over
+        // the time summed since the last batch; `false` in every other build.
+        let at_sightings_only = leave_out(LeaveOut::Predictions);
+        let mut pending = 0.0f64;
         let mut i = 0;
         while i < events.len() {
             if let Some(p) = progress
@@ -412,7 +417,15 @@ impl<T: Real> Replayer<T> {
             let t = event.stamp;
             // Predict to the event's stamp with the velocity held since the last one.
             if let Some(prev) = last {
-                let dt = (t - prev).min(max_gap);
+                let mut dt = (t - prev).min(max_gap);
+                if at_sightings_only {
+                    if matches!(event.kind, EventKind::Velocity { .. }) {
+                        pending += dt.max(0.0);
+                        dt = 0.0;
+                    } else {
+                        dt = dt.max(0.0) + std::mem::take(&mut pending);
+                    }
+                }
                 if dt > 0.0 {
                     let r = match (held, &self.vehicle) {
                         (Held::Velocity, _) => {

@@ -19,6 +19,7 @@ pub use plots::{draw_errors, draw_map, write_png};
 pub use report::{drop_absent, write_report};
 pub use tum::{tum_line, tum_text, write_tum};
 
+use crate::domain::leave_outs::{LeaveOut, leave_out};
 use crate::domain::recording::Recording;
 use crate::drivers::ekf::ReplayRun;
 use crate::metrics::Metrics;
@@ -111,6 +112,12 @@ pub fn write_trajectory(
     poses: impl IntoIterator<Item = (f64, Pose2<f64>)>,
 ) -> Result<()> {
     create_folder(out)?;
+    // A leave-out build (feature `leave-outs`): the poses are still paired with the
+    // ground truth, not written.
+    if leave_out(LeaveOut::TumFiles) {
+        poses.into_iter().for_each(drop);
+        return Ok(());
+    }
     write_tum(&out.join("trajectory.tum"), poses)
 }
 
@@ -137,6 +144,9 @@ pub fn write_landmarks(path: &Path, run: &ReplayRun) -> Result<()> {
 /// Writes `groundtruth.tum` (the recording's ground truth) into `out`, creating it.
 pub fn write_truth(out: &Path, recording: &Recording) -> Result<()> {
     create_folder(out)?;
+    if leave_out(LeaveOut::TumFiles) {
+        return Ok(());
+    }
     write_tum(
         &out.join("groundtruth.tum"),
         recording.ground_truth.iter().map(|p| (p.stamp, p.pose)),
