@@ -2,7 +2,8 @@
 //! range, is refused naming the file and the line, message or field at fault (issue 62):
 //! a CARMEN beam count that disagrees with the fields that follow, scans of different
 //! lengths, scans of no reading, a pose beyond 100 km, options that do not apply; and a
-//! `.log.gz` of several gzip members is read to its end.
+//! `.log.gz` of several gzip members is read to its end. Lines of a message type CARMEN
+//! does not have are counted and warned of.
 
 mod common;
 
@@ -254,6 +255,58 @@ fn a_run_that_skips_a_large_share_says_so() {
     );
     assert!(
         err.contains("lenient.toml: `loss_warning_fraction` = 2 must be within 0 ..= 1"),
+        "{err}"
+    );
+}
+
+/// A line of a message type CARMEN does not have (here a misspelt `FLASER`: its scan is
+/// lost) is skipped, counted and warned of with its first line; CARMEN's own messages the
+/// reader does not use (`SYNC`) are counted only.
+#[test]
+fn a_line_of_an_unknown_message_type_is_counted_and_warned_of_with_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("misspelt.clf");
+    log_with(&log, 7, |l| {
+        format!("SYNC 1\n{}", l.replacen("FLASER", "FLASR", 1))
+    });
+    let dataset = format!("carmen:{}", log.display());
+    let out = dir.path().join("out");
+    let run = succeeds(
+        host_sim()
+            .args(["replay", "--dataset", &dataset, "--quiet", "--no-plots"])
+            .args(["--particles", "16", "--out"])
+            .arg(&out),
+    );
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    let expected = format!(
+        "warning: {dataset}: 1 line of a message type CARMEN does not have skipped: `FLASR` (first at line 8)"
+    );
+    assert!(stderr.contains(&expected), "{stderr}");
+    assert!(!stderr.contains("SYNC"), "{stderr}");
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    let loss = &metrics["input_loss"];
+    assert_eq!(
+        loss["skipped_lines"],
+        serde_json::json!({ "FLASR": 1, "SYNC": 1 })
+    );
+    assert_eq!(loss["scans"]["read"], SCANS - 1);
+    assert_eq!(loss["warnings"].as_array().unwrap().len(), 1);
+}
+
+/// A log whose only lasers are of a type the reader does not take is refused naming them.
+#[test]
+fn a_log_of_lasers_the_reader_does_not_take_is_refused_naming_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("robotlaser.clf");
+    std::fs::write(
+        &log,
+        "# a log\nROBOTLASER1 0 -1.57 3.14 0.01 30 0.01 0 1 2.0 0\nROBOTLASER1 0\n",
+    )
+    .unwrap();
+    let err = replay_fails(dir.path(), &log);
+    assert!(
+        err.contains("robotlaser.clf: no laser scans this reader takes (FLASER or RLASER lines); it has 2 ROBOTLASER1, which it does not read"),
         "{err}"
     );
 }

@@ -62,7 +62,10 @@ impl RosMap {
     }
 
     /// Reads `yaml` (fields `image`, `resolution`, `origin`; `negate: 1` inverts the
-    /// grey levels) and the PGM it names (relative to the yaml's folder).
+    /// grey levels; `mode` `trinary` or `scale`, the thresholds) and the PGM it names
+    /// (relative to the yaml's folder). A line that is not `field: value`, a field given
+    /// twice, a field map_server does not know and `mode: raw` (grey levels as occupancy
+    /// values, which this reader would turn upside down) are refused with their line.
     pub fn read(yaml: &Path, log_odds: &LogOdds) -> Result<Self, RosMapError> {
         let text = std::fs::read_to_string(yaml).map_err(|e| error(yaml, e.to_string()))?;
         let mut image = None;
@@ -71,13 +74,29 @@ impl RosMap {
         let mut negate = false;
         // (value, line) of `occupied_thresh` and `free_thresh`.
         let mut thresholds: [Option<(f64, usize)>; 2] = [None, None];
+        // (field, line) of every field read so far.
+        let mut seen: Vec<(String, usize)> = Vec::new();
         for (n, line) in text.lines().enumerate() {
             let line = line.split('#').next().unwrap_or("");
-            let Some((k, v)) = line.split_once(':') else {
+            if line.trim().is_empty() {
                 continue;
+            }
+            let Some((k, v)) = line.split_once(':') else {
+                return Err(error(
+                    yaml,
+                    format!(
+                        "line {}: expected `field: value`, got `{}`",
+                        n + 1,
+                        line.trim()
+                    ),
+                ));
             };
             let (k, v) = (k.trim(), v.trim());
             let bad = |what: &str| error(yaml, format!("line {}: field `{k}`: {what}", n + 1));
+            if let Some((_, first)) = seen.iter().find(|(f, _)| f == k) {
+                return Err(bad(&format!("given twice (first at line {first})")));
+            }
+            seen.push((k.to_string(), n + 1));
             match k {
                 "image" => {
                     let name = v.trim_matches(['"', '\'']);
@@ -131,7 +150,25 @@ impl RosMap {
                     }
                     thresholds[usize::from(k == "free_thresh")] = Some((t, n + 1));
                 }
-                _ => {}
+                // How map_server turns grey levels into occupancy: `trinary` (its default)
+                // and `scale` read a grey level as a probability, as this reader does;
+                // `raw` takes it as the occupancy value itself (0 free … 100 occupied).
+                "mode" => match v.trim_matches(['"', '\'']) {
+                    "trinary" | "scale" => {}
+                    "raw" => {
+                        return Err(bad(
+                            "`raw` (grey levels as occupancy values 0–100) is not read: \
+                             save the map in `trinary` or `scale` mode",
+                        ));
+                    }
+                    _ => return Err(bad("must be trinary, scale or raw")),
+                },
+                _ => {
+                    return Err(bad(
+                        "not a map_server field (image, mode, resolution, origin, negate, \
+                         occupied_thresh, free_thresh)",
+                    ));
+                }
             }
         }
         if let [Some((occupied, _)), Some((free, line))] = thresholds
@@ -390,6 +427,16 @@ mod tests {
 
     const YAML: &str = "image: m.pgm\nresolution: 0.05\norigin: [-1.0, -2.0, 0.0]\n";
 
+    /// Asserts that [`YAML`] followed by `extra` (its lines from line 4), with `pgm`, is
+    /// refused naming `m.yaml`, the message ending in `why`.
+    fn refused_with(tag: &str, extra: &str, pgm: &[u8], why: &str) {
+        let yaml = files(tag, &format!("{YAML}{extra}"), pgm);
+        let error = RosMap::read(&yaml, &LogOdds::SYMMETRIC)
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains("m.yaml") && error.ends_with(why), "{error}");
+    }
+
     #[test]
     fn maxval_is_white() {
         // maxval 100: grey 100 is white (free), 0 black (occupied), 50 unknown.
@@ -515,13 +562,49 @@ mod tests {
         .into_iter()
         .enumerate()
         {
-            let yaml = files(&format!("thresh{n}"), &format!("{YAML}{extra}"), pgm);
-            let error = RosMap::read(&yaml, &LogOdds::SYMMETRIC)
-                .unwrap_err()
-                .to_string();
-            assert!(error.contains("m.yaml") && error.ends_with(why), "{error}");
+            refused_with(&format!("thresh{n}"), extra, pgm, why);
         }
         let ok = format!("{YAML}occupied_thresh: 0.65\nfree_thresh: 0.196\nnegate: 0\n");
         assert!(RosMap::read(&files("thresh-ok", &ok, pgm), &LogOdds::SYMMETRIC).is_ok());
+    }
+
+    #[test]
+    fn unknown_repeated_or_malformed_fields_and_raw_mode_are_refused_with_their_line() {
+        let pgm = b"P5\n1 1\n255\n\xff";
+        for (n, (extra, why)) in [
+            (
+                "resolutoin: 0.1\n",
+                "line 4: field `resolutoin`: not a map_server field (image, mode, resolution, \
+                 origin, negate, occupied_thresh, free_thresh)",
+            ),
+            (
+                "resolution: 0.1\n",
+                "line 4: field `resolution`: given twice (first at line 2)",
+            ),
+            (
+                "negate 1\n",
+                "line 4: expected `field: value`, got `negate 1`",
+            ),
+            (
+                "mode: raw\n",
+                "line 4: field `mode`: `raw` (grey levels as occupancy values 0–100) is not \
+                 read: save the map in `trinary` or `scale` mode",
+            ),
+            (
+                "mode: bitmap\n",
+                "line 4: field `mode`: must be trinary, scale or raw",
+            ),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            refused_with(&format!("fields{n}"), extra, pgm, why);
+        }
+        // What map_server writes, comments and blank lines included, is read.
+        for (n, mode) in ["trinary", "scale"].into_iter().enumerate() {
+            let ok = format!("# a map\n\n{YAML}mode: {mode}\nnegate: 0  # white free\n");
+            let map = RosMap::read(&files(&format!("mode{n}"), &ok, pgm), &LogOdds::SYMMETRIC);
+            assert!(map.is_ok(), "{mode}: {map:?}");
+        }
     }
 }

@@ -363,12 +363,7 @@ pub(crate) fn score_and_write(
         run,
         grid,
     )?;
-    let back = lidar.log.lasers().filter(|l| !l.rear).map(|l| l.stamp);
-    let loss = crate::metrics::inputs::input_loss(
-        run,
-        lidar.loss_warning,
-        crate::metrics::inputs::stamps_going_back(back),
-    );
+    let loss = crate::metrics::inputs::input_loss(run, lidar.loss_warning, &lidar.log);
     for warning in loss["warnings"].as_array().into_iter().flatten() {
         eprintln!(
             "warning: {}: {}",

@@ -10,6 +10,7 @@
 use crate::domain::recording::Recording;
 use crate::drivers::ekf::ReplayRun;
 use crate::drivers::grid_run::GridRun;
+use crate::inputs::readers::carmen::CarmenLog;
 use anyhow::{Result, bail};
 use serde::Serialize;
 
@@ -196,14 +197,24 @@ pub fn check_scored(recording: &Recording, metrics: &super::Metrics) -> Result<(
     Ok(())
 }
 
-/// What a grid run read, used and lost of each input stream, with the reason, and a
-/// warning for each stream whose lost share is above `threshold` (`metrics.json`'s
-/// `input_loss`); `stamps_back` is how many of the front scans' stamps went back before
-/// the previous scan's (taken in file order, as the format plays them, and counted:
-/// `scans.stamps_going_back`).
-pub fn input_loss(run: &GridRun, threshold: f64, stamps_back: usize) -> serde_json::Value {
+/// What a grid run over `log` read, used and lost of each input stream, with the reason,
+/// and a warning for each stream whose lost share is above `threshold` (`metrics.json`'s
+/// `input_loss`): how many of the front scans' stamps went back before the previous
+/// scan's (taken in file order, as the format plays them: `scans.stamps_going_back`), the
+/// lines the reader skipped by type (`skipped_lines`), with a warning for each type CARMEN
+/// does not have ([`CarmenLog::unknown_messages`]).
+pub fn input_loss(run: &GridRun, threshold: f64, log: &CarmenLog) -> serde_json::Value {
     let read = run.trajectory.len();
+    let stamps_back = stamps_going_back(log.lasers().filter(|l| !l.rear).map(|l| l.stamp));
     let mut warnings = Vec::new();
+    // Lines the reader skipped: every type counted; a type CARMEN does not have (a
+    // misspelt or damaged line, whose scan or odometry is lost) warned of.
+    for (kind, lines, first) in log.unknown_messages() {
+        warnings.push(format!(
+            "{lines} line{} of a message type CARMEN does not have skipped: `{kind}` (first at line {first})",
+            if lines == 1 { "" } else { "s" }
+        ));
+    }
     let mut stream = |name: &str, lost: usize, verb: &str, reason: &str| {
         let share = lost as f64 / read.max(1) as f64;
         if share > threshold {
@@ -241,6 +252,7 @@ pub fn input_loss(run: &GridRun, threshold: f64, stamps_back: usize) -> serde_js
         "warning_fraction": threshold,
         "scans": scans,
         "odometry": odometry,
+        "skipped_lines": log.skipped,
         "warnings": warnings,
     })
 }

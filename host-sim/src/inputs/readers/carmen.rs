@@ -1,8 +1,11 @@
 //! CARMEN log reader (`.clf`, `.log`; `.log.gz` through a decompressing reader).
 //!
 //! One message a line: `FLASER`/`RLASER` (front/rear laser with the pose and odometry of
-//! the scan), `ODOM`, `PARAM`; `SYNC`, `NEFF`, `#` comments and unknown messages are
-//! skipped. Messages are kept in **file order**: in the Intel log the time stamps go
+//! the scan), `ODOM`, `PARAM`; `#` comments, blank lines and every other message are
+//! skipped and counted by type ([`CarmenLog::skipped`]): CARMEN's other messages
+//! ([`UNREAD_MESSAGES`]: `SYNC`, GMapping's `NEFF`, other lasers, GPS, …) quietly, a type
+//! CARMEN does not have (a misspelt or damaged line) with a warning naming its first line
+//! ([`CarmenLog::unknown_messages`]). Messages are kept in **file order**: in the Intel log the time stamps go
 //! backwards 265 times and some scans are < 10 ms apart, so order and motion must never
 //! be derived from stamp differences — use the odometry pose increments between scans.
 //! A stamp that is not finite (`nan`, `inf`) is refused with its line number, as are a
@@ -59,8 +62,57 @@ pub struct CarmenLog {
     pub messages: Vec<Message>,
     /// `PARAM name value` lines.
     pub params: BTreeMap<String, String>,
-    /// Lines skipped (comments, unknown or malformed messages).
-    pub skipped_lines: usize,
+    /// Lines skipped, by message type (`#` for comments): CARMEN's messages this reader
+    /// does not use and types CARMEN does not have; blank lines are not counted.
+    pub skipped: BTreeMap<String, usize>,
+    /// The line of the first of each skipped type, 1-based.
+    pub first_skipped: BTreeMap<String, usize>,
+}
+
+/// CARMEN messages this reader skips on purpose (it reads `FLASER`, `RLASER`, `ODOM` and
+/// `PARAM`): a log's lines of these types are counted, not warned of.
+pub const UNREAD_MESSAGES: &[&str] = &[
+    "#",
+    "SYNC",
+    "NEFF",
+    "TRUEPOS",
+    "ROBOTLASER1",
+    "ROBOTLASER2",
+    "RAWLASER1",
+    "RAWLASER2",
+    "RAWLASER3",
+    "RAWLASER4",
+    "LASER3",
+    "LASER4",
+    "POSITIONLASER",
+    "SCANMARK",
+    "GPSNMEA",
+    "NMEAGGA",
+    "NMEARMC",
+    "SONAR",
+    "BUMPER",
+    "IMU",
+    "VECTORMOVE",
+    "ROBOTVELOCITY",
+    "FOLLOWTRAJECTORY",
+    "BASEVELOCITY",
+];
+
+impl CarmenLog {
+    /// Skipped lines whose type CARMEN does not have (not in [`UNREAD_MESSAGES`]): `(type,
+    /// lines, first line)`, e.g. a misspelt `FLASR` or a line broken by a lost newline.
+    pub fn unknown_messages(&self) -> impl Iterator<Item = (&str, usize, usize)> {
+        self.skipped
+            .iter()
+            .filter(|(kind, _)| !UNREAD_MESSAGES.contains(&kind.as_str()))
+            .map(|(kind, &lines)| {
+                (
+                    kind.as_str(),
+                    lines,
+                    self.first_skipped.get(kind).copied().unwrap_or(0),
+                )
+            })
+    }
 }
 
 impl CarmenLog {
@@ -350,7 +402,13 @@ pub fn parse<R: BufRead>(
                 let value = tok.collect::<Vec<_>>().join(" ");
                 log.params.insert(name, value);
             }
-            _ => log.skipped_lines += 1,
+            None => {}
+            Some(kind) => {
+                // A comment is `#` whatever follows it.
+                let kind = if kind.starts_with('#') { "#" } else { kind };
+                *log.skipped.entry(kind.to_string()).or_default() += 1;
+                log.first_skipped.entry(kind.to_string()).or_insert(n);
+            }
         }
     }
     Ok(log)
@@ -378,7 +436,23 @@ pub fn read_log(path: &Path) -> Result<CarmenLog> {
     let rear = log.lasers().filter(|l| l.rear).count();
     if rear == log.lasers().count() {
         if rear == 0 {
-            bail!("{}: no laser scans", path.display());
+            let other: Vec<String> = log
+                .skipped
+                .iter()
+                .filter(|(kind, _)| kind.contains("LASER"))
+                .map(|(kind, lines)| format!("{lines} {kind}"))
+                .collect();
+            if other.is_empty() {
+                bail!(
+                    "{}: no laser scans (FLASER or RLASER lines)",
+                    path.display()
+                );
+            }
+            bail!(
+                "{}: no laser scans this reader takes (FLASER or RLASER lines); it has {}, which it does not read",
+                path.display(),
+                other.join(", ")
+            );
         }
         bail!(
             "{}: no front laser scans (FLASER); its {rear} rear laser scans (RLASER) are not used",
@@ -400,6 +474,29 @@ mod tests {
     use super::*;
 
     #[test]
+    fn skipped_lines_are_counted_by_type_and_unknown_types_named_with_their_first_line() {
+        let text = "# a log\n\nSYNC a\nNEFF 12.5\nFLASR 1 1.0 0 0 0 0 0 0 1.0 host 1.0\n\
+            FLASER 1 1.0 0 0 0 0 0 0 2.0 host 2.0\n1.07 1.08 1.08\nNEFF 11.0\n\
+            FLASR 1 1.0 0 0 0 0 0 0 3.0 host 3.0\n";
+        let log = parse(text.as_bytes()).unwrap();
+        assert_eq!(log.messages.len(), 1);
+        let skipped: Vec<(&str, usize)> =
+            log.skipped.iter().map(|(k, &n)| (k.as_str(), n)).collect();
+        assert_eq!(
+            skipped,
+            [
+                ("#", 1),
+                ("1.07", 1),
+                ("FLASR", 2),
+                ("NEFF", 2),
+                ("SYNC", 1)
+            ]
+        );
+        let unknown: Vec<(&str, usize, usize)> = log.unknown_messages().collect();
+        assert_eq!(unknown, [("1.07", 1, 7), ("FLASR", 2, 5)]);
+    }
+
+    #[test]
     fn parses_messages_in_file_order() {
         let text = "# comment\nPARAM robot_front_laser_max 81.9 x\n\
             FLASER 3 1.0 2.5 81.9 0.1 0.2 0.3 1.1 1.2 1.3 100.5 host 7.0\n\
@@ -407,7 +504,9 @@ mod tests {
             RLASER 1 4.0 0 0 0 0 0 0 98.0 host 7.2\n";
         let log = parse(text.as_bytes()).unwrap();
         assert_eq!(log.messages.len(), 3);
-        assert_eq!(log.skipped_lines, 2);
+        assert_eq!(log.skipped.get("#"), Some(&1));
+        assert_eq!(log.skipped.get("SYNC"), Some(&1));
+        assert_eq!(log.unknown_messages().count(), 0);
         assert_eq!(log.params["robot_front_laser_max"], "81.9 x");
         let lasers: Vec<_> = log.lasers().collect();
         assert_eq!(lasers[0].ranges, vec![1.0, 2.5, 81.9]);
