@@ -92,12 +92,41 @@ fn an_unusable_log_fails_naming_the_file_and_line() {
             "velocity 1 90 0\nsighting 1 2 0.1 7\nvelocity 2 80 0\n",
             "none of the 2 odometry records could be used (2 refused as not finite or beyond the settings' max_speed_mps",
         ),
+        // True landmarks none of which was sighted: the map cannot be scored.
+        (
+            &CAR.replace("landmark 1 ", "landmark 8 ")
+                .replace("landmark 2 ", "landmark 9 "),
+            "none of the sighted landmark ids (1, 2) is among the true landmarks' (8, 9): the map cannot be scored",
+        ),
     ] {
         let out = replay(dir.path(), text);
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{text:?} exited 0");
         assert!(err.contains(expected), "{text:?}: {err}");
     }
+}
+
+/// A sighted id the true landmarks do not list is mapped, not scored: the run says so on
+/// stderr and in `metrics.json`.
+#[test]
+fn a_sighted_id_the_true_landmarks_do_not_list_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = CAR.replace("sighting 1.0 4.2 -0.45 2", "sighting 1.0 4.2 -0.45 5");
+    let out = replay(dir.path(), &text);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("warning: landmarks/run.txt: sighted landmark ids that the recording's true landmarks do not list: 5 (mapped, not scored)"),
+        "{err}"
+    );
+    let metrics: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("out").join("metrics.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(
+        metrics["inputs"]["sightings"]["unlisted_ids"],
+        serde_json::json!([5])
+    );
 }
 
 #[test]

@@ -49,6 +49,10 @@ pub struct SightingUse {
     pub refused: usize,
     /// Corrected the filter or created a landmark.
     pub used: usize,
+    /// With a list of the true landmarks: the sighted ids it does not list (their
+    /// landmarks are mapped, not scored; left out when there are none).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub unlisted_ids: Vec<u32>,
 }
 
 /// `metrics.json`'s `inputs`: every record of each stream accounted for.
@@ -89,6 +93,7 @@ impl EkfInputs {
                     .sightings
                     .saturating_sub(used + c.dropped + c.gated + c.ambiguous),
                 used,
+                unlisted_ids: unlisted_ids(recording),
             },
             warnings: Vec::new(),
         }
@@ -121,6 +126,13 @@ impl EkfInputs {
                     100.0 * share
                 ));
             }
+        }
+        if !s.unlisted_ids.is_empty() {
+            let ids: Vec<String> = s.unlisted_ids.iter().map(u32::to_string).collect();
+            self.warnings.push(format!(
+                "sighted landmark ids that the recording's true landmarks do not list: {} (mapped, not scored)",
+                ids.join(", ")
+            ));
         }
     }
 
@@ -177,11 +189,44 @@ impl EkfInputs {
     }
 }
 
+/// The sighted ids (known-id sightings) that `recording`'s true landmarks do not list, in
+/// increasing order; none when it lists no landmark.
+fn unlisted_ids(recording: &Recording) -> Vec<u32> {
+    if recording.landmarks.is_empty() {
+        return Vec::new();
+    }
+    let listed: std::collections::BTreeSet<u32> =
+        recording.landmarks.iter().map(|l| l.id).collect();
+    let unlisted: std::collections::BTreeSet<u32> = recording
+        .sighted_ids()
+        .filter(|id| !listed.contains(id))
+        .collect();
+    unlisted.into_iter().collect()
+}
+
 /// Refuses a landmark replay that used none of an input it needs
 /// ([`crate::metrics::inputs::EkfInputs::check_used`]) or whose ground truth it could not
-/// be scored against (robot ground truth that overlaps no estimate).
+/// be scored against (robot ground truth that overlaps no estimate, true landmarks none
+/// of whose ids was sighted).
 pub fn check_scored(recording: &Recording, metrics: &super::Metrics) -> Result<()> {
     metrics.inputs.check_used(&recording.name)?;
+    // True landmarks none of whose ids was sighted: the map cannot be scored.
+    let sighted: std::collections::BTreeSet<u32> = recording.sighted_ids().collect();
+    let unlisted = &metrics.inputs.sightings.unlisted_ids;
+    if !recording.landmarks.is_empty() && !sighted.is_empty() && unlisted.len() == sighted.len() {
+        let listed: Vec<String> = recording
+            .landmarks
+            .iter()
+            .map(|l| l.id.to_string())
+            .collect();
+        let seen: Vec<String> = sighted.iter().map(u32::to_string).collect();
+        bail!(
+            "{}: none of the sighted landmark ids ({}) is among the true landmarks' ({}): the map cannot be scored",
+            recording.name,
+            seen.join(", "),
+            listed.join(", ")
+        );
+    }
     if !recording.ground_truth.is_empty() && metrics.evaluated_poses == 0 {
         let (first, last) = (
             recording.ground_truth.first().map_or(0.0, |g| g.stamp),
