@@ -5,11 +5,13 @@
 //! - `Robot<k>_Odometry.dat`: time (s), v (m/s), ω (rad/s) → [`EventKind::Velocity`];
 //! - `Robot<k>_Measurement.dat`: time, **barcode**, range (m), bearing (rad) →
 //!   [`EventKind::Sighting`] with [`Identity::Unique`]`(subject)`; the barcode is mapped
-//!   to a subject through `Barcodes.dat`. Subjects 1–5 are the robots: their sightings are
+//!   to a subject through `Barcodes.dat` (each subject and each barcode listed once).
+//!   Subjects 1–5 are the robots: their sightings are
 //!   dropped, as are barcodes that `Barcodes.dat` does not list (counted in
 //!   [`Recording::dropped_sightings`]);
 //! - `Robot<k>_Groundtruth.dat` (optional: dataset 1 has none): time, x, y, θ;
-//! - `Landmark_Groundtruth.dat`: subject, x, y, σx, σy.
+//! - `Landmark_Groundtruth.dat`: subject, x, y, σx, σy; each subject once, a landmark
+//!   (not a robot) that `Barcodes.dat` lists.
 
 use super::sort_events;
 use super::text::{ReadError, invalid, read_table, read_table_with};
@@ -29,9 +31,24 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
     let barcodes_path = file("Barcodes.dat".into());
     let barcodes = read_table::<2>(&barcodes_path)?;
     let mut subject_of = HashMap::new();
+    // The line of each subject and of each barcode: each is listed once.
+    let (mut subject_line, mut barcode_line) = (HashMap::new(), HashMap::new());
     for row in &barcodes {
         let subject = whole(&barcodes_path, row.line, row.values[0], "subject")?;
         let barcode = whole(&barcodes_path, row.line, row.values[1], "barcode")?;
+        for (what, value, lines) in [
+            ("subject", subject, &mut subject_line),
+            ("barcode", barcode, &mut barcode_line),
+        ] {
+            if let Some(first) = lines.insert(value, row.line) {
+                return Err(invalid(
+                    &barcodes_path,
+                    row.line,
+                    format!("{what} {value} is listed twice (first on line {first})"),
+                )
+                .into());
+            }
+        }
         subject_of.insert(barcode, subject);
     }
 
@@ -131,8 +148,26 @@ pub fn read(dir: &Path, robot: u8) -> anyhow::Result<Recording> {
     let lm_path = file("Landmark_Groundtruth.dat".into());
     let mut landmarks = Vec::new();
     if lm_path.exists() {
+        let mut landmark_line = HashMap::new();
         for row in read_table::<5>(&lm_path)? {
             let id = whole(&lm_path, row.line, row.values[0], "subject")?;
+            let refuse = |why: String| -> anyhow::Error { invalid(&lm_path, row.line, why).into() };
+            if let Some(first) = landmark_line.insert(id, row.line) {
+                return Err(refuse(format!(
+                    "subject {id} is listed twice (first on line {first})"
+                )));
+            }
+            if id <= LAST_ROBOT_SUBJECT {
+                return Err(refuse(format!(
+                    "subject {id} is a robot (subjects 1–{LAST_ROBOT_SUBJECT}), not a landmark"
+                )));
+            }
+            if !subject_line.contains_key(&id) {
+                return Err(refuse(format!(
+                    "subject {id} has no barcode in {}: it could never be sighted",
+                    barcodes_path.display()
+                )));
+            }
             beyond(
                 &lm_path,
                 row.line,
@@ -297,6 +332,44 @@ mod tests {
                 barcodes.display()
             )
         );
+    }
+
+    #[test]
+    fn subjects_and_barcodes_listed_twice_and_landmarks_no_barcode_names_are_refused() {
+        let head = "# a\n# b\n# c\n# d\n";
+        let landmark = "6\t3.0\t4.0\t0.01\t0.01";
+        for (file, rows, why) in [
+            (
+                "Barcodes.dat",
+                "6\t72\n6\t73\n",
+                "Barcodes.dat:6: subject 6 is listed twice (first on line 5)",
+            ),
+            (
+                "Barcodes.dat",
+                "6\t72\n7\t72\n",
+                "Barcodes.dat:6: barcode 72 is listed twice (first on line 5)",
+            ),
+            (
+                "Landmark_Groundtruth.dat",
+                "6\t3.0\t4.0\t0.01\t0.01\n6\t5.0\t4.0\t0.01\t0.01\n",
+                "Landmark_Groundtruth.dat:6: subject 6 is listed twice (first on line 5)",
+            ),
+            (
+                "Landmark_Groundtruth.dat",
+                "3\t3.0\t4.0\t0.01\t0.01\n",
+                "Landmark_Groundtruth.dat:5: subject 3 is a robot (subjects 1–5), not a landmark",
+            ),
+            (
+                "Landmark_Groundtruth.dat",
+                "8\t3.0\t4.0\t0.01\t0.01\n",
+                "Landmark_Groundtruth.dat:5: subject 8 has no barcode in",
+            ),
+        ] {
+            let dir = folder("10.1\t1.01\t2.0\t0.0", landmark);
+            std::fs::write(dir.path().join(file), format!("{head}{rows}")).unwrap();
+            let e = read(dir.path(), 1).unwrap_err().to_string();
+            assert!(e.contains(why), "{e}");
+        }
     }
 
     #[test]
