@@ -305,13 +305,13 @@ awk -v tol="$TOLERANCE_PERCENT" -v budget="$BUDGET" '
     {
         name = $1; now = $2; seen[name] = 1;
         if (NF != 2 || now !~ /^[0-9]+$/) { printf "FAIL  measurement not a whole number: %s\n", $0; bad = 1; next }
-        if (!(name in was)) { printf "FAIL  %-40s %10d not in %s (record it: --record)\n", name, now, budget; bad = 1; next }
+        if (!(name in was)) { printf "FAIL  %-40s %10.0f not in %s (record it: --record)\n", name, now, budget; bad = 1; next }
         tag = (now == was[name]) ? "same" : (now < was[name] ? "less" : "MORE");
         why = "";
         if (now > was[name] * (1 + tol / 100)) why = why " over recorded + " tol " %";
         if (limit[name] != "-" && now > limit[name]) why = why " over the limit";
         if (why != "") { tag = "FAIL"; bad = 1 }
-        printf "%-5s %-40s %10d (recorded %d, limit %s)%s\n", tag, name, now, was[name], limit[name], why
+        printf "%-5s %-40s %10.0f (recorded %.0f, limit %s)%s\n", tag, name, now, was[name], limit[name], why
     }
     END {
         for (n in was) if (!(n in seen)) { printf "FAIL  %-40s not measured\n", n; bad = 1 }
