@@ -115,23 +115,24 @@ impl<const SECTOR: usize> Region<SECTOR> {
 
     /// What the region holds now, read through the flash's address.
     pub fn bytes(&self) -> &[u8] {
-        // SAFETY: the region lies within the F411's 512 KB of flash, mapped for reading at
-        // FLASH_BASE; it changes only through `&mut self` (erase, write), which this
-        // borrow excludes.
-        #[allow(unsafe_code)]
-        unsafe {
-            core::slice::from_raw_parts(
-                (FLASH_BASE + self.start as usize) as *const u8,
-                self.len as usize,
-            )
-        }
+        // The borrow of `self` excludes `erase` and `write` (`&mut self`) while it lasts.
+        self.mapped()
     }
 
     /// What the region holds, for the rest of the program (a map image a localizer
     /// borrows): the region is given up, nothing writes it again.
     pub fn into_bytes(self) -> &'static [u8] {
-        // SAFETY: as in `bytes`; `self` is consumed and was the only handle that could
-        // write these sectors (each region is handed out once).
+        // `self` is consumed and was the only handle that could write these sectors
+        // (each region is handed out once).
+        self.mapped()
+    }
+
+    /// The region's bytes at their flash address. Sound only while nothing writes them:
+    /// its callers tie the slice to a borrow of the region, or consume it.
+    fn mapped(&self) -> &'static [u8] {
+        // SAFETY: the region lies within the F411's 512 KB of flash, mapped for reading at
+        // FLASH_BASE; the bytes change only through the region's `&mut self` methods, which
+        // `bytes` (a borrow) and `into_bytes` (a move) exclude.
         #[allow(unsafe_code)]
         unsafe {
             core::slice::from_raw_parts(
