@@ -297,7 +297,7 @@ pub fn input_loss(run: &GridRun, threshold: f64, log: &CarmenLog) -> serde_json:
         "warning_fraction": threshold,
         "scans": scans,
         "odometry": odometry,
-        "skipped_lines": log.skipped,
+        "skipped_lines": log.skipped_counts(),
         "warnings": warnings,
     })
 }

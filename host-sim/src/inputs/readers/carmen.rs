@@ -64,9 +64,16 @@ pub struct CarmenLog {
     pub params: BTreeMap<String, String>,
     /// Lines skipped, by message type (`#` for comments): CARMEN's messages this reader
     /// does not use and types CARMEN does not have; blank lines are not counted.
-    pub skipped: BTreeMap<String, usize>,
-    /// The line of the first of each skipped type, 1-based.
-    pub first_skipped: BTreeMap<String, usize>,
+    pub skipped: BTreeMap<String, SkippedLines>,
+}
+
+/// The lines of one skipped message type.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SkippedLines {
+    /// How many.
+    pub lines: usize,
+    /// The first one's line number, 1-based.
+    pub first: usize,
 }
 
 /// CARMEN messages this reader skips on purpose (it reads `FLASER`, `RLASER`, `ODOM` and
@@ -105,13 +112,15 @@ impl CarmenLog {
         self.skipped
             .iter()
             .filter(|(kind, _)| !UNREAD_MESSAGES.contains(&kind.as_str()))
-            .map(|(kind, &lines)| {
-                (
-                    kind.as_str(),
-                    lines,
-                    self.first_skipped.get(kind).copied().unwrap_or(0),
-                )
-            })
+            .map(|(kind, s)| (kind.as_str(), s.lines, s.first))
+    }
+
+    /// How many lines of each type were skipped.
+    pub fn skipped_counts(&self) -> BTreeMap<&str, usize> {
+        self.skipped
+            .iter()
+            .map(|(kind, s)| (kind.as_str(), s.lines))
+            .collect()
     }
 }
 
@@ -406,8 +415,10 @@ pub fn parse<R: BufRead>(
             Some(kind) => {
                 // A comment is `#` whatever follows it.
                 let kind = if kind.starts_with('#') { "#" } else { kind };
-                *log.skipped.entry(kind.to_string()).or_default() += 1;
-                log.first_skipped.entry(kind.to_string()).or_insert(n);
+                log.skipped
+                    .entry(kind.to_string())
+                    .or_insert(SkippedLines { lines: 0, first: n })
+                    .lines += 1;
             }
         }
     }
@@ -440,7 +451,7 @@ pub fn read_log(path: &Path) -> Result<CarmenLog> {
                 .skipped
                 .iter()
                 .filter(|(kind, _)| kind.contains("LASER"))
-                .map(|(kind, lines)| format!("{lines} {kind}"))
+                .map(|(kind, s)| format!("{} {kind}", s.lines))
                 .collect();
             if other.is_empty() {
                 bail!(
@@ -480,8 +491,7 @@ mod tests {
             FLASR 1 1.0 0 0 0 0 0 0 3.0 host 3.0\n";
         let log = parse(text.as_bytes()).unwrap();
         assert_eq!(log.messages.len(), 1);
-        let skipped: Vec<(&str, usize)> =
-            log.skipped.iter().map(|(k, &n)| (k.as_str(), n)).collect();
+        let skipped: Vec<(&str, usize)> = log.skipped_counts().into_iter().collect();
         assert_eq!(
             skipped,
             [
@@ -504,8 +514,8 @@ mod tests {
             RLASER 1 4.0 0 0 0 0 0 0 98.0 host 7.2\n";
         let log = parse(text.as_bytes()).unwrap();
         assert_eq!(log.messages.len(), 3);
-        assert_eq!(log.skipped.get("#"), Some(&1));
-        assert_eq!(log.skipped.get("SYNC"), Some(&1));
+        assert_eq!(log.skipped_counts().get("#"), Some(&1));
+        assert_eq!(log.skipped_counts().get("SYNC"), Some(&1));
         assert_eq!(log.unknown_messages().count(), 0);
         assert_eq!(log.params["robot_front_laser_max"], "81.9 x");
         let lasers: Vec<_> = log.lasers().collect();
